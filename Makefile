@@ -1,0 +1,33 @@
+# Two commands do everything on a fresh Debian 12 machine:  `make demo`  and  `make test`.
+SHELL := /bin/bash
+ROOT := $(shell pwd)
+ENV := source $(ROOT)/scripts/env.sh
+OUT ?= $(ROOT)/demo_output
+GUI ?= 0
+
+.PHONY: setup demo test lint format pytest rostest bench clean
+
+setup:
+	@bash scripts/setup.sh
+
+demo: setup
+	@$(ENV) && python3 scripts/demo_station.py --output-dir "$(OUT)" --gui $(GUI)
+
+lint: setup
+	@$(ENV) && ruff check . && ruff format --check .
+
+format: setup
+	@$(ENV) && ruff format . && ruff check --fix .
+
+# Everything: lint, pytest on the ROS-free core, every rostest; one summary line `N passed, M failed`.
+test: setup
+	@$(ENV) && bash scripts/run_tests.sh
+
+pytest: setup
+	@$(ENV) && python3 -m pytest -q test/core
+
+rostest: setup
+	@$(ENV) && bash scripts/run_tests.sh --rostest-only
+
+clean:
+	rm -rf .ws .test_results .ros_home demo_output
