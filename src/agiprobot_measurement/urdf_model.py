@@ -27,7 +27,12 @@ def build_station_urdf(
     import xacro
 
     mappings = {}
-    for key, value in (("robot", robot), ("joint_limits", joint_limits), ("scanner", scanner), ("scene", scene)):
+    for key, value in (
+        ("robot", robot),
+        ("joint_limits", joint_limits),
+        ("scanner", scanner),
+        ("scene", scene),
+    ):
         if value is not None:
             mappings[key] = str(Path(value).resolve())
     source = Path(xacro_file) if xacro_file else URDF_DIR / "station.urdf.xacro"
