@@ -30,4 +30,4 @@ rostest: setup
 	@$(ENV) && bash scripts/run_tests.sh --rostest-only
 
 clean:
-	rm -rf .ws .test_results .ros_home demo_output
+	rm -rf "$$(bash scripts/workspace_path.sh)" .test_results .ros_home demo_output

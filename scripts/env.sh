@@ -6,7 +6,8 @@ set +u
 export PATH="$_AGIPRO_ROOT/.venv/bin:$PATH"
 export VIRTUAL_ENV="$_AGIPRO_ROOT/.venv"
 # shellcheck disable=SC1091
-source "$_AGIPRO_ROOT/.ws/devel/setup.bash"
+export AGIPROBOT_WS="$(bash "$_AGIPRO_ROOT/scripts/workspace_path.sh")"
+source "$AGIPROBOT_WS/devel/setup.bash"
 export ROS_HOME="${ROS_HOME:-$_AGIPRO_ROOT/.ros_home}"
 export ROS_LOG_DIR="${ROS_LOG_DIR:-$ROS_HOME/log}"
 export ROS_MASTER_URI="${ROS_MASTER_URI:-http://127.0.0.1:11311}"

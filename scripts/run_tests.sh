@@ -23,11 +23,11 @@ if [ "$only_rostest" = 0 ]; then
 fi
 
 echo "== rostest =="
-rm -rf "$ROOT/.ws/build/test_results"
-catkin_make -C "$ROOT/.ws" run_tests -DPYTHON_EXECUTABLE="$ROOT/.venv/bin/python3" > "$RESULTS/rostest.log" 2>&1
+rm -rf "$AGIPROBOT_WS/build/test_results"
+catkin_make -C "$AGIPROBOT_WS" run_tests -DPYTHON_EXECUTABLE="$ROOT/.venv/bin/python3" > "$RESULTS/rostest.log" 2>&1
 grep -E "^\[ROSTEST\]|^\[ROSUNIT\]|SUMMARY|^ \* RESULT|FAILURE|ERROR|^\[Testcase" "$RESULTS/rostest.log" | grep -v "^-- " | head -200
 # catkin_make run_tests exits 0 even when tests fail: the verdict comes from catkin_test_results.
-if ! catkin_test_results "$ROOT/.ws/build/test_results"; then status=1; fi
+if ! catkin_test_results "$AGIPROBOT_WS/build/test_results"; then status=1; fi
 
-python3 "$ROOT/scripts/test_summary.py" "$RESULTS" "$ROOT/.ws/build/test_results" || status=1
+python3 "$ROOT/scripts/test_summary.py" "$RESULTS" "$AGIPROBOT_WS/build/test_results" || status=1
 exit $status

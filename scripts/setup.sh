@@ -37,22 +37,23 @@ else
   log "pip requirements: up to date"
 fi
 
-# 3. catkin workspace .ws with the repository linked into src/
-mkdir -p .ws/src
-[ -L .ws/src/agiprobot_measurement ] || ln -sfn ../.. .ws/src/agiprobot_measurement
+# 3. catkin workspace (outside the checkout, see scripts/workspace_path.sh) with the repository in src/
+WS="$(bash scripts/workspace_path.sh)"
+mkdir -p "$WS/src"
+[ "$(readlink "$WS/src/agiprobot_measurement")" = "$ROOT" ] || ln -sfn "$ROOT" "$WS/src/agiprobot_measurement"
 # First-build trap: without this folder catkin records an empty PYTHONPATH in setup_cached.sh.
-mkdir -p .ws/devel/lib/python3/dist-packages
+mkdir -p "$WS/devel/lib/python3/dist-packages"
 
 # Rebuild only when something that the build consumes changed (interfaces, CMake, package, entry points).
 BUILD_HASH="$( { ls nodes scripts; cat CMakeLists.txt package.xml setup.py msg/* srv/* action/* test/*.test 2>/dev/null || true; } \
   | sha256sum | cut -d' ' -f1)"
-if [ "$(cat .ws/.build.sha256 2>/dev/null)" != "$BUILD_HASH" ] || [ ! -f .ws/devel/setup.bash ]; then
-  log "building the catkin workspace"
+if [ "$(cat "$WS/.build.sha256" 2>/dev/null)" != "$BUILD_HASH" ] || [ ! -f "$WS/devel/setup.bash" ]; then
+  log "building the catkin workspace $WS"
   set +u; export PATH="$ROOT/.venv/bin:$PATH"; set -u
-  catkin_make -C .ws -DPYTHON_EXECUTABLE="$ROOT/.venv/bin/python3" -DCATKIN_ENABLE_TESTING=ON \
-    -DCMAKE_BUILD_TYPE=Release > .ws/build.log 2>&1 \
-    || { tail -40 .ws/build.log; log "ERROR: catkin_make failed (full log: .ws/build.log)"; exit 1; }
-  echo "$BUILD_HASH" > .ws/.build.sha256
+  catkin_make --force-cmake -C "$WS" -DPYTHON_EXECUTABLE="$ROOT/.venv/bin/python3" -DCATKIN_ENABLE_TESTING=ON \
+    -DCMAKE_BUILD_TYPE=Release > "$WS/build.log" 2>&1 \
+    || { tail -40 "$WS/build.log"; log "ERROR: catkin_make failed (full log: $WS/build.log)"; exit 1; }
+  echo "$BUILD_HASH" > "$WS/.build.sha256"
 else
   log "catkin workspace: up to date"
 fi

@@ -49,7 +49,7 @@ class JointTrajectory:
     velocities: np.ndarray | None = None  # (M, n)
     accelerations: np.ndarray | None = None  # (M, n)
     frame_id: str = "world"
-    effort: list = field(default_factory=list)
+    effort: list = field(default_factory=list)  # per-point effort rows when listed, else empty
 
     def __post_init__(self):
         self.joint_names = list(self.joint_names)
@@ -99,6 +99,72 @@ class JointTrajectory:
             None if self.velocities is None else self.velocities[:, order],
             None if self.accelerations is None else self.accelerations[:, order],
             self.frame_id,
+            [[row[i] for i in order] for row in self.effort] if self._has_effort() else [],
+        )
+
+    def _has_effort(self) -> bool:
+        return len(self.effort) == len(self) > 0 and all(len(r) == len(self.joint_names) for r in self.effort)
+
+    def copy(self) -> JointTrajectory:
+        """A deep copy (arrays copied)."""
+        return JointTrajectory(
+            list(self.joint_names),
+            self.time_from_start.copy(),
+            self.positions.copy(),
+            None if self.velocities is None else self.velocities.copy(),
+            None if self.accelerations is None else self.accelerations.copy(),
+            self.frame_id,
+            [list(r) for r in self.effort],
+        )
+
+    def time_scaled(self, factor: float) -> JointTrajectory:
+        """The same path ``factor`` times slower (``factor`` > 1) or faster.
+
+        Times (s) are multiplied by ``factor``, velocities divided by it, accelerations by its square. The
+        cubic Hermite interpolation scales the same way, so measured peaks scale exactly.
+        """
+        factor = float(factor)
+        if not np.isfinite(factor) or factor <= 0.0:
+            raise TrajectoryError(f"time scaling factor must be a positive number, got {factor}")
+        return JointTrajectory(
+            list(self.joint_names),
+            self.time_from_start * factor,
+            self.positions.copy(),
+            None if self.velocities is None else self.velocities / factor,
+            None if self.accelerations is None else self.accelerations / factor**2,
+            self.frame_id,
+        )
+
+    def concatenated(self, following: JointTrajectory, tolerance_rad: float = 1e-6) -> JointTrajectory:
+        """This trajectory followed by ``following``, which must start where this one ends.
+
+        The junction keeps this trajectory's last knot (``following``'s first knot is dropped) and the times
+        of ``following`` are shifted to continue from it. Velocities are listed when either part lists them
+        (estimated for the other); accelerations only when both list them.
+        """
+        following = following.reordered(self.joint_names)
+        if len(self) == 0:
+            return following
+        if len(following) == 0:
+            return self.copy()
+        gap = np.abs(self.end - following.start)
+        if np.any(gap > tolerance_rad):
+            j = int(np.argmax(gap))
+            raise TrajectoryError(
+                f"cannot concatenate: {self.joint_names[j]} jumps by {gap[j]:.6f} rad at the junction "
+                f"(tolerance {tolerance_rad} rad)"
+            )
+        shift = self.duration - float(following.time_from_start[0])
+        times = np.concatenate([self.time_from_start, following.time_from_start[1:] + shift])
+        positions = np.vstack([self.positions, following.positions[1:]])
+        velocities = None
+        if self.velocities is not None or following.velocities is not None:
+            velocities = np.vstack([self.knot_velocities(), following.knot_velocities()[1:]])
+        accelerations = None
+        if self.accelerations is not None and following.accelerations is not None:
+            accelerations = np.vstack([self.accelerations, following.accelerations[1:]])
+        return JointTrajectory(
+            list(self.joint_names), times, positions, velocities, accelerations, self.frame_id
         )
 
     # -------------------------------------------------------------------------------- conversions
@@ -140,6 +206,8 @@ class JointTrajectory:
                 point.velocities = self.velocities[i].tolist()
             if self.accelerations is not None:
                 point.accelerations = self.accelerations[i].tolist()
+            if self._has_effort():
+                point.effort = [float(e) for e in self.effort[i]]
             point.time_from_start = rospy.Duration.from_sec(float(t))
             msg.points.append(point)
         return msg
@@ -167,6 +235,9 @@ class JointTrajectory:
         except (KeyError, TypeError, ValueError) as exc:
             raise TrajectoryError(f"malformed trajectory point: {exc}") from exc
         header = data.get("header") or {}
+        efforts = [list(p.get("effort") or []) for p in points]
+        if not (efforts and all(len(e) == len(names) for e in efforts)):
+            efforts = []
         return cls(
             names,
             times,
@@ -174,16 +245,18 @@ class JointTrajectory:
             stacked("velocities"),
             stacked("accelerations"),
             header.get("frame_id", ""),
+            efforts,
         )
 
     def to_dict(self, seq: int = 0) -> dict:
         """To the expanded ``joint_trajectory`` dict (the form ``rospy_message_converter`` / genpy write)."""
         points = []
+        has_effort = self._has_effort()
         for i, t in enumerate(self.time_from_start):
             points.append(
                 {
                     "accelerations": [] if self.accelerations is None else self.accelerations[i].tolist(),
-                    "effort": [],
+                    "effort": list(self.effort[i]) if has_effort else [],
                     "positions": self.positions[i].tolist(),
                     "time_from_start": _seconds_to_duration(float(t)),
                     "velocities": [] if self.velocities is None else self.velocities[i].tolist(),
@@ -271,6 +344,19 @@ class CheckTolerances:
     position_rad: float = 1e-6  # beyond the position limits
     velocity_fraction: float = 0.01  # relative excess of a velocity limit
     acceleration_fraction: float = 0.05  # relative excess of an acceleration limit
+
+
+def motion_peaks(trajectory: JointTrajectory) -> tuple[np.ndarray, np.ndarray]:
+    """Peak |velocity| (rad/s) and |acceleration| (rad/s^2) per joint, measured as :func:`check_trajectory`
+    judges them: velocity on the densely sampled interpolation, acceleration on the listed knot values when
+    listed (on the interpolation otherwise). Joint order is the trajectory's own.
+    """
+    if len(trajectory) == 0:
+        n = len(trajectory.joint_names)
+        return np.zeros(n), np.zeros(n)
+    _, vel, acc = trajectory.sample(trajectory.dense_times())
+    listed = trajectory.accelerations
+    return np.abs(vel).max(axis=0), np.abs(acc if listed is None else listed).max(axis=0)
 
 
 def check_trajectory(

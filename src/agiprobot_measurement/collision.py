@@ -1,0 +1,678 @@
+"""Collision checking of the station's robot against itself, the scene and the part, with python-fcl.
+
+Robot geometry is the URDF's collision elements (boxes, cylinders, spheres), inflated by a padding and posed by
+forward kinematics of the :class:`~agiprobot_measurement.kinematics.KinematicModel`. The world is the scene's
+obstacles (boxes, cylinders, spheres, meshes) and the part to measure (a BVH mesh that can be replaced at run
+time). Which pairs are checked is decided by an allowed-collision matrix read from ``config/collision.yaml``
+(regenerate it with ``scripts/generate_collision_matrix.py``).
+
+Units: metres, radians; poses are 4x4 homogeneous matrices in the planning frame (``world``).
+
+Speed: a batch of states is posed with one vectorised FK, and a numpy broad phase (bounding capsules of the robot
+shapes against oriented boxes of the obstacles, capsule-capsule distances between robot shapes) leaves only the
+few near pairs to FCL's narrow phase. That is what makes thousands of full-robot checks per second possible in
+Python; FCL's own broad-phase managers would call back into Python for every candidate pair.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import NamedTuple
+
+import fcl
+import numpy as np
+
+from agiprobot_measurement.kinematics import KinematicModel
+from agiprobot_measurement.station import (
+    CONFIG_DIR,
+    ConfigError,
+    PartPlacement,
+    Scene,
+    SceneObject,
+    Station,
+    read_yaml,
+)
+
+#: Reasons a pair may be listed in the allowed-collision matrix (those of MoveIt's SRDF).
+ALLOWED_REASONS = ("Adjacent", "Never", "Always", "User")
+
+_EPS = 1e-12
+_CHUNK = 4096  # states posed at once: bounds the broad phase's temporary arrays to a few tens of MB
+
+
+# ------------------------------------------------------------------------------------------ configuration
+@dataclass
+class CollisionConfig:
+    """Padding (m) and the allowed-collision matrix: unordered name pair -> reason."""
+
+    padding_m: float = 0.01
+    allowed: dict[frozenset, str] = field(default_factory=dict)
+    generation: dict = field(default_factory=dict)
+    source: Path | None = None
+
+    def is_allowed(self, a: str, b: str) -> bool:
+        return frozenset((a, b)) in self.allowed
+
+
+def load_collision_config(path: str | Path | None = None) -> CollisionConfig:
+    """Read ``config/collision.yaml`` (or ``path``); errors name the file and the bad entry."""
+    path = Path(path) if path else CONFIG_DIR / "collision.yaml"
+    data = read_yaml(path)
+    where = str(path)
+    if not isinstance(data, dict):
+        raise ConfigError(f"{where}: expected a mapping")
+    try:
+        padding = float(data.get("padding_m", 0.0))
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"{where}: padding_m must be a number") from exc
+    if not math.isfinite(padding) or padding < 0.0:
+        raise ConfigError(f"{where}: padding_m must be a finite number >= 0, got {padding}")
+    allowed = {}
+    entries = data.get("allowed_collisions") or []
+    if not isinstance(entries, list):
+        raise ConfigError(f"{where}: allowed_collisions must be a list")
+    for i, entry in enumerate(entries):
+        here = f"{where}: allowed_collisions[{i}]"
+        if not isinstance(entry, dict) or not {"a", "b", "reason"} <= set(entry):
+            raise ConfigError(f"{here}: expected a mapping with keys a, b, reason; got {entry!r}")
+        a, b, reason = str(entry["a"]), str(entry["b"]), str(entry["reason"])
+        if a == b:
+            raise ConfigError(f"{here}: a pair needs two different names, got '{a}' twice")
+        if reason not in ALLOWED_REASONS:
+            raise ConfigError(f"{here}: unknown reason {reason!r}; valid: {', '.join(ALLOWED_REASONS)}")
+        allowed[frozenset((a, b))] = reason
+    generation = data.get("generation") or {}
+    if not isinstance(generation, dict):
+        raise ConfigError(f"{where}: generation must be a mapping")
+    return CollisionConfig(padding_m=padding, allowed=allowed, generation=dict(generation), source=path)
+
+
+# --------------------------------------------------------------------------------------------- geometry
+def _fcl_transform(pose: np.ndarray) -> fcl.Transform:
+    return fcl.Transform(pose[:3, :3], pose[:3, 3])
+
+
+def _bvh(vertices: np.ndarray, faces: np.ndarray) -> fcl.BVHModel:
+    model = fcl.BVHModel()
+    model.beginModel(len(faces), len(vertices))
+    model.addSubModel(np.asarray(vertices, dtype=float), np.asarray(faces, dtype=np.int64))
+    model.endModel()
+    return model
+
+
+@dataclass
+class _RobotShape:
+    link: str
+    kind: str
+    offset: np.ndarray  # moving frame -> shape frame (4x4)
+    anchor: int  # index of the moving frame (-1: fixed to the world)
+    obj: fcl.CollisionObject
+    axis: int  # shape-frame axis of the bounding capsule's segment
+    half_length: float  # m, half the segment
+    radius: float  # m, capsule radius (padding included)
+
+
+@dataclass
+class _WorldObject:
+    name: str
+    kind: str
+    pose: np.ndarray
+    obj: fcl.CollisionObject
+    box_center: np.ndarray  # oriented bounding box: centre (world), rotation, half extents (m)
+    box_rotation: np.ndarray
+    box_half: np.ndarray
+    solid_box: bool  # the bounding box is the object itself
+    mesh: object = None  # closed trimesh (object frame) for the inside test FCL's BVH cannot do
+
+
+class Clearance(NamedTuple):
+    """Smallest distance (m, padding included; <= 0 in collision) and the pair it belongs to."""
+
+    distance_m: float
+    pair: tuple[str, str]
+
+
+class _FramePoser:
+    """All moving frames of a chain for (N, dof) joint values, with the fixed parts folded into constants.
+
+    Equivalent to :meth:`KinematicModel.link_poses_batch` (the tests compare them) but it does only one small
+    matrix product per joint, which matters for the single-state checks a sampling planner makes.
+    """
+
+    def __init__(self, model: KinematicModel):
+        self.dof = model.dof
+        self.pre: list[np.ndarray] = []  # moving frame k-1 -> joint k frame (before its rotation)
+        self.axes: list[np.ndarray] = []
+        self.frames: dict[str, tuple[int, np.ndarray]] = {}  # link -> (moving frame, offset)
+        anchor, acc = -1, np.eye(4)
+        self.frames[model.base_frame] = (anchor, acc.copy())
+        for joint in model.chain_joints:
+            acc = acc @ joint.origin
+            if joint.type != "fixed":
+                self.pre.append(acc)
+                self.axes.append(np.asarray(joint.axis, dtype=float) / np.linalg.norm(joint.axis))
+                anchor, acc = len(self.pre) - 1, np.eye(4)
+            self.frames[joint.child] = (anchor, acc.copy())
+        frontier = list(self.frames)
+        while frontier:
+            parent = frontier.pop()
+            for joint in model.urdf.joints.values():
+                if joint.parent == parent and joint.type == "fixed" and joint.child not in self.frames:
+                    a, off = self.frames[parent]
+                    self.frames[joint.child] = (a, off @ joint.origin)
+                    frontier.append(joint.child)
+        self._z_axis = [bool(np.allclose(axis, (0.0, 0.0, 1.0))) for axis in self.axes]
+
+    def moving_frames(self, q: np.ndarray) -> np.ndarray:
+        """(N, dof, 4, 4): the frame after each joint's rotation."""
+        n = q.shape[0]
+        out = np.empty((n, self.dof, 4, 4))
+        cos, sin = np.cos(q), np.sin(q)
+        previous = None
+        for k in range(self.dof):
+            frame = self.pre[k] if previous is None else previous @ self.pre[k]
+            frame = np.broadcast_to(frame, (n, 4, 4))
+            c, s = cos[:, k, None], sin[:, k, None]
+            if self._z_axis[k]:
+                col0, col1 = frame[:, :, 0], frame[:, :, 1]
+                out[:, k, :, 0] = c * col0 + s * col1
+                out[:, k, :, 1] = c * col1 - s * col0
+                out[:, k, :, 2:] = frame[:, :, 2:]
+            else:
+                kx, ky, kz = self.axes[k]
+                skew = np.array([[0.0, -kz, ky], [kz, 0.0, -kx], [-ky, kx, 0.0]])
+                rot = np.eye(3) + s[:, :, None] * skew + (1.0 - c[:, :, None]) * (skew @ skew)
+                out[:, k, :, :3] = frame[:, :, :3] @ rot
+                out[:, k, :, 3] = frame[:, :, 3]
+            previous = out[:, k]
+        return out
+
+    def link_poses(self, q: np.ndarray, links: list[str]) -> dict[str, np.ndarray]:
+        moving = self.moving_frames(q)
+        poses = {}
+        for link in links:
+            anchor, offset = self.frames[link]
+            poses[link] = np.broadcast_to(offset, (q.shape[0], 4, 4)) if anchor < 0 else moving[:, anchor] @ offset
+        return poses
+
+
+def _segment_distances(p0, p1, q0, q1) -> np.ndarray:
+    """Distances between segments p0-p1 and q0-q1 (arrays (..., 3)); Ericson, Real-Time Collision Detection 5.1.9.
+
+    Degenerate segments (spheres) are points.
+    """
+    d1, d2, r = p1 - p0, q1 - q0, p0 - q0
+    a = np.einsum("...i,...i->...", d1, d1)
+    e = np.einsum("...i,...i->...", d2, d2)
+    f = np.einsum("...i,...i->...", d2, r)
+    c = np.einsum("...i,...i->...", d1, r)
+    b = np.einsum("...i,...i->...", d1, d2)
+    a_ok, e_ok = a > _EPS, e > _EPS
+    safe_a, safe_e = np.where(a_ok, a, 1.0), np.where(e_ok, e, 1.0)
+    denom = a * e - b * b
+    parallel = denom <= _EPS * np.maximum(a * e, _EPS)
+    s = np.where(parallel, 0.0, np.clip((b * f - c * e) / np.where(parallel, 1.0, denom), 0.0, 1.0))
+    t = (b * s + f) / safe_e
+    s = np.where(t < 0.0, np.clip(-c / safe_a, 0.0, 1.0), np.where(t > 1.0, np.clip((b - c) / safe_a, 0.0, 1.0), s))
+    t = np.clip(t, 0.0, 1.0)
+    both = a_ok & e_ok
+    s = np.where(both, s, np.where(a_ok, np.clip(-c / safe_a, 0.0, 1.0), 0.0))
+    t = np.where(both, t, np.where(e_ok, np.clip(f / safe_e, 0.0, 1.0), 0.0))
+    closest = (p0 + s[..., None] * d1) - (q0 + t[..., None] * d2)
+    return np.sqrt(np.einsum("...i,...i->...", closest, closest))
+
+
+# ----------------------------------------------------------------------------------------------- checker
+class CollisionChecker:
+    """Validity of joint states: joint limits, self-collision, collision with the scene objects and the part.
+
+    Build it with :meth:`from_station`. Checked pairs: every robot link against every world object, and every
+    two robot links, except the pairs of the allowed-collision matrix. A robot shape touching an obstacle
+    within ``padding_m`` counts as a collision.
+    """
+
+    def __init__(
+        self,
+        model: KinematicModel,
+        scene: Scene | None = None,
+        config: CollisionConfig | str | Path | None = None,
+        load_part: bool = True,
+    ):
+        self.model = model
+        self.config = config if isinstance(config, CollisionConfig) else load_collision_config(config)
+        self.padding_m = float(self.config.padding_m)
+        self._poser = _FramePoser(model)
+        self._request = fcl.CollisionRequest()
+        self._distance_request = fcl.DistanceRequest(enable_signed_distance=True)
+        self.shapes: list[_RobotShape] = []
+        for link, (anchor, link_offset) in self._poser.frames.items():
+            for geometry in model.urdf.collision.get(link, []):
+                self.shapes.append(self._make_shape(link, anchor, link_offset @ geometry.origin, geometry))
+        self.robot_links: list[str] = list(dict.fromkeys(shape.link for shape in self.shapes))
+        self._shape_link = np.array([self.robot_links.index(s.link) for s in self.shapes])
+        self._shape_anchor = np.array([s.anchor for s in self.shapes])
+        self._shape_offset = np.array([s.offset for s in self.shapes])
+        self._axis_select = np.eye(3)[[s.axis for s in self.shapes]].reshape(-1, 3)
+        self._shape_half = np.array([s.half_length for s in self.shapes])
+        self._shape_radius = np.array([s.radius for s in self.shapes])
+        self._static = self._shape_anchor < 0
+        self._objects: dict[str, _WorldObject] = {}
+        self.part_name: str | None = None
+        if scene is not None:
+            for obstacle in scene.objects:
+                self.add_object(obstacle)
+            if scene.part is not None and load_part:
+                self.set_part_placement(scene.part)
+        self._rebuild()
+
+    @classmethod
+    def from_station(
+        cls,
+        station: Station | None = None,
+        config: CollisionConfig | str | Path | None = None,
+        model: KinematicModel | None = None,
+        load_part: bool = True,
+    ) -> CollisionChecker:
+        """Checker for the station's robot, scene and part (config: ``config/collision.yaml``)."""
+        station = station or Station.load()
+        model = model or KinematicModel.from_station(station)
+        return cls(model, station.scene, config, load_part=load_part)
+
+    # ------------------------------------------------------------------------------------ robot shapes
+    def _make_shape(self, link, anchor, offset, geometry) -> _RobotShape:
+        pad = self.padding_m
+        if geometry.type == "box":
+            size = np.asarray(geometry.size, dtype=float) + 2.0 * pad
+            axis = int(np.argmax(size))
+            others = np.delete(size, axis) / 2.0
+            return _RobotShape(
+                link, "box", offset, anchor, fcl.CollisionObject(fcl.Box(*size)),
+                axis, size[axis] / 2.0, float(np.hypot(*others)),
+            )  # fmt: skip
+        if geometry.type == "cylinder":
+            radius, length = geometry.radius + pad, geometry.length + 2.0 * pad
+            return _RobotShape(
+                link, "cylinder", offset, anchor, fcl.CollisionObject(fcl.Cylinder(radius, length)),
+                2, length / 2.0, radius,
+            )  # fmt: skip
+        if geometry.type == "sphere":
+            radius = geometry.radius + pad
+            return _RobotShape(link, "sphere", offset, anchor, fcl.CollisionObject(fcl.Sphere(radius)), 2, 0.0, radius)
+        raise ConfigError(
+            f"link '{link}': collision geometry '{geometry.type}' is not supported (use box, cylinder, sphere)"
+        )
+
+    # ---------------------------------------------------------------------------------- world objects
+    def add_box(self, name: str, size_m, pose: np.ndarray) -> None:
+        """Add (or replace) a box obstacle: full edge lengths (m), centre pose (4x4)."""
+        size = np.asarray(size_m, dtype=float)
+        self._add(name, "box", pose, fcl.Box(*size), np.zeros(3), size / 2.0, True)
+
+    def add_cylinder(self, name: str, radius_m: float, length_m: float, pose: np.ndarray) -> None:
+        """Add (or replace) a cylinder obstacle along its z axis, centred at ``pose`` (m)."""
+        half = np.array([radius_m, radius_m, length_m / 2.0])
+        self._add(name, "cylinder", pose, fcl.Cylinder(radius_m, length_m), np.zeros(3), half, False)
+
+    def add_sphere(self, name: str, radius_m: float, pose: np.ndarray) -> None:
+        """Add (or replace) a sphere obstacle (m)."""
+        self._add(name, "sphere", pose, fcl.Sphere(radius_m), np.zeros(3), np.full(3, radius_m), False)
+
+    def add_mesh(self, name: str, vertices_m: np.ndarray, faces: np.ndarray, pose: np.ndarray) -> None:
+        """Add (or replace) a triangle-mesh obstacle: vertices in metres in the object frame, placed at ``pose``."""
+        import trimesh
+
+        vertices = np.asarray(vertices_m, dtype=float)
+        faces = np.asarray(faces, dtype=np.int64)
+        if vertices.ndim != 2 or vertices.shape[1] != 3 or faces.ndim != 2 or faces.shape[1] != 3:
+            raise ValueError(f"mesh '{name}': need vertices (V, 3) and faces (F, 3)")
+        if len(faces) == 0 or not np.all(np.isfinite(vertices)):
+            raise ValueError(f"mesh '{name}': empty or non-finite mesh")
+        lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+        mesh = trimesh.Trimesh(vertices, faces, process=False)
+        closed = mesh if mesh.is_watertight else None
+        self._add(name, "mesh", pose, _bvh(vertices, faces), (lo + hi) / 2.0, (hi - lo) / 2.0, False, closed)
+
+    def add_trimesh(self, name: str, mesh, pose: np.ndarray, scale_to_m: float = 1.0) -> None:
+        """Add a ``trimesh.Trimesh`` obstacle; ``scale_to_m`` converts its units to metres."""
+        self.add_mesh(name, np.asarray(mesh.vertices) * scale_to_m, np.asarray(mesh.faces), pose)
+
+    def add_object(self, obstacle: SceneObject) -> None:
+        """Add a :class:`~agiprobot_measurement.station.SceneObject` from a scene file."""
+        if obstacle.type == "box":
+            self.add_box(obstacle.name, obstacle.size_m, obstacle.pose)
+        elif obstacle.type == "cylinder":
+            self.add_cylinder(obstacle.name, obstacle.radius_m, obstacle.length_m, obstacle.pose)
+        elif obstacle.type == "sphere":
+            self.add_sphere(obstacle.name, obstacle.radius_m, obstacle.pose)
+        elif obstacle.type == "mesh":
+            self.add_trimesh(obstacle.name, _load_mesh(obstacle.mesh), obstacle.pose, obstacle.mesh_scale)
+        else:
+            raise ConfigError(f"scene object '{obstacle.name}': unknown type '{obstacle.type}'")
+
+    def set_part(
+        self,
+        mesh=None,
+        faces: np.ndarray | None = None,
+        pose: np.ndarray | None = None,
+        name: str = "part",
+        scale_to_m: float = 1.0,
+    ) -> None:
+        """Replace the part: a ``trimesh.Trimesh`` or vertices (V, 3) with ``faces``; ``scale_to_m`` converts
+        the vertex unit to metres (0.001 for mm); ``pose`` places it in the world (identity if omitted)."""
+        pose = np.eye(4) if pose is None else np.asarray(pose, dtype=float)
+        if faces is None:
+            vertices, faces = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+        else:
+            vertices = np.asarray(mesh)
+        if self.part_name is not None and self.part_name in self._objects:
+            del self._objects[self.part_name]
+        self.part_name = name
+        self.add_mesh(name, vertices * scale_to_m, faces, pose)
+
+    def set_part_placement(self, part: PartPlacement) -> None:
+        """Load the part of a scene file (mesh file, unit, pose)."""
+        self.set_part(_load_mesh(part.mesh), pose=part.pose, name=part.name, scale_to_m=part.scale_to_m)
+
+    def remove_part(self) -> None:
+        if self.part_name is not None:
+            self.remove_object(self.part_name)
+            self.part_name = None
+
+    def remove_object(self, name: str) -> None:
+        if name not in self._objects:
+            raise KeyError(f"no object '{name}'; objects: {', '.join(self._objects) or 'none'}")
+        del self._objects[name]
+        if name == self.part_name:
+            self.part_name = None
+        self._rebuild()
+
+    def object_names(self) -> list[str]:
+        return list(self._objects)
+
+    def _add(self, name, kind, pose, geometry, local_center, half, solid_box, mesh=None) -> None:
+        pose = np.asarray(pose, dtype=float)
+        if pose.shape != (4, 4) or not np.all(np.isfinite(pose)):
+            raise ValueError(f"object '{name}': pose must be a finite 4x4 matrix")
+        if not np.all(np.asarray(half) > 0):
+            raise ValueError(f"object '{name}': dimensions must be positive")
+        if name in self.robot_links:
+            raise ValueError(f"object '{name}': the name of a robot link")
+        obj = fcl.CollisionObject(geometry, _fcl_transform(pose))
+        self._objects[name] = _WorldObject(
+            name, kind, pose, obj, pose[:3, :3] @ local_center + pose[:3, 3], pose[:3, :3].copy(),
+            np.asarray(half, dtype=float), solid_box, mesh,
+        )  # fmt: skip
+        self._rebuild()
+
+    # ------------------------------------------------------------------------------- allowed pairs
+    def allow_collision(self, a: str, b: str, reason: str = "User") -> None:
+        """Stop checking the pair (a, b) (link or object names)."""
+        self.config.allowed[frozenset((a, b))] = reason
+        self._rebuild()
+
+    def disallow_collision(self, a: str, b: str) -> None:
+        """Check the pair (a, b) again."""
+        self.config.allowed.pop(frozenset((a, b)), None)
+        self._rebuild()
+
+    def _rebuild(self) -> None:
+        """Recompute the arrays of the broad phase after the world or the allowed pairs changed."""
+        objects = list(self._objects.values())
+        self._object_list = objects
+        n_obj = len(objects)
+        self._box_center = np.array([o.box_center for o in objects]).reshape(n_obj, 3)
+        self._box_rotation = np.array([o.box_rotation for o in objects]).reshape(n_obj, 3, 3)
+        self._box_half = np.array([o.box_half for o in objects]).reshape(n_obj, 3)
+        self._solid_box = np.array([o.solid_box for o in objects], dtype=bool)
+        allowed = self.config.allowed
+        self._env_checked = np.array(
+            [[frozenset((s.link, o.name)) not in allowed for o in objects] for s in self.shapes], dtype=bool
+        ).reshape(len(self.shapes), n_obj)
+        pairs = [
+            (i, j)
+            for i in range(len(self.shapes))
+            for j in range(i + 1, len(self.shapes))
+            if self.shapes[i].link != self.shapes[j].link
+            and frozenset((self.shapes[i].link, self.shapes[j].link)) not in allowed
+        ]
+        self._self_pairs = np.array(pairs, dtype=int).reshape(-1, 2)
+        self._self_reach = self._shape_radius[self._self_pairs].sum(axis=1) if pairs else np.zeros(0)
+
+    def checked_pairs(self) -> list[tuple[str, str]]:
+        """Every (link, link) and (link, object) pair the checker tests."""
+        pairs = {(self.shapes[i].link, self.shapes[j].link) for i, j in self._self_pairs}
+        for s, o in zip(*np.nonzero(self._env_checked), strict=True):
+            pairs.add((self.shapes[s].link, self._object_list[o].name))
+        return sorted(pairs)
+
+    # -------------------------------------------------------------------------------------- posing
+    def shape_poses(self, q: np.ndarray) -> np.ndarray:
+        """World poses (N, S, 4, 4) of the (padded) robot collision shapes for (N, dof) joint values."""
+        moving = self._poser.moving_frames(q)
+        anchors = np.where(self._static, 0, self._shape_anchor)
+        poses = moving[:, anchors] @ self._shape_offset
+        if np.any(self._static):
+            poses[:, self._static] = self._shape_offset[self._static]
+        return poses
+
+    def _set_shape_pose(self, s: int, pose: np.ndarray) -> None:
+        self.shapes[s].obj.setTransform(fcl.Transform(pose[:3, :3], pose[:3, 3]))
+
+    # ------------------------------------------------------------------------------------- queries
+    def _check_q(self, q: np.ndarray) -> np.ndarray:
+        return self.model._check_q(np.atleast_2d(np.asarray(q, dtype=float)))
+
+    def is_state_valid(self, q: np.ndarray) -> bool:
+        """True when the joint state (rad) is within the joint limits and collision-free (with padding)."""
+        q = np.asarray(q, dtype=float)
+        if q.ndim != 1:
+            raise ValueError(f"expected one joint state of {self.model.dof} values, got shape {q.shape}")
+        return bool(self.check_states(q[None])[0])
+
+    def check_states(self, q: np.ndarray) -> np.ndarray:
+        """Validity (N,) bool of (N, dof) joint states (rad): joint limits, self- and world collision."""
+        q = self._check_q(q)
+        valid = self.model.within_limits(q)
+        index = np.nonzero(valid)[0]
+        for start in range(0, len(index), _CHUNK):
+            chunk = index[start : start + _CHUNK]
+            valid[chunk] = self._collision_free(q[chunk])
+        return valid
+
+    def _broad_phase(self, poses: np.ndarray):
+        """Candidate pairs of the numpy broad phase.
+
+        Returns (sure (N,) states certainly in collision, env (K, 3) rows [state, shape, object],
+        self (K, 2) rows [state, pair index], local capsule extents used by the inside test).
+        """
+        axes = np.einsum("nsij,sj->nsi", poses[:, :, :3, :3], self._axis_select)  # segment directions (N, S, 3)
+        centers = poses[:, :, :3, 3]
+        ends0 = centers - self._shape_half[:, None] * axes
+        ends1 = centers + self._shape_half[:, None] * axes
+        n = poses.shape[0]
+        sure = np.zeros(n, dtype=bool)
+        env = np.zeros((0, 3), dtype=int)
+        if len(self._object_list):
+            # capsule ends in every obstacle's box frame: (N, S, O, 3)
+            local0 = np.einsum("nsi,oij->nsoj", ends0, self._box_rotation) - np.einsum(
+                "oi,oij->oj", self._box_center, self._box_rotation
+            )
+            local1 = local0 + np.einsum("nsi,oij->nsoj", ends1 - ends0, self._box_rotation)
+            radius = self._shape_radius[None, :, None, None]
+            low = np.minimum(local0, local1) - radius
+            high = np.maximum(local0, local1) + radius
+            half = self._box_half[None, None]
+            near = np.all((low <= half) & (high >= -half), axis=-1) & self._env_checked[None]
+            # a capsule segment end inside a solid box: the shape reaches into the box for certain
+            inside = np.all(np.abs(local0) < half, axis=-1) | np.all(np.abs(local1) < half, axis=-1)
+            sure |= np.any(inside & near & self._solid_box[None, None], axis=(1, 2))
+            env = np.argwhere(near & ~sure[:, None, None])
+        pairs = np.zeros((0, 2), dtype=int)
+        if len(self._self_pairs):
+            i, j = self._self_pairs[:, 0], self._self_pairs[:, 1]
+            distance = _segment_distances(ends0[:, i], ends1[:, i], ends0[:, j], ends1[:, j])
+            pairs = np.argwhere((distance < self._self_reach) & ~sure[:, None])
+        return sure, env, pairs
+
+    def _collision_free(self, q: np.ndarray) -> np.ndarray:
+        poses = self.shape_poses(q)
+        sure, env, pairs = self._broad_phase(poses)
+        free = ~sure
+        if len(env) == 0 and len(pairs) == 0:
+            return free
+        # group candidate rows by state; FCL only for those, stopping at a state's first collision
+        states = np.union1d(env[:, 0], pairs[:, 0])
+        env_split = np.searchsorted(env[:, 0], states), np.searchsorted(env[:, 0], states, side="right")
+        pair_split = np.searchsorted(pairs[:, 0], states), np.searchsorted(pairs[:, 0], states, side="right")
+        env_rows, pair_rows = env[:, 1:].tolist(), pairs[:, 1].tolist()
+        self_pairs = self._self_pairs.tolist()
+        objects = self._object_list
+        shapes = self.shapes
+        request = self._request
+        for k, state in enumerate(states.tolist()):
+            state_poses = poses[state]
+            posed = set()
+            hit = False
+            for s, o in env_rows[env_split[0][k] : env_split[1][k]]:
+                if s not in posed:
+                    self._set_shape_pose(s, state_poses[s])
+                    posed.add(s)
+                if fcl.collide(shapes[s].obj, objects[o].obj, request, fcl.CollisionResult()):
+                    hit = True
+                    break
+                if objects[o].mesh is not None and self._inside_mesh(state_poses[s], s, objects[o]):
+                    hit = True
+                    break
+            if not hit:
+                for p in pair_rows[pair_split[0][k] : pair_split[1][k]]:
+                    a, b = self_pairs[p]
+                    for s in (a, b):
+                        if s not in posed:
+                            self._set_shape_pose(s, state_poses[s])
+                            posed.add(s)
+                    if fcl.collide(shapes[a].obj, shapes[b].obj, request, fcl.CollisionResult()):
+                        hit = True
+                        break
+            if hit:
+                free[state] = False
+        return free
+
+    def _inside_mesh(self, shape_pose: np.ndarray, s: int, obj: _WorldObject) -> bool:
+        """Whether shape ``s`` lies entirely inside a closed mesh, which FCL's surface BVH does not report.
+
+        Called only after FCL found no surface contact: then the shape is either wholly inside or wholly
+        outside, and its centre decides. Cheap bounding-box test first: it is rare that it is needed at all.
+        """
+        rotation, translation = obj.pose[:3, :3], obj.pose[:3, 3]
+        center_local = rotation.T @ (shape_pose[:3, 3] - translation)
+        box_center_local = rotation.T @ (obj.box_center - translation)
+        if np.any(np.abs(center_local - box_center_local) > obj.box_half):
+            return False
+        return bool(obj.mesh.contains(center_local[None])[0])
+
+    def _all_pairs(self, include_allowed: bool):
+        """(shape, shape-or-object, names) of every pair to test for the diagnostic queries."""
+        allowed = self.config.allowed
+        for i in range(len(self.shapes)):
+            for j in range(i + 1, len(self.shapes)):
+                a, b = self.shapes[i].link, self.shapes[j].link
+                if a != b and (include_allowed or frozenset((a, b)) not in allowed):
+                    yield i, self.shapes[j], (a, b)
+        for i, shape in enumerate(self.shapes):
+            for obj in self._object_list:
+                if include_allowed or frozenset((shape.link, obj.name)) not in allowed:
+                    yield i, obj, (shape.link, obj.name)
+
+    def _pose_all(self, q: np.ndarray) -> np.ndarray:
+        poses = self.shape_poses(self._check_q(q))[0]
+        for s in range(len(self.shapes)):
+            self._set_shape_pose(s, poses[s])
+        return poses
+
+    def colliding_pairs(self, q: np.ndarray, include_allowed: bool = False) -> list[tuple[str, str]]:
+        """Names of every colliding (link, link) and (link, object) pair at joint state ``q`` (rad).
+
+        Joint limits are not looked at. ``include_allowed`` also reports pairs the matrix allows.
+        """
+        poses = self._pose_all(np.asarray(q, dtype=float).reshape(-1))
+        found = []
+        for i, other, names in self._all_pairs(include_allowed):
+            other_obj = other.obj
+            hit = fcl.collide(self.shapes[i].obj, other_obj, self._request, fcl.CollisionResult()) > 0
+            if not hit and isinstance(other, _WorldObject) and other.mesh is not None:
+                hit = self._inside_mesh(poses[i], i, other)
+            if hit and names not in found:
+                found.append(names)
+        return found
+
+    def min_distance(self, q: np.ndarray) -> Clearance:
+        """Smallest distance (m) between checked pairs at ``q``, measured on the padded robot geometry.
+
+        Positive: free with ``padding_m`` to spare; <= 0: in collision (negative values are penetration
+        depths where FCL computes them, 0 otherwise).
+        """
+        poses = self._pose_all(np.asarray(q, dtype=float).reshape(-1))
+        best = Clearance(math.inf, ("", ""))
+        for i, other, names in self._all_pairs(False):
+            result = fcl.DistanceResult()
+            distance = fcl.distance(self.shapes[i].obj, other.obj, self._distance_request, result)
+            if fcl.collide(self.shapes[i].obj, other.obj, self._request, fcl.CollisionResult()):
+                distance = min(distance, 0.0) if distance != -1.0 else 0.0
+            elif isinstance(other, _WorldObject) and other.mesh is not None and self._inside_mesh(poses[i], i, other):
+                distance = -abs(distance)
+            if distance < best.distance_m:
+                best = Clearance(float(distance), names)
+        return best
+
+    def explain(self, q: np.ndarray) -> str:
+        """Why a state is invalid, e.g. 'in collision: forearm_link - table'; '' when it is valid."""
+        q = self._check_q(q)[0]
+        outside = [
+            f"{name} = {value:.4f} rad outside [{lo:.4f}, {hi:.4f}]"
+            for name, value, lo, hi in zip(self.model.joint_names, q, self.model.lower, self.model.upper, strict=True)
+            if not lo <= value <= hi
+        ]
+        if outside:
+            return "outside joint limits: " + "; ".join(outside)
+        pairs = self.colliding_pairs(q)
+        if pairs:
+            return "in collision: " + ", ".join(f"{a} - {b}" for a, b in pairs)
+        return ""
+
+
+def _load_mesh(path: str | Path):
+    import trimesh
+
+    try:
+        mesh = trimesh.load(str(path), force="mesh")
+    except Exception as exc:  # trimesh raises many types for unreadable files
+        raise ConfigError(f"{path}: cannot read mesh: {exc}") from exc
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise ConfigError(f"{path}: no triangles in mesh")
+    return mesh
+
+
+def adjacent_link_pairs(model: KinematicModel, links: list[str]) -> list[tuple[str, str]]:
+    """Pairs of links with geometry joined by one joint, or by a run of fixed joints through links without
+    geometry (e.g. ``wrist_3_link`` - ``tool0`` - ``laser_scanner_link``): they touch by construction."""
+    with_geometry = set(links)
+    neighbours: dict[str, set[str]] = {}
+    for joint in model.urdf.joints.values():
+        neighbours.setdefault(joint.parent, set()).add(joint.child)
+        neighbours.setdefault(joint.child, set()).add(joint.parent)
+    pairs = set()
+    for link in links:
+        seen, frontier = {link}, [link]
+        while frontier:
+            current = frontier.pop()
+            for other in neighbours.get(current, ()):
+                if other in seen:
+                    continue
+                seen.add(other)
+                if other in with_geometry:
+                    pairs.add(tuple(sorted((link, other))))
+                else:
+                    frontier.append(other)
+    return sorted(pairs)

@@ -1,0 +1,58 @@
+"""rviz markers for a station scene (table, obstacles, part). Needs the ROS message packages only."""
+
+from __future__ import annotations
+
+import numpy as np
+from geometry_msgs.msg import Pose
+from visualization_msgs.msg import Marker, MarkerArray
+
+from agiprobot_measurement.station import Scene
+
+
+def pose_msg(matrix: np.ndarray) -> Pose:
+    from scipy.spatial.transform import Rotation
+
+    pose = Pose()
+    pose.position.x, pose.position.y, pose.position.z = (float(v) for v in matrix[:3, 3])
+    qx, qy, qz, qw = Rotation.from_matrix(matrix[:3, :3]).as_quat()
+    pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = qx, qy, qz, qw
+    return pose
+
+
+def scene_marker_array(scene: Scene, namespace: str = "scene") -> MarkerArray:
+    markers = MarkerArray()
+    for i, obj in enumerate(scene.objects):
+        marker = Marker()
+        marker.header.frame_id = scene.frame_id
+        marker.ns = namespace
+        marker.id = i
+        marker.action = Marker.ADD
+        marker.pose = pose_msg(obj.pose)
+        marker.color.r, marker.color.g, marker.color.b, marker.color.a = obj.color_rgba
+        if obj.type == "box":
+            marker.type = Marker.CUBE
+            marker.scale.x, marker.scale.y, marker.scale.z = (float(v) for v in obj.size_m)
+        elif obj.type == "cylinder":
+            marker.type = Marker.CYLINDER
+            marker.scale.x = marker.scale.y = 2.0 * obj.radius_m
+            marker.scale.z = obj.length_m
+        elif obj.type == "sphere":
+            marker.type = Marker.SPHERE
+            marker.scale.x = marker.scale.y = marker.scale.z = 2.0 * obj.radius_m
+        else:
+            marker.type = Marker.MESH_RESOURCE
+            marker.mesh_resource = f"file://{obj.mesh}"
+            marker.scale.x = marker.scale.y = marker.scale.z = obj.mesh_scale
+        markers.markers.append(marker)
+    if scene.part is not None:
+        marker = Marker()
+        marker.header.frame_id = scene.frame_id
+        marker.ns = "part"
+        marker.id = 0
+        marker.type = Marker.MESH_RESOURCE
+        marker.mesh_resource = f"file://{scene.part.mesh}"
+        marker.pose = pose_msg(scene.part.pose)
+        marker.scale.x = marker.scale.y = marker.scale.z = scene.part.scale_to_m
+        marker.color.r, marker.color.g, marker.color.b, marker.color.a = scene.part.color_rgba
+        markers.markers.append(marker)
+    return markers
