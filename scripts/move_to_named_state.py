@@ -28,14 +28,10 @@ def current_state(joint_names, timeout_s=5.0):
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("states", nargs="+", help="named states to visit in order")
     parser.add_argument("--velocity-scaling", type=float, default=0.5, help="fraction of the velocity limits")
-    parser.add_argument(
-        "--acceleration-scaling", type=float, default=0.5, help="fraction of the acceleration limits"
-    )
+    parser.add_argument("--acceleration-scaling", type=float, default=0.5, help="fraction of the acceleration limits")
     parser.add_argument("--action", default="/robot_sim/execute_trajectory", help="controller action name")
     args = parser.parse_args(rospy.myargv()[1:])
     rospy.init_node("move_to_named_state", anonymous=True)
@@ -55,17 +51,13 @@ def main() -> int:
         return 1
     for name in args.states:
         start = current_state(list(limits.names))
-        trajectory = point_to_point(
-            start, named[name], limits, args.velocity_scaling, args.acceleration_scaling
-        )
+        trajectory = point_to_point(start, named[name], limits, args.velocity_scaling, args.acceleration_scaling)
         rospy.loginfo("moving to '%s' (%.2f s)", name, trajectory.duration)
         client.send_goal(ExecuteJointTrajectoryGoal(trajectory=trajectory.to_msg()))
         client.wait_for_result(rospy.Duration(trajectory.duration + 10.0))
         result = client.get_result()
         if result is None or not result.success:
-            print(
-                f"error: move to '{name}' failed: {result.error if result else 'no result'}", file=sys.stderr
-            )
+            print(f"error: move to '{name}' failed: {result.error if result else 'no result'}", file=sys.stderr)
             return 1
         reached = current_state(list(limits.names))
         print(f"reached '{name}': max joint error {np.abs(reached - named[name]).max():.2e} rad")

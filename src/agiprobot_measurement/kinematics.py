@@ -83,9 +83,7 @@ class KinematicModel:
         self._kdl_fk = PyKDL.ChainFkSolverPos_recursive(self.kdl_chain)
 
     @classmethod
-    def from_station(
-        cls, station: Station | None = None, tip_frame: str | None = None, base_frame: str = "world"
-    ):
+    def from_station(cls, station: Station | None = None, tip_frame: str | None = None, base_frame: str = "world"):
         station = station or Station.load()
         return cls(
             UrdfModel(station.urdf_xml),
@@ -117,9 +115,7 @@ class KinematicModel:
     def _check_q(self, q: np.ndarray) -> np.ndarray:
         q = np.asarray(q, dtype=float)
         if q.shape[-1:] != (self.dof,):
-            raise ValueError(
-                f"expected {self.dof} joint values ({', '.join(self.joint_names)}), got shape {q.shape}"
-            )
+            raise ValueError(f"expected {self.dof} joint values ({', '.join(self.joint_names)}), got shape {q.shape}")
         if not np.all(np.isfinite(q)):
             raise ValueError("joint values must be finite (got NaN or inf)")
         return q

@@ -60,9 +60,7 @@ def point_to_point(
         t_a = v_max[j] / a_max[j]
     peak = 1.0 / (duration - t_a)
     # verify against all joints (distance * s' <= v_max, distance * s'' <= a_max); stretch if needed
-    scale = max(
-        1.0, float(np.max(distance * peak / v_max)), float(np.sqrt(np.max(distance * peak / t_a / a_max)))
-    )
+    scale = max(1.0, float(np.max(distance * peak / v_max)), float(np.sqrt(np.max(distance * peak / t_a / a_max))))
     duration *= scale
     t_a *= scale
     peak = 1.0 / (duration - t_a)

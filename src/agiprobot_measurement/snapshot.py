@@ -41,9 +41,7 @@ def _rviz_background(config: Path) -> np.ndarray:
     return np.array([48.0, 48.0, 48.0])
 
 
-def image_stats(
-    path: Path, background_rgb: np.ndarray, top_px: int = 60, bottom_px: int = 10
-) -> SnapshotStats:
+def image_stats(path: Path, background_rgb: np.ndarray, top_px: int = 60, bottom_px: int = 10) -> SnapshotStats:
     import cv2
 
     image = cv2.imread(str(path), cv2.IMREAD_COLOR)
@@ -58,9 +56,7 @@ def image_stats(
 class OffscreenRviz:
     """Start Xvfb and rviz with a config; ``grab()`` screenshots; use as a context manager."""
 
-    def __init__(
-        self, config: str | Path, width: int = 1024, height: int = 768, log_dir: str | Path | None = None
-    ):
+    def __init__(self, config: str | Path, width: int = 1024, height: int = 768, log_dir: str | Path | None = None):
         self.config = Path(config).resolve()
         if not self.config.is_file():
             raise FileNotFoundError(f"rviz config not found: {self.config}")
@@ -124,16 +120,12 @@ class OffscreenRviz:
         tmp = output.with_suffix(".tmp.png")
         while True:
             if self.rviz.poll() is not None:
-                raise RuntimeError(
-                    f"rviz exited with code {self.rviz.returncode} (log: {self.log_dir / 'rviz.log'})"
-                )
+                raise RuntimeError(f"rviz exited with code {self.rviz.returncode} (log: {self.log_dir / 'rviz.log'})")
             self._screenshot(tmp)
             stats = image_stats(tmp, self.background)
             key = stats.non_background_pixels
             same = (
-                same + 1
-                if previous is not None and key > 0 and abs(key - previous) <= 0.002 * stats.view_pixels
-                else 0
+                same + 1 if previous is not None and key > 0 and abs(key - previous) <= 0.002 * stats.view_pixels else 0
             )
             previous = key
             if same >= stable_frames or time.monotonic() > deadline:

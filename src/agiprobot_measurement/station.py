@@ -109,11 +109,7 @@ def load_robot_config(path: str | Path | None = None) -> RobotConfig:
     data = read_yaml(path)
     where = str(path)
     names = _require(data, "joint_names", where)
-    if (
-        not isinstance(names, list)
-        or not all(isinstance(n, str) for n in names)
-        or len(set(names)) != len(names)
-    ):
+    if not isinstance(names, list) or not all(isinstance(n, str) for n in names) or len(set(names)) != len(names):
         raise ConfigError(f"{where}: 'joint_names' must be a list of distinct names")
     dh = _require(data, "dh", where)
     n = len(names)
@@ -150,9 +146,7 @@ class JointLimits:
         return np.all((q >= self.lower - tolerance) & (q <= self.upper + tolerance), axis=-1)
 
 
-def load_joint_limits(
-    path: str | Path | None = None, joint_names: tuple[str, ...] | None = None
-) -> JointLimits:
+def load_joint_limits(path: str | Path | None = None, joint_names: tuple[str, ...] | None = None) -> JointLimits:
     """Read a MoveIt-style ``joint_limits.yaml``; ``joint_names`` fixes the order (default: the robot's)."""
     path = Path(path) if path else CONFIG_DIR / "joint_limits.yaml"
     if joint_names is None:
@@ -217,9 +211,7 @@ def load_scanner_config(path: str | Path | None = None) -> ScannerConfig:
     model = _require(data, "sensor_model", where)
     params = {}
     for key in SENSOR_PARAMETER_KEYS:
-        params[key] = _positive(
-            _require(model, key, f"{where}: sensor_model"), f"{where}: sensor_model.{key}"
-        )
+        params[key] = _positive(_require(model, key, f"{where}: sensor_model"), f"{where}: sensor_model.{key}")
     for key, value in model.items():
         if key not in params:
             params[key] = value
@@ -233,9 +225,7 @@ def load_scanner_config(path: str | Path | None = None) -> ScannerConfig:
             _vector(_require(mount, "xyz_m", f"{where}: mount"), 3, f"{where}: mount.xyz_m"),
             _vector(_require(mount, "rpy_rad", f"{where}: mount"), 3, f"{where}: mount.rpy_rad"),
         ),
-        housing_size_m=_vector(
-            _require(housing, "size_m", f"{where}: housing"), 3, f"{where}: housing.size_m"
-        ),
+        housing_size_m=_vector(_require(housing, "size_m", f"{where}: housing"), 3, f"{where}: housing.size_m"),
         housing_center_m=_vector(
             _require(housing, "center_xyz_m", f"{where}: housing"), 3, f"{where}: housing.center_xyz_m"
         ),

@@ -58,9 +58,7 @@ class JointTrajectory:
         m = self.time_from_start.shape[0]
         n = len(self.joint_names)
         if self.positions.ndim != 2 or self.positions.shape != (m, n):
-            raise TrajectoryError(
-                f"positions must have shape ({m} points, {n} joints), got {self.positions.shape}"
-            )
+            raise TrajectoryError(f"positions must have shape ({m} points, {n} joints), got {self.positions.shape}")
         for name in ("velocities", "accelerations"):
             value = getattr(self, name)
             if value is not None:
@@ -163,9 +161,7 @@ class JointTrajectory:
         accelerations = None
         if self.accelerations is not None and following.accelerations is not None:
             accelerations = np.vstack([self.accelerations, following.accelerations[1:]])
-        return JointTrajectory(
-            list(self.joint_names), times, positions, velocities, accelerations, self.frame_id
-        )
+        return JointTrajectory(list(self.joint_names), times, positions, velocities, accelerations, self.frame_id)
 
     # -------------------------------------------------------------------------------- conversions
     @classmethod
@@ -228,9 +224,7 @@ class JointTrajectory:
             return np.array(rows, dtype=float) if rows and all(len(r) for r in rows) else None
 
         try:
-            positions = np.array([p["positions"] for p in points], dtype=float).reshape(
-                len(points), len(names)
-            )
+            positions = np.array([p["positions"] for p in points], dtype=float).reshape(len(points), len(names))
             times = np.array([_duration_to_seconds(p["time_from_start"]) for p in points])
         except (KeyError, TypeError, ValueError) as exc:
             raise TrajectoryError(f"malformed trajectory point: {exc}") from exc
@@ -438,9 +432,7 @@ def check_trajectory(
     return CheckResult(True)
 
 
-def check_continuity(
-    previous: JointTrajectory, following: JointTrajectory, tolerance_rad: float = 1e-3
-) -> CheckResult:
+def check_continuity(previous: JointTrajectory, following: JointTrajectory, tolerance_rad: float = 1e-3) -> CheckResult:
     """Whether ``following`` starts where ``previous`` ends (same joints, within ``tolerance_rad``)."""
     if previous.joint_names != following.joint_names:
         following = following.reordered(previous.joint_names)

@@ -100,9 +100,7 @@ def _geometry(link: str, element: ET.Element) -> UrdfGeometry | None:
     if shape.tag == "sphere":
         return UrdfGeometry(link, "sphere", origin, radius=float(shape.get("radius")))
     if shape.tag == "mesh":
-        return UrdfGeometry(
-            link, "mesh", origin, mesh=shape.get("filename"), scale=_floats(shape.get("scale"), 3, 1.0)
-        )
+        return UrdfGeometry(link, "mesh", origin, mesh=shape.get("filename"), scale=_floats(shape.get("scale"), 3, 1.0))
     raise ConfigError(f"URDF: link {link}: unsupported geometry <{shape.tag}>")
 
 

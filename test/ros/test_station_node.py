@@ -100,16 +100,12 @@ class StationTest(unittest.TestCase):
     def test_rejects_position_limit(self):
         target = NAMED["home"].copy()
         target[1] = LIMITS.upper[1] + 0.2  # shoulder_lift above its 0.52 rad limit
-        self._assert_rejected(
-            make_trajectory([NAMED["home"], target], [0.0, 10.0]), ["position limit", JOINTS[1]]
-        )
+        self._assert_rejected(make_trajectory([NAMED["home"], target], [0.0, 10.0]), ["position limit", JOINTS[1]])
 
     def test_rejects_velocity_limit(self):
         target = NAMED["home"] + np.array([0.0, 0.0, 0.0, 0.0, 0.0, 3.0])
         # 3 rad in 0.5 s: far above wrist_3's 3.14 rad/s
-        self._assert_rejected(
-            make_trajectory([NAMED["home"], target], [0.0, 0.5]), ["velocity limit", JOINTS[5]]
-        )
+        self._assert_rejected(make_trajectory([NAMED["home"], target], [0.0, 0.5]), ["velocity limit", JOINTS[5]])
 
     def test_rejects_acceleration_limit(self):
         target = NAMED["home"] + np.array([0.5, 0.0, 0.0, 0.0, 0.0, 0.0])
