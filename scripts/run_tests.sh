@@ -29,5 +29,5 @@ grep -E "^\[ROSTEST\]|^\[ROSUNIT\]|SUMMARY|^ \* RESULT|FAILURE|ERROR|^\[Testcase
 # catkin_make run_tests exits 0 even when tests fail: the verdict comes from catkin_test_results.
 if ! catkin_test_results "$AGIPROBOT_WS/build/test_results"; then status=1; fi
 
-python3 "$ROOT/scripts/test_summary.py" "$RESULTS" "$AGIPROBOT_WS/build/test_results" || status=1
+python3 "$ROOT/scripts/test_summary.py" "$RESULTS" "$AGIPROBOT_WS/build/test_results" "$ROOT/test" || status=1
 exit $status

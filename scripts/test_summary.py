@@ -23,7 +23,7 @@ def count_file(path: Path) -> tuple[int, int, list[str]]:
 
 
 def main() -> int:
-    results_dir, ros_results_dir = Path(sys.argv[1]), Path(sys.argv[2])
+    results_dir, ros_results_dir, test_dir = Path(sys.argv[1]), Path(sys.argv[2]), Path(sys.argv[3])
     passed = failed = 0
     failures: list[str] = []
     lint = results_dir / "lint"
@@ -42,8 +42,17 @@ def main() -> int:
         p, f, n = count_file(xml)
         if xml.name.startswith("rostest-"):
             failed, failures = failed + f, failures + n
+            if p + f == 0:
+                # a test node that died before reporting leaves a rostest file without test cases
+                failed += 1
+                failures.append(f"{xml.name}: no test results (the test node crashed or never ran)")
         else:
             passed, failed, failures = passed + p, failed + f, failures + n
+    # a .test whose launch file does not even load leaves no result file at all
+    for test_file in sorted(test_dir.glob("*.test")):
+        if not any(ros_results_dir.rglob(f"rostest-*{test_file.stem}.xml")):
+            failed += 1
+            failures.append(f"{test_file.name}: no result file (rostest did not run it)")
     for name in failures:
         print(f"FAILED: {name}")
     print(f"{passed} passed, {failed} failed")

@@ -62,9 +62,7 @@ def interpolate_poses(
         rotations = Rotation.from_matrix(np.stack([previous[:3, :3], target[:3, :3]]))
         angle = float((rotations[0].inv() * rotations[1]).magnitude())
         # the small slack keeps 0.2 m / 0.002 m at 100 steps despite rounding
-        steps = max(
-            1, math.ceil(distance / step_m - 1e-9), math.ceil(angle / max_rotation_step_rad - 1e-9)
-        )
+        steps = max(1, math.ceil(distance / step_m - 1e-9), math.ceil(angle / max_rotation_step_rad - 1e-9))
         s = np.linspace(0.0, 1.0, steps + 1)[1:]
         segment = np.zeros((steps, 4, 4))
         segment[:, :3, :3] = Slerp([0.0, 1.0], rotations)(s).as_matrix()

@@ -17,7 +17,7 @@ Python; FCL's own broad-phase managers would call back into Python for every can
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import NamedTuple
 
@@ -43,17 +43,55 @@ _CHUNK = 4096  # states posed at once: bounds the broad phase's temporary arrays
 
 
 # ------------------------------------------------------------------------------------------ configuration
+@dataclass(frozen=True)
+class AllowedEntry:
+    """Why a pair is not checked, and which of its collision elements.
+
+    ``elements`` None: the whole pair. Otherwise a set of element pairs ``((name_a, i), (name_b, j))`` with
+    indices into each link's collision elements in URDF order (a scene object is element 0): only those are
+    not checked, so e.g. the joint housings of two adjacent links may overlap while the forearm folding back
+    onto the shoulder housing is still caught.
+    """
+
+    reason: str
+    elements: frozenset | None = None
+
+    def allows(self, a: str, i: int, b: str, j: int) -> bool:
+        return self.elements is None or frozenset(((a, i), (b, j))) in self.elements
+
+
 @dataclass
 class CollisionConfig:
-    """Padding (m) and the allowed-collision matrix: unordered name pair -> reason."""
+    """Padding (m) and the allowed-collision matrix: unordered name pair -> :class:`AllowedEntry`."""
 
     padding_m: float = 0.01
-    allowed: dict[frozenset, str] = field(default_factory=dict)
+    allowed: dict[frozenset, AllowedEntry] = field(default_factory=dict)
     generation: dict = field(default_factory=dict)
     source: Path | None = None
 
-    def is_allowed(self, a: str, b: str) -> bool:
-        return frozenset((a, b)) in self.allowed
+    def is_allowed(self, a: str, b: str, i: int | None = None, j: int | None = None) -> bool:
+        """Whether the pair (a, b) is not checked: as a whole, or (with i, j) for elements i of a, j of b."""
+        entry = self.allowed.get(frozenset((a, b)))
+        if entry is None:
+            return False
+        if i is None or j is None:
+            return entry.elements is None
+        return entry.allows(a, i, b, j)
+
+
+def _element_pairs(value: object, a: str, b: str, where: str) -> frozenset:
+    if not isinstance(value, list) or not value:
+        raise ConfigError(f"{where}.elements: expected a non-empty list of [index_a, index_b] pairs")
+    pairs = set()
+    for item in value:
+        if (
+            not isinstance(item, list | tuple)
+            or len(item) != 2
+            or not all(isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in item)
+        ):
+            raise ConfigError(f"{where}.elements: expected pairs of element indices >= 0, got {item!r}")
+        pairs.add(frozenset(((a, item[0]), (b, item[1]))))
+    return frozenset(pairs)
 
 
 def load_collision_config(path: str | Path | None = None) -> CollisionConfig:
@@ -73,8 +111,8 @@ def load_collision_config(path: str | Path | None = None) -> CollisionConfig:
     entries = data.get("allowed_collisions") or []
     if not isinstance(entries, list):
         raise ConfigError(f"{where}: allowed_collisions must be a list")
-    for i, entry in enumerate(entries):
-        here = f"{where}: allowed_collisions[{i}]"
+    for k, entry in enumerate(entries):
+        here = f"{where}: allowed_collisions[{k}]"
         if not isinstance(entry, dict) or not {"a", "b", "reason"} <= set(entry):
             raise ConfigError(f"{here}: expected a mapping with keys a, b, reason; got {entry!r}")
         a, b, reason = str(entry["a"]), str(entry["b"]), str(entry["reason"])
@@ -82,7 +120,11 @@ def load_collision_config(path: str | Path | None = None) -> CollisionConfig:
             raise ConfigError(f"{here}: a pair needs two different names, got '{a}' twice")
         if reason not in ALLOWED_REASONS:
             raise ConfigError(f"{here}: unknown reason {reason!r}; valid: {', '.join(ALLOWED_REASONS)}")
-        allowed[frozenset((a, b))] = reason
+        key = frozenset((a, b))
+        if key in allowed:
+            raise ConfigError(f"{here}: pair {a} - {b} listed twice")
+        elements = _element_pairs(entry["elements"], a, b, here) if "elements" in entry else None
+        allowed[key] = AllowedEntry(reason, elements)
     generation = data.get("generation") or {}
     if not isinstance(generation, dict):
         raise ConfigError(f"{where}: generation must be a mapping")
@@ -105,6 +147,7 @@ def _bvh(vertices: np.ndarray, faces: np.ndarray) -> fcl.BVHModel:
 @dataclass
 class _RobotShape:
     link: str
+    element: int  # index among the link's collision elements (URDF order)
     kind: str
     offset: np.ndarray  # moving frame -> shape frame (4x4)
     anchor: int  # index of the moving frame (-1: fixed to the world)
@@ -241,16 +284,19 @@ class CollisionChecker:
         load_part: bool = True,
     ):
         self.model = model
-        self.config = config if isinstance(config, CollisionConfig) else load_collision_config(config)
+        config = config if isinstance(config, CollisionConfig) else load_collision_config(config)
+        # a private copy: allow_collision() must not change a configuration other checkers share
+        self.config = replace(config, allowed=dict(config.allowed), generation=dict(config.generation))
         self.padding_m = float(self.config.padding_m)
         self._poser = _FramePoser(model)
         self._request = fcl.CollisionRequest()
         self._distance_request = fcl.DistanceRequest(enable_signed_distance=True)
         self.shapes: list[_RobotShape] = []
         for link, (anchor, link_offset) in self._poser.frames.items():
-            for geometry in model.urdf.collision.get(link, []):
-                self.shapes.append(self._make_shape(link, anchor, link_offset @ geometry.origin, geometry))
+            for element, geometry in enumerate(model.urdf.collision.get(link, [])):
+                self.shapes.append(self._make_shape(link, element, anchor, link_offset @ geometry.origin, geometry))
         self.robot_links: list[str] = list(dict.fromkeys(shape.link for shape in self.shapes))
+        self._validate_allowed()
         self._shape_link = np.array([self.robot_links.index(s.link) for s in self.shapes])
         self._shape_anchor = np.array([s.anchor for s in self.shapes])
         self._shape_offset = np.array([s.offset for s in self.shapes])
@@ -281,25 +327,41 @@ class CollisionChecker:
         return cls(model, station.scene, config, load_part=load_part)
 
     # ------------------------------------------------------------------------------------ robot shapes
-    def _make_shape(self, link, anchor, offset, geometry) -> _RobotShape:
+    def _validate_allowed(self) -> None:
+        """Catch typos in the matrix: every entry names a link of the URDF, element indices exist."""
+        where = self.config.source or "collision config"
+        counts = {link: len(self.model.urdf.collision.get(link, [])) for link in self.model.urdf.links}
+        for key, entry in self.config.allowed.items():
+            names = sorted(key)
+            if not any(name in counts for name in names):
+                raise ConfigError(f"{where}: allowed pair {' - '.join(names)} names no robot link")
+            for pair in entry.elements or ():
+                for name, index in pair:
+                    if name in counts and index >= counts[name]:
+                        raise ConfigError(
+                            f"{where}: allowed pair {' - '.join(names)}: link '{name}' has no collision element"
+                            f" {index} (it has {counts[name]})"
+                        )
+
+    def _make_shape(self, link, element, anchor, offset, geometry) -> _RobotShape:
         pad = self.padding_m
         if geometry.type == "box":
             size = np.asarray(geometry.size, dtype=float) + 2.0 * pad
             axis = int(np.argmax(size))
             others = np.delete(size, axis) / 2.0
             return _RobotShape(
-                link, "box", offset, anchor, fcl.CollisionObject(fcl.Box(*size)),
+                link, element, "box", offset, anchor, fcl.CollisionObject(fcl.Box(*size)),
                 axis, size[axis] / 2.0, float(np.hypot(*others)),
             )  # fmt: skip
         if geometry.type == "cylinder":
             radius, length = geometry.radius + pad, geometry.length + 2.0 * pad
             return _RobotShape(
-                link, "cylinder", offset, anchor, fcl.CollisionObject(fcl.Cylinder(radius, length)),
+                link, element, "cylinder", offset, anchor, fcl.CollisionObject(fcl.Cylinder(radius, length)),
                 2, length / 2.0, radius,
             )  # fmt: skip
         if geometry.type == "sphere":
             radius = geometry.radius + pad
-            return _RobotShape(link, "sphere", offset, anchor, fcl.CollisionObject(fcl.Sphere(radius)), 2, 0.0, radius)
+            return _RobotShape(link, element, "sphere", offset, anchor, fcl.CollisionObject(fcl.Sphere(radius)), 2, 0.0, radius)
         raise ConfigError(
             f"link '{link}': collision geometry '{geometry.type}' is not supported (use box, cylinder, sphere)"
         )
@@ -409,7 +471,9 @@ class CollisionChecker:
     # ------------------------------------------------------------------------------- allowed pairs
     def allow_collision(self, a: str, b: str, reason: str = "User") -> None:
         """Stop checking the pair (a, b) (link or object names)."""
-        self.config.allowed[frozenset((a, b))] = reason
+        if reason not in ALLOWED_REASONS:
+            raise ValueError(f"unknown reason {reason!r}; valid: {', '.join(ALLOWED_REASONS)}")
+        self.config.allowed[frozenset((a, b))] = AllowedEntry(reason)
         self._rebuild()
 
     def disallow_collision(self, a: str, b: str) -> None:
@@ -426,19 +490,22 @@ class CollisionChecker:
         self._box_rotation = np.array([o.box_rotation for o in objects]).reshape(n_obj, 3, 3)
         self._box_half = np.array([o.box_half for o in objects]).reshape(n_obj, 3)
         self._solid_box = np.array([o.solid_box for o in objects], dtype=bool)
-        allowed = self.config.allowed
         self._env_checked = np.array(
-            [[frozenset((s.link, o.name)) not in allowed for o in objects] for s in self.shapes], dtype=bool
+            [[not self._allowed(s, o) for o in objects] for s in self.shapes], dtype=bool
         ).reshape(len(self.shapes), n_obj)
         pairs = [
             (i, j)
             for i in range(len(self.shapes))
             for j in range(i + 1, len(self.shapes))
-            if self.shapes[i].link != self.shapes[j].link
-            and frozenset((self.shapes[i].link, self.shapes[j].link)) not in allowed
+            if self.shapes[i].link != self.shapes[j].link and not self._allowed(self.shapes[i], self.shapes[j])
         ]
         self._self_pairs = np.array(pairs, dtype=int).reshape(-1, 2)
         self._self_reach = self._shape_radius[self._self_pairs].sum(axis=1) if pairs else np.zeros(0)
+
+    def _allowed(self, shape: _RobotShape, other: _RobotShape | _WorldObject) -> bool:
+        if isinstance(other, _RobotShape):
+            return self.config.is_allowed(shape.link, other.link, shape.element, other.element)
+        return self.config.is_allowed(shape.link, other.name, shape.element, 0)
 
     def checked_pairs(self) -> list[tuple[str, str]]:
         """Every (link, link) and (link, object) pair the checker tests."""
@@ -481,16 +548,19 @@ class CollisionChecker:
             valid[chunk] = self._collision_free(q[chunk])
         return valid
 
+    def _segments(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """End points (N, S, 3) of the robot shapes' bounding-capsule segments."""
+        axes = np.einsum("nsij,sj->nsi", poses[:, :, :3, :3], self._axis_select)
+        centers = poses[:, :, :3, 3]
+        return centers - self._shape_half[:, None] * axes, centers + self._shape_half[:, None] * axes
+
     def _broad_phase(self, poses: np.ndarray):
         """Candidate pairs of the numpy broad phase.
 
         Returns (sure (N,) states certainly in collision, env (K, 3) rows [state, shape, object],
         self (K, 2) rows [state, pair index], local capsule extents used by the inside test).
         """
-        axes = np.einsum("nsij,sj->nsi", poses[:, :, :3, :3], self._axis_select)  # segment directions (N, S, 3)
-        centers = poses[:, :, :3, 3]
-        ends0 = centers - self._shape_half[:, None] * axes
-        ends1 = centers + self._shape_half[:, None] * axes
+        ends0, ends1 = self._segments(poses)
         n = poses.shape[0]
         sure = np.zeros(n, dtype=bool)
         env = np.zeros((0, 3), dtype=int)
@@ -574,15 +644,14 @@ class CollisionChecker:
 
     def _all_pairs(self, include_allowed: bool):
         """(shape, shape-or-object, names) of every pair to test for the diagnostic queries."""
-        allowed = self.config.allowed
         for i in range(len(self.shapes)):
             for j in range(i + 1, len(self.shapes)):
-                a, b = self.shapes[i].link, self.shapes[j].link
-                if a != b and (include_allowed or frozenset((a, b)) not in allowed):
-                    yield i, self.shapes[j], (a, b)
+                a, b = self.shapes[i], self.shapes[j]
+                if a.link != b.link and (include_allowed or not self._allowed(a, b)):
+                    yield i, b, (a.link, b.link)
         for i, shape in enumerate(self.shapes):
             for obj in self._object_list:
-                if include_allowed or frozenset((shape.link, obj.name)) not in allowed:
+                if include_allowed or not self._allowed(shape, obj):
                     yield i, obj, (shape.link, obj.name)
 
     def _pose_all(self, q: np.ndarray) -> np.ndarray:
@@ -625,6 +694,41 @@ class CollisionChecker:
             if distance < best.distance_m:
                 best = Clearance(float(distance), names)
         return best
+
+    def element_collision_matrix(self, q: np.ndarray) -> tuple[list[tuple[tuple[str, int], tuple[str, int]]], np.ndarray]:
+        """Which pairs of collision elements of different robot links collide, in each of (N, dof) states.
+
+        The allowed-collision matrix is ignored: this is what ``scripts/generate_collision_matrix.py`` samples
+        to build it. Returns the element pairs ``((link_a, i), (link_b, j))`` and an (N, P) bool matrix.
+        """
+        q = self._check_q(q)
+        shape_pairs = np.array(
+            [
+                (i, j)
+                for i in range(len(self.shapes))
+                for j in range(i + 1, len(self.shapes))
+                if self.shapes[i].link != self.shapes[j].link
+            ],
+            dtype=int,
+        ).reshape(-1, 2)
+        names = [
+            ((self.shapes[i].link, self.shapes[i].element), (self.shapes[j].link, self.shapes[j].element))
+            for i, j in shape_pairs
+        ]
+        result = np.zeros((q.shape[0], len(shape_pairs)), dtype=bool)
+        reach = self._shape_radius[shape_pairs].sum(axis=1)
+        i, j = shape_pairs[:, 0], shape_pairs[:, 1]
+        for start in range(0, q.shape[0], _CHUNK):
+            poses = self.shape_poses(q[start : start + _CHUNK])
+            ends0, ends1 = self._segments(poses)
+            near = _segment_distances(ends0[:, i], ends1[:, i], ends0[:, j], ends1[:, j]) < reach
+            for state, p in np.argwhere(near).tolist():
+                a, b = shape_pairs[p]
+                self._set_shape_pose(a, poses[state, a])
+                self._set_shape_pose(b, poses[state, b])
+                if fcl.collide(self.shapes[a].obj, self.shapes[b].obj, self._request, fcl.CollisionResult()):
+                    result[start + state, p] = True
+        return names, result
 
     def explain(self, q: np.ndarray) -> str:
         """Why a state is invalid, e.g. 'in collision: forearm_link - table'; '' when it is valid."""

@@ -150,9 +150,7 @@ class IKSolver(Protocol):
 
     def solve(self, pose: np.ndarray, seed: np.ndarray | None = None) -> np.ndarray | None: ...
 
-    def solve_nearest(
-        self, poses: np.ndarray, seeds: np.ndarray | None = None
-    ) -> tuple[np.ndarray, np.ndarray]: ...
+    def solve_nearest(self, poses: np.ndarray, seeds: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]: ...
 
 
 # ------------------------------------------------------------------------------------------- closed form
@@ -229,9 +227,7 @@ class URAnalyticIK:
         return pose @ (_dh_transform(q[..., 5], d[5], 0.0, 0.0) @ self.tip_offset)
 
     # ------------------------------------------------------------------------------------------- IK
-    def solve_all(
-        self, poses: np.ndarray, seeds: np.ndarray | None = None
-    ) -> tuple[np.ndarray, np.ndarray]:
+    def solve_all(self, poses: np.ndarray, seeds: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """All closed-form solutions: (solutions (N, 8, 6) rad, valid (N, 8) bool) for poses (N, 4, 4).
 
         The 8 branches are shoulder left/right x wrist flip x elbow up/down. Each angle is shifted by
@@ -253,9 +249,7 @@ class URAnalyticIK:
         q[~valid] = np.nan
         return (q[0], valid[0]) if single else (q, valid)
 
-    def solve_nearest(
-        self, poses: np.ndarray, seeds: np.ndarray | None = None
-    ) -> tuple[np.ndarray, np.ndarray]:
+    def solve_nearest(self, poses: np.ndarray, seeds: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Per pose the valid solution nearest its seed (Euclidean in joint space).
 
         ``poses`` (N, 4, 4) or (4, 4), ``seeds`` (N, 6) or (6,) rad. Returns (q (N, 6) rad, NaN where none;
@@ -386,9 +380,7 @@ class KDLIK:
         seed = _seeds_for(seed, 1, self.model, "seed")[0]
         return self._solve_one(poses[0], seed)
 
-    def solve_batch(
-        self, poses: np.ndarray, seeds: np.ndarray | None = None
-    ) -> tuple[np.ndarray, np.ndarray]:
+    def solve_batch(self, poses: np.ndarray, seeds: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Solve (N, 4, 4) poses from (N, dof) or (dof,) seeds: (q (N, dof) rad, NaN where none; ok (N,))."""
         poses, single = check_poses(poses)
         seeds = _seeds_for(seeds, poses.shape[0], self.model)

@@ -131,13 +131,15 @@ def cube_instance(
     tilt_rad: float = 0.35,
     uncertainty_threshold_mm: float = 0.12,
     scan_speed_mm_s: float = 25.0,
+    length_mm: tuple[float, float] = (40.0, 80.0),
+    standoff_mm: tuple[float, float] = (150.0, 210.0),
     seed: int = 0,
 ) -> SetCoverInstance:
     """Build an instance with about ``n_points * n_orientations * n_tilts * valid_fraction`` views.
 
     ``n_tilts`` is 1 (boresight along the anchor's normal) or 9 (a 3 x 3 grid of +-``tilt_rad`` about the
     trajectory and the lateral axis). Views that measure no point are dropped, like the original's invalid
-    viewpoints. Durations: trajectory length (50-120 mm, as if the kinematic check shortened some) at
+    viewpoints. Durations: trajectory length (40-80 mm by default, as if the kinematic check shortened some) at
     ``scan_speed_mm_s`` plus a random approach/settle time.
     """
     if n_tilts not in (1, 9):
@@ -153,10 +155,10 @@ def cube_instance(
     tb = np.array([b for _, b in tilts])[tilt_idx] * tilt_rad
     keep = rng.random(anchor.size) < valid_fraction
     anchor, phi, ta, tb = anchor[keep], phi[keep], ta[keep], tb[keep]
-    length = rng.uniform(50.0, 120.0, anchor.size)
+    length = rng.uniform(*length_mm, anchor.size)
     # The kinematic check does not always reach the optimal standoff: the depth (and so the uncertainty)
     # differs between views.
-    standoff = rng.uniform(150.0, 210.0, anchor.size)
+    standoff = rng.uniform(*standoff_mm, anchor.size)
     s, t, l = _view_frames(normals[anchor], phi, ta, tb)
 
     # psi and theta below 45 deg need -s.n > 1/sqrt(3): faces no view of a chunk looks at that steeply are

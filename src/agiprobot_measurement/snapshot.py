@@ -104,7 +104,7 @@ class OffscreenRviz:
         self.display = f":{number}"
         env = dict(os.environ, DISPLAY=self.display)
         self.rviz = subprocess.Popen(
-            ["rviz", "-d", str(self.config), "__name:=rviz_snapshot"],
+            ["rviz", "-d", str(self.config), f"__name:=rviz_snapshot_{os.getpid()}"],
             env=env,
             stdout=(self.log_dir / "rviz.log").open("w"),
             stderr=subprocess.STDOUT,

@@ -9,8 +9,9 @@ Guarantee: the produced trajectory's peak |velocity| and |acceleration|, measure
 :func:`~agiprobot_measurement.trajectory.check_trajectory` judges them (cubic Hermite interpolation through
 the knots for velocities, listed knot values for accelerations), and the peak acceleration of the underlying
 continuous motion at every toppra grid point, are within the (scaled) limits. TOPP-RA enforces its
-constraints only at its grid points, so its output can overshoot slightly between them; the trajectory is then slowed down
-uniformly (time scaling by ``k``: velocities / k, accelerations / k^2) until the measured peaks fit.
+constraints only at its grid points, so its output can overshoot slightly between them; the trajectory is then
+slowed down uniformly (time scaling by ``k``: velocities / k, accelerations / k^2) until the measured peaks
+fit.
 
 The spline passes through every waypoint but not along the straight segments between sparse waypoints; pass
 ``max_waypoint_step_rad`` to densify such paths (e.g. a planner's collision-checked polyline) first.
@@ -39,10 +40,16 @@ MIN_GRID_INTERVALS = 100
 MAX_INTERVALS_PER_WAYPOINT = 64
 # Peaks are compared against limit * (1 - this) so floating-point noise never lands on the wrong side.
 LIMIT_MARGIN = 1e-9
+# toppra gets the limits times this: its solutions sit exactly on the limits it is given, and a hair below
+# ours they pass the check without a needless retiming round.
+TOPPRA_SHARE = 1.0 - 1e-6
 MAX_RETIMING_ROUNDS = 8
 # Share of the joint acceleration a scan's cruise may use for the path curvature term q_ss * s_dot^2; the
 # rest stays available to hold the speed.
 CRUISE_ACCELERATION_SHARE = 0.9
+# Share of the joint velocity limit a scan's cruise may use: toppra's velocity constraint (see TOPPRA_SHARE) must
+# not bind before the speed cap, or the cruise would not be exactly constant.
+CRUISE_VELOCITY_SHARE = 1.0 - 1e-4
 # Cruise detection: path speed within this relative distance of the cruise speed.
 CRUISE_SPEED_TOLERANCE = 1e-6
 # Path acceleration bound (mm/s^2) of a scan's virtual "path joint" when the caller sets none: effectively
@@ -141,25 +148,28 @@ class _Timing:
         max_velocity: np.ndarray,
         max_acceleration: np.ndarray,
     ) -> _Timing:
-        path = toppra.SplineInterpolator(s_waypoints, spline(s_waypoints))
-        # The toppra path re-fits the same spline (same knots, values, boundary type), so its derivatives are
-        # the ones the output is evaluated with. The grid holds every waypoint, so their times are exact.
+        # toppra's solver works with absolute tolerances and fails on path speeds of 1e3 (a scan line in mm):
+        # it gets the path over u = (s - s0) / length in [0, 1]. A not-a-knot spline over affinely mapped knots
+        # is the same curve, so the toppra path and ``spline`` agree. The grid holds every waypoint, so their
+        # times are exact.
+        s0, length = float(s_waypoints[0]), float(s_waypoints[-1] - s_waypoints[0])
+        path = toppra.SplineInterpolator((s_waypoints - s0) / length, spline(s_waypoints))
         ss = _grid(spline, s_waypoints)
         constraints = [
-            toppra.constraint.JointVelocityConstraint(np.column_stack([-max_velocity, max_velocity])),
+            toppra.constraint.JointVelocityConstraint(TOPPRA_SHARE * np.column_stack([-max_velocity, max_velocity])),
             toppra.constraint.JointAccelerationConstraint(
-                np.column_stack([-max_acceleration, max_acceleration]),
+                TOPPRA_SHARE * np.column_stack([-max_acceleration, max_acceleration]),
                 discretization_scheme=toppra.constraint.DiscretizationType.Interpolation,
             ),
         ]
         instance = toppra.algorithm.TOPPRA(
-            constraints, path, gridpoints=ss, parametrizer="ParametrizeConstAccel"
+            constraints, path, gridpoints=(ss - s0) / length, parametrizer="ParametrizeConstAccel"
         )
-        _, sd, _, _ = instance.compute_parameterization(0.0, 0.0, return_data=True)
+        _, ud, _, _ = instance.compute_parameterization(0.0, 0.0, return_data=True)
         code = instance.problem_data.return_code
-        if sd is None or code != toppra.algorithm.ParameterizationReturnCode.Ok:
+        if ud is None or code != toppra.algorithm.ParameterizationReturnCode.Ok:
             raise TimeParameterizationError(f"toppra found no time parameterisation: {code.value}")
-        sd = np.maximum(np.asarray(sd, dtype=float), 0.0)
+        sd = np.maximum(np.asarray(ud, dtype=float), 0.0) * length
         sd[0] = sd[-1] = 0.0  # start and end at rest exactly, not at solver round-off
         mean = sd[:-1] + sd[1:]
         if np.any(mean <= 0.0):
@@ -207,8 +217,7 @@ def _grid(spline: CubicSpline, s_waypoints: np.ndarray) -> np.ndarray:
     by_length = np.ceil(lengths / (s_waypoints[-1] - s_waypoints[0]) * MIN_GRID_INTERVALS)
     counts = np.clip(np.maximum(by_error, by_length), 1, MAX_INTERVALS_PER_WAYPOINT).astype(int)
     pieces = [
-        np.linspace(a, b, c, endpoint=False)
-        for a, b, c in zip(s_waypoints[:-1], s_waypoints[1:], counts, strict=True)
+        np.linspace(a, b, c, endpoint=False) for a, b, c in zip(s_waypoints[:-1], s_waypoints[1:], counts, strict=True)
     ]
     return np.concatenate([*pieces, s_waypoints[-1:]])
 
@@ -434,26 +443,25 @@ def constant_speed_scan_trajectory(
     # judged on the waypoints and three points inside every interval.
     s_fine = np.unique(np.concatenate([s, *(s[:-1] + f * np.diff(s) for f in (0.25, 0.5, 0.75))]))
     with np.errstate(divide="ignore"):
-        v_by_velocity = float(np.min(max_velocity / np.abs(spline(s_fine, 1))))
+        v_by_velocity = CRUISE_VELOCITY_SHARE * float(np.min(max_velocity / np.abs(spline(s_fine, 1))))
         v_by_curvature = float(
             np.min(np.sqrt(CRUISE_ACCELERATION_SHARE * max_acceleration / np.abs(spline(s_fine, 2))))
         )
     cruise = min(requested, v_by_velocity, v_by_curvature)
-    limited_by = ""
+    reasons = []
     if cruise < requested:
-        limited_by = (
-            "joint velocity limits"
+        reasons.append(
+            f"joint velocity limits allow at most {v_by_velocity:.6g} mm/s along this line"
             if v_by_velocity <= v_by_curvature
-            else "joint acceleration limits (the line's curvature in joint space)"
+            else f"joint acceleration limits allow at most {v_by_curvature:.6g} mm/s along this line's curvature "
+            "in joint space"
         )
 
     # The path speed cap is a virtual joint q_{n+1}(s) = s with velocity limit = cruise speed (mm/s).
     augmented = CubicSpline(s, np.column_stack([q, s]), bc_type="not-a-knot")
+    # toppra shrinks every limit by TOPPRA_SHARE; the cap is a target, not a limit, so undo that for it.
     timing = _Timing.solve(
-        augmented,
-        s,
-        np.append(max_velocity, cruise),
-        np.append(max_acceleration, ramp),
+        augmented, s, np.append(max_velocity, cruise / TOPPRA_SHARE), np.append(max_acceleration, ramp)
     )
     trajectory, factor = _build(
         timing,
@@ -466,16 +474,20 @@ def constant_speed_scan_trajectory(
         frame_id,
         joints=slice(0, len(names)),
     )
-    if factor > 1.0 + 1e-9 and not limited_by:
-        limited_by = "toppra's discretisation (the trajectory was slowed to stay within the joint limits)"
+    if factor > 1.0:
+        reasons.append(f"slowed by a factor {factor:.6g} to keep toppra's output within the joint limits")
 
     sd = timing.sd / factor
     ts = timing.ts * factor
-    at_cruise = np.flatnonzero(timing.sd >= cruise * (1.0 - CRUISE_SPEED_TOLERANCE))
-    if len(at_cruise):
-        first, last = int(at_cruise[0]), int(at_cruise[-1])
+    # The cruise is the longest run of grid points at the capped speed (one run unless toppra misbehaves).
+    at_cruise = np.concatenate([[False], timing.sd >= cruise * (1.0 - CRUISE_SPEED_TOLERANCE), [False]])
+    edges = np.flatnonzero(np.diff(at_cruise.astype(int)))
+    runs = edges.reshape(-1, 2)  # [first, last + 1] of each run
+    if len(runs):
+        first, stop = runs[int(np.argmax(runs[:, 1] - runs[:, 0]))]
+        last = int(stop) - 1
         reached = True
-        achieved = cruise / factor
+        achieved = float(np.mean(sd[first : last + 1]))
         cruise_start, cruise_end = float(ts[first]), float(ts[last])
         cruise_length = float(timing.ss[last] - timing.ss[first])
     else:
@@ -483,7 +495,11 @@ def constant_speed_scan_trajectory(
         achieved = float(sd.max())
         cruise_start = cruise_end = float(ts[int(np.argmax(sd))])
         cruise_length = 0.0
-        limited_by = limited_by or "the line is too short to reach the speed within the acceleration limits"
+        reasons.append(
+            f"the {s[-1]:.6g} mm line is too short to reach {cruise / factor:.6g} mm/s within the acceleration "
+            "limits (the speed given is the peak)"
+        )
+    limited_by = "; ".join(reasons)
     return ScanTrajectory(
         trajectory=trajectory,
         scan_speed_mm_s=float(achieved),

@@ -28,6 +28,9 @@ class TrajectoryError(ValueError):
 def _duration_to_seconds(value) -> float:
     if isinstance(value, dict):
         return float(value.get("secs", 0)) + float(value.get("nsecs", 0)) * 1e-9
+    if hasattr(value, "secs") and hasattr(value, "nsecs"):
+        # the same arithmetic as for the dict form, so messages and stored plans give identical floats
+        return float(value.secs) + float(value.nsecs) * 1e-9
     if hasattr(value, "to_sec"):
         return float(value.to_sec())
     return float(value)
@@ -175,7 +178,7 @@ class JointTrajectory:
 
         return cls(
             joint_names=list(msg.joint_names),
-            time_from_start=np.array([p.time_from_start.to_sec() for p in points]),
+            time_from_start=np.array([_duration_to_seconds(p.time_from_start) for p in points]),
             positions=np.array([list(p.positions) for p in points], dtype=float).reshape(
                 len(points), len(msg.joint_names)
             )
@@ -204,7 +207,9 @@ class JointTrajectory:
                 point.accelerations = self.accelerations[i].tolist()
             if self._has_effort():
                 point.effort = [float(e) for e in self.effort[i]]
-            point.time_from_start = rospy.Duration.from_sec(float(t))
+            # rounded, not truncated like Duration.from_sec, so stored {secs, nsecs} survive a round trip
+            stamp = _seconds_to_duration(float(t))
+            point.time_from_start = rospy.Duration(stamp["secs"], stamp["nsecs"])
             msg.points.append(point)
         return msg
 

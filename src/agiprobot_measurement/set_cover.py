@@ -1,0 +1,759 @@
+"""Viewpoint selection as a set-cover problem (ROS-free).
+
+Input is a measurability matrix ``M`` (points x candidate views, any scipy.sparse format or a dense array):
+an entry is *measurable* when it is non-zero and not NaN. Boolean matrices only say which point a view
+measures; numeric matrices also give the point's uncertainty (in the sensor model's units). Points that no
+view measures are *uncoverable*: they are reported (:attr:`SetCoverResult.uncoverable`), not an infeasibility.
+
+Solvers (``solver_type``, the names the original documents):
+
+``greedy``
+    Each step takes the view that measures the most not-yet-covered points; ties go to the view whose worst
+    (maximum) uncertainty is lowest (Gronle et al. 2016, ch. 4.4), then to the lower index. A lazy priority
+    queue keeps the work per step small: gains only ever shrink, so a popped entry whose recomputed gain is
+    unchanged is the true best.
+``IP_basic``
+    Minimum number of views (Scott 2009): ``min sum v_j  s.t.  M v >= 1, v binary``.
+``IP_uncertainty``
+    Cost of a view = its worst uncertainty divided by the worst over all views (so costs lie in (0, 1] and the
+    solver's tolerances mean the same on every part).
+``IP_time``
+    Cost of a view = its trajectory duration (``durations_s``), normalised the same way.
+
+The integer programmes are reduced before they are solved (all reductions keep at least one optimal
+solution): uncoverable rows dropped; duplicate columns (same point set) merged into the cheapest; dominated
+columns (point set a strict subset of a no more expensive column's) dropped; views that are the only cover of
+a point forced in; duplicate rows and dominated rows (a row whose views include all views of another row is
+implied by it) dropped; repeated until nothing changes. The reduced programme goes to HiGHS (``highspy``,
+built directly in column-wise sparse form) or, with ``backend='cbc'``, to CBC through PuLP, warm-started with
+a cost-aware greedy cover. Every returned selection is made irredundant (no view can be removed without
+uncovering a point), which never increases the cost.
+
+All solvers return a :class:`SetCoverResult`; :func:`solve_set_cover` is the entry point.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import sparse
+
+SOLVER_TYPES = ("greedy", "IP_basic", "IP_uncertainty", "IP_time")
+BACKENDS = ("highs", "cbc")
+DEFAULT_TIME_LIMIT_S = 60.0
+
+# Reductions run a few rounds at most: each round is cheap, and after two or three nothing changes on
+# realistic data.
+_MAX_REDUCTION_ROUNDS = 10
+# Bound on the candidate pairs the dominance search examines per call (each costs one bitset comparison of
+# ceil(n / 64) words); beyond it the search stops and the remaining columns are simply kept.
+_DOMINANCE_PAIR_BUDGET = 30_000_000
+_PAIR_CHUNK = 2_000_000
+
+
+class SetCoverError(ValueError):
+    """Invalid input to the set-cover solvers."""
+
+
+@dataclass(frozen=True)
+class SetCoverResult:
+    """Outcome of :func:`solve_set_cover`.
+
+    ``selected`` are column (view) indices of the input matrix, ascending. ``objective`` is in the solver's
+    own units: number of views (``greedy``, ``IP_basic``), sum of the views' worst uncertainties
+    (``IP_uncertainty``, in the matrix's units, not normalised) or of their durations in s (``IP_time``).
+    ``gap`` is the relative optimality gap ``(objective - lower_bound) / objective`` the solver proved, None
+    when no bound is known (greedy). ``proven_optimal`` is True only when the gap is zero.
+    """
+
+    selected: np.ndarray
+    covered: np.ndarray
+    n_coverable: int
+    objective: float
+    gap: float | None
+    proven_optimal: bool
+    solve_time_s: float
+    solver: str
+    message: str
+    lower_bound: float | None = None
+    stats: dict = field(default_factory=dict)
+
+    @property
+    def n_selected(self) -> int:
+        return int(self.selected.size)
+
+    @property
+    def n_points(self) -> int:
+        return int(self.covered.size)
+
+    @property
+    def uncoverable(self) -> np.ndarray:
+        """Indices of the points that no candidate view measures."""
+        return np.asarray(self.stats.get("uncoverable", np.zeros(0, dtype=np.int64)))
+
+    @property
+    def covers_all_coverable(self) -> bool:
+        return int(np.count_nonzero(self.covered)) == self.n_coverable
+
+
+# --------------------------------------------------------------------------------------------------------
+# Input handling
+
+
+@dataclass
+class _Columns:
+    """Column-wise sparse sets: column j holds the rows ``indices[indptr[j]:indptr[j + 1]]`` (sorted)."""
+
+    indptr: np.ndarray
+    indices: np.ndarray
+    n_rows: int
+
+    @property
+    def n_cols(self) -> int:
+        return self.indptr.size - 1
+
+    def sizes(self) -> np.ndarray:
+        return np.diff(self.indptr)
+
+    def col(self, j: int) -> np.ndarray:
+        return self.indices[self.indptr[j] : self.indptr[j + 1]]
+
+    def take(self, which: np.ndarray) -> _Columns:
+        """The columns ``which`` (same rows), renumbered 0.."""
+        sizes = self.sizes()[which]
+        indptr = np.zeros(which.size + 1, dtype=np.int64)
+        np.cumsum(sizes, out=indptr[1:])
+        # Flat positions of all entries of the chosen columns, without a Python loop.
+        pos = np.repeat(self.indptr[which] - indptr[:-1], sizes) + np.arange(indptr[-1])
+        return _Columns(indptr, self.indices[pos], self.n_rows)
+
+    def transpose(self) -> _Columns:
+        csc = sparse.csc_array(
+            (np.ones(self.indices.size, dtype=bool), self.indices, self.indptr), shape=(self.n_rows, self.n_cols)
+        )
+        csr = csc.tocsr()
+        csr.sort_indices()
+        return _Columns(csr.indptr, csr.indices, self.n_cols)
+
+    def submatrix(self, rows: np.ndarray, cols: np.ndarray) -> _Columns:
+        """Columns ``cols`` restricted to rows ``rows`` (both index arrays), renumbered 0.."""
+        csc = sparse.csc_array(
+            (np.ones(self.indices.size, dtype=bool), self.indices, self.indptr), shape=(self.n_rows, self.n_cols)
+        )
+        sub = sparse.csc_array(csc[:, cols][rows, :])
+        sub.sort_indices()
+        return _Columns(sub.indptr, sub.indices, rows.size)
+
+
+def _measurable_columns(matrix) -> tuple[_Columns, np.ndarray | None]:
+    """Canonical column sets of the measurable entries and, for numeric input, their values."""
+    if sparse.issparse(matrix):
+        csc = matrix.tocsc()
+        if csc is matrix and not csc.has_canonical_format:
+            csc = csc.copy()  # canonicalising works in place: leave the caller's matrix alone
+    else:
+        dense = np.asarray(matrix)
+        if dense.ndim != 2:
+            raise SetCoverError(f"matrix must be 2-D (points x views), got shape {dense.shape}")
+        csc = sparse.csc_array(dense)
+    csc.sum_duplicates()
+    csc.sort_indices()
+    n_rows, n_cols = csc.shape
+    data = csc.data
+    if data.dtype == bool:
+        keep, values = data, None
+    elif np.issubdtype(data.dtype, np.number):
+        values = data.astype(np.float64, copy=False)
+        keep = (values != 0.0) & ~np.isnan(values)
+        if np.any(values[keep] < 0.0) or not np.all(np.isfinite(values[keep])):
+            raise SetCoverError("uncertainty values in the matrix must be finite and non-negative")
+    else:
+        raise SetCoverError(f"matrix dtype {data.dtype} is neither boolean nor numeric")
+    if keep.all():
+        return _Columns(csc.indptr.copy(), csc.indices.copy(), n_rows), values
+    col_of_entry = np.repeat(np.arange(n_cols), np.diff(csc.indptr))
+    counts = np.bincount(col_of_entry[keep], minlength=n_cols)
+    indptr = np.concatenate([[0], np.cumsum(counts)]).astype(csc.indptr.dtype)
+    cols = _Columns(indptr, csc.indices[keep], n_rows)
+    return cols, None if values is None else values[keep]
+
+
+def _column_max(cols: _Columns, values: np.ndarray) -> np.ndarray:
+    """Per-column maximum of ``values`` (aligned with ``cols.indices``); 0 for empty columns."""
+    out = np.zeros(cols.n_cols)
+    nonempty = np.nonzero(cols.sizes() > 0)[0]
+    if nonempty.size:
+        # reduceat segments run from one start to the next; empty columns in between hold no entries, so
+        # every segment is exactly one non-empty column.
+        out[nonempty] = np.maximum.reduceat(values, cols.indptr[nonempty])
+    return out
+
+
+def _worst_uncertainty(matrix, cols: _Columns, values, uncertainties) -> np.ndarray | None:
+    """Worst (maximum) uncertainty per view, or None when nothing gives uncertainties."""
+    if uncertainties is None:
+        return None if values is None else _column_max(cols, values)
+    if sparse.issparse(uncertainties) or np.ndim(uncertainties) == 2:
+        if tuple(uncertainties.shape) != (cols.n_rows, cols.n_cols):
+            raise SetCoverError(
+                f"uncertainties matrix has shape {tuple(uncertainties.shape)}, expected "
+                f"{(cols.n_rows, cols.n_cols)}"
+            )
+        u = sparse.csc_array(uncertainties, dtype=np.float64)
+        mask = sparse.csc_array(
+            (np.ones(cols.indices.size), cols.indices, cols.indptr), shape=(cols.n_rows, cols.n_cols)
+        )
+        u = sparse.csc_array(u.multiply(mask))  # only the measurable entries count
+        u.sum_duplicates()
+        if u.data.size and (np.any(u.data < 0.0) or not np.all(np.isfinite(u.data))):
+            raise SetCoverError("uncertainties must be finite and non-negative")
+        return _column_max(_Columns(u.indptr, u.indices, cols.n_rows), u.data)
+    per_view = np.asarray(uncertainties, dtype=np.float64)
+    if per_view.shape != (cols.n_cols,):
+        raise SetCoverError(
+            f"uncertainties must be one value per view ({cols.n_cols}) or a points x views matrix, "
+            f"got shape {per_view.shape}"
+        )
+    if not np.all(np.isfinite(per_view)) or np.any(per_view < 0.0):
+        raise SetCoverError("uncertainties must be finite and non-negative")
+    return per_view
+
+
+def _normalised(costs: np.ndarray) -> np.ndarray:
+    top = float(costs.max()) if costs.size else 0.0
+    return costs / top if top > 0.0 else costs.copy()
+
+
+# --------------------------------------------------------------------------------------------------------
+# Greedy
+
+
+def _greedy(cols: _Columns, tie: np.ndarray, costs: np.ndarray | None = None) -> list[int]:
+    """Lazy greedy cover of every coverable row; returns the picks in order.
+
+    Without ``costs`` the key is the number of newly covered points (largest first); with ``costs`` it is
+    cost per newly covered point (Chvatal's rule, used to warm-start the weighted programmes). Ties: ``tie``
+    (lower first), then the index.
+    """
+    indptr, indices = cols.indptr, cols.indices
+    gains = cols.sizes()
+    covered = np.zeros(cols.n_rows, dtype=bool)
+    n_uncovered = int(np.count_nonzero(np.bincount(indices, minlength=cols.n_rows)))
+    cand = np.nonzero(gains > 0)[0]
+    if costs is None:
+        keys = (-gains[cand]).astype(np.float64)
+    else:
+        keys = costs[cand] / gains[cand]
+    heap = list(zip(keys.tolist(), tie[cand].tolist(), cand.tolist(), strict=True))
+    heapq.heapify(heap)
+    picks: list[int] = []
+    while heap and n_uncovered > 0:
+        key, t, j = heap[0]
+        rows = indices[indptr[j] : indptr[j + 1]]
+        gain = rows.size - int(np.count_nonzero(covered[rows]))
+        if gain == 0:
+            heapq.heappop(heap)
+            continue
+        fresh = -float(gain) if costs is None else costs[j] / gain
+        if fresh == key:
+            # Every other entry's stored key is no better than this one and stored keys only understate
+            # (gains only shrink), so this is the true best, tie-break included.
+            heapq.heappop(heap)
+            covered[rows] = True
+            n_uncovered -= gain
+            picks.append(j)
+        else:
+            heapq.heapreplace(heap, (fresh, t, j))
+    return picks
+
+
+def _make_irredundant(cols: _Columns, picks: list[int], costs: np.ndarray | None) -> list[int]:
+    """Drop picks whose points are all covered by the other picks (most expensive, else latest, first)."""
+    if len(picks) < 2:
+        return list(picks)
+    count = np.zeros(cols.n_rows, dtype=np.int32)
+    for j in picks:
+        count[cols.col(j)] += 1
+    order = list(reversed(picks))
+    if costs is not None:
+        order.sort(key=lambda j: -costs[j])  # stable: equal costs keep latest-first
+    kept = set(picks)
+    for j in order:
+        rows = cols.col(j)
+        if np.all(count[rows] >= 2):
+            count[rows] -= 1
+            kept.discard(j)
+    return [j for j in picks if j in kept]
+
+
+# --------------------------------------------------------------------------------------------------------
+# Reductions
+
+
+def _bitsets(cols: _Columns, which: np.ndarray) -> np.ndarray:
+    """Rows of ``which`` columns packed into uint64 words, one row of words per column."""
+    n_words = max(1, -(-cols.n_rows // 64))
+    out = np.zeros((which.size, n_words * 8), dtype=np.uint8)
+    step = max(1, 8_000_000 // max(cols.n_rows, 1))
+    csc = sparse.csc_array(
+        (np.ones(cols.indices.size, dtype=bool), cols.indices, cols.indptr), shape=(cols.n_rows, cols.n_cols)
+    )
+    for start in range(0, which.size, step):
+        block = csc[:, which[start : start + step]].T.toarray()
+        packed = np.packbits(block, axis=1, bitorder="little")
+        out[start : start + step, : packed.shape[1]] = packed
+    return out.view(np.uint64)
+
+
+def _duplicate_groups(cols: _Columns, alive: np.ndarray) -> np.ndarray:
+    """For each alive column the representative of its identical-set group (itself if unique), else -1.
+
+    The representative is the first column of the group in ``alive``'s order.
+    """
+    rep = np.full(cols.n_cols, -1, dtype=np.int64)
+    if alive.size == 0:
+        return rep
+    rng = np.random.default_rng(12345)
+    w1, w2 = rng.random(cols.n_rows), rng.random(cols.n_rows)
+    part = cols.take(alive)
+    sizes = part.sizes()
+    # Sums of random weights over sorted indices: identical sets give bit-identical sums; the exact check
+    # below guards against (astronomically unlikely) collisions. Empty sets are not passed in.
+    h1 = np.add.reduceat(w1[part.indices], part.indptr[:-1])
+    h2 = np.add.reduceat(w2[part.indices], part.indptr[:-1])
+    order = np.lexsort((np.arange(alive.size), h2, h1, sizes))
+    key = np.column_stack([sizes[order], h1[order], h2[order]])
+    new_group = np.ones(order.size, dtype=bool)
+    new_group[1:] = np.any(key[1:] != key[:-1], axis=1)
+    group_first = np.maximum.accumulate(np.where(new_group, np.arange(order.size), 0))
+    rep[alive[order]] = alive[order[group_first]]
+    for pos in np.nonzero(~new_group)[0]:
+        j, r = alive[order[pos]], rep[alive[order[pos]]]
+        if not np.array_equal(cols.col(j), cols.col(r)):
+            rep[j] = j  # hash collision: keep it as its own group
+    return rep
+
+
+def _subset_pairs(
+    cols: _Columns, alive: np.ndarray, pair_filter, budget: int = _DOMINANCE_PAIR_BUDGET
+) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Pairs (a, b) of alive columns, a != b, with rows(a) a subset of rows(b) and ``pair_filter(a, b)``.
+
+    Any superset of a contains a's rarest row, so b is only sought among the columns holding that row; a
+    bitset test of the second-rarest row prunes most candidates before the full bitset comparison. Returns
+    the pairs and whether the search finished within ``budget`` candidate pairs.
+    """
+    empty = np.zeros(0, dtype=np.int64)
+    if alive.size < 2:
+        return empty, empty, True
+    is_alive = np.zeros(cols.n_cols, dtype=bool)
+    is_alive[alive] = True
+    sub = cols.take(alive)
+    rows_t = sub.transpose()  # row -> positions in ``alive``
+    degree = rows_t.sizes()
+    sizes = sub.sizes()
+    if np.any(sizes == 0):
+        raise AssertionError("empty columns must be removed before the dominance search")
+    seg_id = np.repeat(np.arange(alive.size), sizes)
+    order = np.lexsort((degree[sub.indices], seg_id))
+    rarest = sub.indices[order[sub.indptr[:-1]]]
+    second = np.where(sizes > 1, sub.indices[order[np.minimum(sub.indptr[:-1] + 1, sub.indptr[1:] - 1)]], -1)
+    bits = _bitsets(sub, np.arange(alive.size))
+    by_row = np.argsort(rarest, kind="stable")
+    row_starts = np.searchsorted(rarest[by_row], np.arange(cols.n_rows + 1))
+    work = np.diff(row_starts) * degree
+    out_a, out_b = [], []
+    spent = 0
+    complete = True
+    for r in np.argsort(work, kind="stable"):
+        if work[r] == 0:
+            continue
+        if spent + work[r] > budget:
+            complete = False
+            break
+        spent += int(work[r])
+        group = by_row[row_starts[r] : row_starts[r + 1]]
+        cand = rows_t.col(r)
+        step = max(1, _PAIR_CHUNK // max(cand.size, 1))
+        for g0 in range(0, group.size, step):
+            g = group[g0 : g0 + step]
+            a = np.repeat(g, cand.size)
+            b = np.tile(cand, g.size)
+            # Equal sizes mean equal sets; then only the higher index counts as the subset, so one of a
+            # group of identical sets always survives.
+            m = (sizes[b] > sizes[a]) | ((sizes[b] == sizes[a]) & (b < a))
+            a, b = a[m], b[m]
+            s2 = second[a]
+            has2 = s2 < 0
+            s2c = np.maximum(s2, 0)
+            has2 |= ((bits[b, s2c >> 6] >> (s2c & 63).astype(np.uint64)) & np.uint64(1)).astype(bool)
+            a, b = a[has2], b[has2]
+            if a.size == 0:
+                continue
+            m = pair_filter(alive[a], alive[b])
+            a, b = a[m], b[m]
+            if a.size == 0:
+                continue
+            ok = ~np.any(bits[a] & ~bits[b], axis=1)
+            out_a.append(alive[a[ok]])
+            out_b.append(alive[b[ok]])
+    if not out_a:
+        return empty, empty, complete
+    return np.concatenate(out_a), np.concatenate(out_b), complete
+
+
+@dataclass
+class _Reduction:
+    forced: list[int]
+    cols_alive: np.ndarray
+    rows_alive: np.ndarray
+    stats: dict
+
+
+def _reduce(cols: _Columns, costs: np.ndarray, tie: np.ndarray) -> _Reduction:
+    """Apply the optimality-preserving reductions; the rest is the programme to solve."""
+    stats = {
+        "duplicate_cols": 0,
+        "dominated_cols": 0,
+        "forced_cols": 0,
+        "duplicate_rows": 0,
+        "dominated_rows": 0,
+        "dominance_complete": True,
+        "rounds": 0,
+    }
+    row_alive = np.zeros(cols.n_rows, dtype=bool)
+    row_alive[cols.indices] = True  # uncoverable rows are never alive
+    col_alive = cols.sizes() > 0
+    forced: list[int] = []
+    # Cheapest first, then lower worst uncertainty, then index: the order in which duplicates are kept.
+    preference = np.lexsort((np.arange(cols.n_cols), tie, costs))
+    rank = np.empty(cols.n_cols, dtype=np.int64)
+    rank[preference] = np.arange(cols.n_cols)
+
+    for _ in range(_MAX_REDUCTION_ROUNDS):
+        stats["rounds"] += 1
+        changed = False
+        rows = np.nonzero(row_alive)[0]
+        cur_cols = np.nonzero(col_alive)[0]
+        sub = cols.submatrix(rows, cur_cols)
+        empty = sub.sizes() == 0
+        if empty.any():
+            col_alive[cur_cols[empty]] = False
+            keep = ~empty
+            cur_cols = cur_cols[keep]
+            sub = cols.submatrix(rows, cur_cols)
+        # Duplicates: keep the preferred column of each group.
+        local_order = np.argsort(rank[cur_cols], kind="stable")
+        rep = _duplicate_groups(sub, local_order)
+        dup = rep[local_order] != local_order
+        if dup.any():
+            col_alive[cur_cols[local_order[dup]]] = False
+            stats["duplicate_cols"] += int(dup.sum())
+            changed = True
+            keep = ~np.isin(np.arange(cur_cols.size), local_order[dup])
+            cur_cols = cur_cols[keep]
+            sub = cols.submatrix(rows, cur_cols)
+        # Dominated columns: a strict subset of a column that costs no more.
+        local_costs = costs[cur_cols]
+        a, _b, complete = _subset_pairs(
+            sub, np.arange(sub.n_cols), lambda a, b, c=local_costs: c[b] <= c[a]
+        )
+        stats["dominance_complete"] &= complete
+        if a.size:
+            dominated = np.unique(a)
+            col_alive[cur_cols[dominated]] = False
+            stats["dominated_cols"] += int(dominated.size)
+            changed = True
+            keep = np.ones(cur_cols.size, dtype=bool)
+            keep[dominated] = False
+            cur_cols = cur_cols[keep]
+            sub = cols.submatrix(rows, cur_cols)
+        # Forced: the only remaining view of some point.
+        rows_t = sub.transpose()
+        deg = rows_t.sizes()
+        single = np.nonzero(deg == 1)[0]
+        if single.size:
+            must = np.unique(rows_t.indices[rows_t.indptr[single]])
+            for j in cur_cols[must]:
+                forced.append(int(j))
+                col_alive[j] = False
+                row_alive[cols.col(j)] = False
+            stats["forced_cols"] += int(must.size)
+            changed = True
+            continue  # rows changed: rebuild before the row reductions
+        # Rows: duplicate rows, then rows implied by another (their views are a superset of its views).
+        row_order = np.arange(rows_t.n_cols)
+        rrep = _duplicate_groups(rows_t, row_order)
+        rdup = rrep != row_order
+        if rdup.any():
+            row_alive[rows[rdup]] = False
+            stats["duplicate_rows"] += int(rdup.sum())
+            changed = True
+        remaining = np.nonzero(~rdup)[0]
+        _, rb, complete = _subset_pairs(
+            rows_t, remaining, lambda a, b: np.ones(a.size, dtype=bool), budget=_DOMINANCE_PAIR_BUDGET // 4
+        )
+        stats["dominance_complete"] &= complete
+        if rb.size:
+            implied = np.unique(rb)
+            row_alive[rows[implied]] = False
+            stats["dominated_rows"] += int(implied.size)
+            changed = True
+        if not changed:
+            break
+    return _Reduction(forced, np.nonzero(col_alive)[0], np.nonzero(row_alive)[0], stats)
+
+
+# --------------------------------------------------------------------------------------------------------
+# Integer programme backends
+
+
+@dataclass
+class _MipOutcome:
+    x: np.ndarray | None  # chosen local columns (bool)
+    objective: float
+    bound: float
+    status: str  # "optimal", "time_limit", "infeasible", "error"
+    detail: str
+
+
+def _solve_highs(
+    sub: _Columns, costs: np.ndarray, start: np.ndarray | None, time_limit_s: float, mip_gap: float
+) -> _MipOutcome:
+    import highspy
+
+    h = highspy.Highs()
+    h.setOptionValue("output_flag", False)
+    h.setOptionValue("time_limit", float(max(time_limit_s, 0.01)))
+    h.setOptionValue("mip_rel_gap", float(mip_gap))
+    h.setOptionValue("mip_abs_gap", 1e-9)
+    h.setOptionValue("random_seed", 0)
+    n, m = sub.n_cols, sub.n_rows
+    lp = highspy.HighsLp()
+    lp.num_col_ = n
+    lp.num_row_ = m
+    lp.col_cost_ = np.asarray(costs, dtype=np.float64)
+    lp.col_lower_ = np.zeros(n)
+    lp.col_upper_ = np.ones(n)
+    lp.row_lower_ = np.ones(m)
+    lp.row_upper_ = np.full(m, highspy.kHighsInf)
+    lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
+    lp.a_matrix_.start_ = sub.indptr.astype(np.int32)
+    lp.a_matrix_.index_ = sub.indices.astype(np.int32)
+    lp.a_matrix_.value_ = np.ones(sub.indices.size)
+    # HiGHS has no separate binary type: a binary is an integer column with bounds [0, 1].
+    lp.integrality_ = [highspy.HighsVarType.kInteger] * n
+    h.passModel(lp)
+    if start is not None:
+        sol = highspy.HighsSolution()
+        sol.col_value = start.astype(np.float64)
+        sol.value_valid = True
+        h.setSolution(sol)
+    h.run()
+    status = h.getModelStatus()
+    info = h.getInfo()
+    has_solution = info.primal_solution_status == highspy.SolutionStatus.kSolutionStatusFeasible
+    x = np.asarray(h.getSolution().col_value) > 0.5 if has_solution else None
+    name = h.modelStatusToString(status)
+    if status == highspy.HighsModelStatus.kOptimal:
+        kind = "optimal"
+    elif status == highspy.HighsModelStatus.kInfeasible:
+        kind = "infeasible"
+    elif status == highspy.HighsModelStatus.kTimeLimit:
+        kind = "time_limit"
+    else:
+        kind = "error"
+    bound = float(info.mip_dual_bound) if math.isfinite(info.mip_dual_bound) else -math.inf
+    return _MipOutcome(x, float(info.objective_function_value), bound, kind, f"HiGHS: {name}")
+
+
+def _solve_cbc(
+    sub: _Columns, costs: np.ndarray, start: np.ndarray | None, time_limit_s: float, mip_gap: float
+) -> _MipOutcome:
+    import pulp
+
+    prob = pulp.LpProblem("set_cover", pulp.LpMinimize)
+    v = [pulp.LpVariable(f"v{j}", cat=pulp.LpBinary) for j in range(sub.n_cols)]
+    prob += pulp.LpAffineExpression(zip(v, costs.tolist(), strict=True))
+    rows_t = sub.transpose()
+    for i in range(rows_t.n_cols):
+        prob += pulp.LpAffineExpression((v[j], 1) for j in rows_t.col(i).tolist()) >= 1
+    if start is not None:
+        for var, val in zip(v, start.tolist(), strict=True):
+            var.setInitialValue(1 if val else 0)
+    solver = pulp.PULP_CBC_CMD(
+        msg=False, timeLimit=max(1, math.ceil(time_limit_s)), gapRel=mip_gap, warmStart=start is not None
+    )
+    prob.solve(solver)
+    values = np.array([var.value() if var.value() is not None else 0.0 for var in v])
+    feasible = prob.sol_status in (pulp.LpSolutionOptimal, pulp.LpSolutionIntegerFeasible)
+    x = values > 0.5 if feasible else None
+    objective = float(costs @ x) if x is not None else math.inf
+    if prob.sol_status == pulp.LpSolutionOptimal:
+        kind, bound = "optimal", objective if mip_gap == 0.0 else -math.inf
+    elif prob.sol_status == pulp.LpSolutionIntegerFeasible:
+        kind, bound = "time_limit", -math.inf
+    elif prob.status == pulp.LpStatusInfeasible:
+        kind, bound = "infeasible", -math.inf
+    else:
+        kind, bound = "error", -math.inf
+    return _MipOutcome(x, objective, bound, kind, f"CBC: {pulp.LpStatus[prob.status]}")
+
+
+# --------------------------------------------------------------------------------------------------------
+# Entry point
+
+
+def _validate_per_view(values, n_cols: int, what: str) -> np.ndarray:
+    arr = np.asarray(values, dtype=np.float64)
+    if arr.shape != (n_cols,):
+        raise SetCoverError(f"{what} must have one value per view ({n_cols}), got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)) or np.any(arr < 0.0):
+        raise SetCoverError(f"{what} must be finite and non-negative")
+    return arr
+
+
+def solve_set_cover(
+    matrix,
+    solver_type: str = "greedy",
+    uncertainties=None,
+    durations_s=None,
+    time_limit_s: float = DEFAULT_TIME_LIMIT_S,
+    mip_gap: float = 0.0,
+    backend: str = "highs",
+    reduce: bool = True,
+    warm_start: bool = True,
+) -> SetCoverResult:
+    """Choose views (columns of ``matrix``) that together measure every coverable point (row).
+
+    :param matrix: points x views, scipy.sparse or dense; non-zero, non-NaN entries are measurable, numeric
+        values are the points' uncertainties.
+    :param solver_type: one of :data:`SOLVER_TYPES`.
+    :param uncertainties: per-view worst uncertainty (length = number of views) or a points x views matrix of
+        uncertainties; default: the values of a numeric ``matrix``. Used for the greedy tie-break and as the
+        cost of ``IP_uncertainty`` (required there).
+    :param durations_s: per-view trajectory duration in s (required for ``IP_time``).
+    :param time_limit_s: wall-clock limit for the integer programme; when it is hit the best cover found is
+        returned with ``proven_optimal=False`` and its gap.
+    :param mip_gap: relative gap at which the solver may stop (0 = prove optimality).
+    :param backend: ``'highs'`` (highspy) or ``'cbc'`` (CBC through PuLP).
+    :param reduce: apply the reductions before the integer programme (off only for testing them).
+    :param warm_start: give the solver the greedy cover as a starting incumbent.
+    :raises SetCoverError: (a ValueError) for an unknown solver or backend and for malformed inputs.
+    """
+    if solver_type not in SOLVER_TYPES:
+        raise SetCoverError(
+            f"unknown solver_type {solver_type!r}; valid names: {', '.join(repr(s) for s in SOLVER_TYPES)}"
+        )
+    if backend not in BACKENDS:
+        raise SetCoverError(f"unknown backend {backend!r}; valid names: {', '.join(repr(b) for b in BACKENDS)}")
+    if not (mip_gap >= 0.0) or not (time_limit_s > 0.0):
+        raise SetCoverError("mip_gap must be >= 0 and time_limit_s > 0")
+    t_start = time.perf_counter()
+    cols, values = _measurable_columns(matrix)
+    worst_u = _worst_uncertainty(matrix, cols, values, uncertainties)
+    durations = None if durations_s is None else _validate_per_view(durations_s, cols.n_cols, "durations_s")
+    if solver_type == "IP_uncertainty" and worst_u is None:
+        raise SetCoverError("IP_uncertainty needs uncertainties (a numeric matrix or the uncertainties argument)")
+    if solver_type == "IP_time" and durations is None:
+        raise SetCoverError("IP_time needs durations_s (one duration per view)")
+
+    row_degree = np.bincount(cols.indices, minlength=cols.n_rows)
+    uncoverable = np.nonzero(row_degree == 0)[0]
+    n_coverable = cols.n_rows - uncoverable.size
+    tie = worst_u if worst_u is not None else np.zeros(cols.n_cols)
+    stats: dict = {"uncoverable": uncoverable, "n_points": cols.n_rows, "n_views": cols.n_cols}
+    note = f"; {uncoverable.size} point(s) measurable by no view" if uncoverable.size else ""
+    solver_name = solver_type if solver_type == "greedy" else f"{solver_type}/{backend}"
+
+    if solver_type == "IP_uncertainty":
+        raw_costs = worst_u
+    elif solver_type == "IP_time":
+        raw_costs = durations
+    else:
+        raw_costs = np.ones(cols.n_cols)
+
+    def finish(picks, gap, proven, lb, message) -> SetCoverResult:
+        selected = np.sort(np.asarray(picks, dtype=np.int64))
+        covered = np.zeros(cols.n_rows, dtype=bool)
+        for j in selected:
+            covered[cols.col(j)] = True
+        return SetCoverResult(
+            selected=selected,
+            covered=covered,
+            n_coverable=int(n_coverable),
+            objective=float(raw_costs[selected].sum()),
+            gap=gap,
+            proven_optimal=proven,
+            solve_time_s=time.perf_counter() - t_start,
+            solver=solver_name,
+            message=message + note,
+            lower_bound=lb,
+            stats=stats,
+        )
+
+    if n_coverable == 0:
+        return finish([], 0.0, True, 0.0, "no coverable points: nothing to select")
+
+    if solver_type == "greedy":
+        picks = _greedy(cols, tie)
+        stats["greedy_picks"] = len(picks)
+        picks = _make_irredundant(cols, picks, None)
+        return finish(picks, None, False, None, f"greedy: {len(picks)} views")
+
+    costs = _normalised(raw_costs)
+    scale = float(raw_costs.max()) if raw_costs.max() > 0 else 1.0  # normalised -> raw cost units
+    t_red = time.perf_counter()
+    if reduce:
+        red = _reduce(cols, costs, tie)
+    else:
+        red = _Reduction([], np.nonzero(cols.sizes() > 0)[0], np.nonzero(row_degree > 0)[0], {})
+    stats.update(red.stats)
+    stats["reduce_time_s"] = time.perf_counter() - t_red
+    stats["reduced_shape"] = (int(red.rows_alive.size), int(red.cols_alive.size))
+    forced = list(red.forced)
+    offset = float(costs[forced].sum()) if forced else 0.0
+    if red.rows_alive.size == 0:
+        picks = _make_irredundant(cols, forced, costs)
+        return finish(picks, 0.0, True, float(raw_costs[picks].sum()), "optimal (solved by reductions)")
+
+    sub = cols.submatrix(red.rows_alive, red.cols_alive)
+    sub_costs = costs[red.cols_alive]
+    greedy_local = None
+    if warm_start:
+        local = _greedy(sub, tie[red.cols_alive], sub_costs)
+        local = _make_irredundant(sub, local, sub_costs)
+        greedy_local = np.zeros(sub.n_cols, dtype=bool)
+        greedy_local[local] = True
+        stats["warm_start_objective"] = float(sub_costs[greedy_local].sum() + offset) * scale
+    t_mip = time.perf_counter()
+    remaining = max(time_limit_s - (t_mip - t_start), 0.01)
+    solve = _solve_highs if backend == "highs" else _solve_cbc
+    outcome = solve(sub, sub_costs, greedy_local, remaining, mip_gap)
+    stats["mip_time_s"] = time.perf_counter() - t_mip
+    stats["mip_shape"] = (sub.n_rows, sub.n_cols)
+    if outcome.x is None:
+        if greedy_local is None:
+            raise RuntimeError(f"set cover: the integer programme gave no solution ({outcome.detail})")
+        x, detail = greedy_local, f"{outcome.detail}; no MIP solution, returning the greedy cover"
+    else:
+        x, detail = outcome.x, outcome.detail
+    picks = forced + [int(j) for j in red.cols_alive[np.nonzero(x)[0]]]
+    picks = _make_irredundant(cols, picks, costs)
+    objective_n = float(costs[picks].sum())
+    bound_n = outcome.bound + offset
+    if solver_type == "IP_basic":
+        bound_n = math.ceil(bound_n - 1e-6)  # the optimum of a count is an integer
+    bound_n = min(bound_n, objective_n)
+    gap = (objective_n - bound_n) / objective_n if objective_n > 0 else 0.0
+    if not math.isfinite(gap):
+        gap = None
+    proven = gap is not None and gap <= 1e-9
+    lb = bound_n * scale if math.isfinite(bound_n) else None
+    status = "optimal" if proven else outcome.status.replace("_", " ")
+    message = f"{status}: {len(picks)} views ({detail})"
+    return finish(picks, gap, proven, lb, message)
