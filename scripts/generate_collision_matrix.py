@@ -3,7 +3,7 @@
 
 Like the MoveIt setup assistant: pairs of links joined by a joint are 'Adjacent'; a pair of links that is in
 collision in every sampled state is 'Always' (overlapping geometry, a modelling artefact); a pair that never
-comes within ``padding_m + never_margin_m`` of each other in any sampled state is 'Never'. Unlike the setup
+comes closer than ``never_margin_m`` (beyond the self padding) in any sampled state is 'Never'. Unlike the setup
 assistant it decides per pair of collision elements: when some elements of a link pair overlap always but
 others are seen both free and in collision (the forearm folding back onto the shoulder housing of the adjacent
 upper arm), only the always-overlapping elements are allowed, so real collisions are not hidden. 'User' entries (robot vs. scene, by hand) and the
@@ -39,16 +39,19 @@ DEFAULT_GENERATION = {"samples": 20000, "seed": 0, "never_margin_m": 0.02, "alwa
 HEADER = """\
 # Collision checking of the robot (src/agiprobot_measurement/collision.py); lengths in metres.
 #
-# padding_m: every robot collision shape is inflated by this much, so a state is valid only when each
-#   checked pair keeps at least this distance.
+# padding_m: the robot's collision shapes are inflated by this much against scene objects and the part, so a
+#   valid state keeps at least this distance from them (their poses are uncertain; it also covers the motion
+#   between the states a planner checks).
+# self_padding_m: the inflation against the robot's own links (two shapes keep 2 * self_padding_m apart).
+#   Smaller, because the robot's geometry is known and the wrist housings sit ~15 mm apart by design.
 # allowed_collisions: pairs that are NOT checked, with the reason (MoveIt SRDF terms):
 #   User      set by hand (robot link vs. scene object); kept when the file is regenerated
 #   Adjacent  links joined by a joint (directly or through links without geometry): touch by construction
 #   Always    in collision in every sampled state: overlapping housings, a modelling artefact
-#   Never     never within padding_m + never_margin_m of each other in any sampled state
-#   `elements: [[i, j], ...]` limits an entry to collision element i of `a` vs. element j of `b` (URDF order):
-#   the other elements of that pair are checked, because the sampling saw them both free and in collision
-#   (e.g. the forearm folding back onto the shoulder housing of the adjacent upper arm).
+#   Never     never closer than never_margin_m (beyond the self padding) in any sampled state
+#   `elements: [[i, j], ...]` limits an entry to collision element i of `a` vs. element j of `b` (URDF order);
+#   the pair's other elements are checked: for Adjacent those seen both free and in collision (the forearm
+#   folding back onto the shoulder housing of the upper arm), for Always also those that came near.
 #   Every other link pair and every link vs. every scene object or the part is checked.
 # generation: how scripts/generate_collision_matrix.py sampled (uniform in the joint limits, seeded).
 #
@@ -65,10 +68,11 @@ def compute_matrix(station: Station, config: CollisionConfig, generation: dict, 
     always-colliding element pairs are listed and the rest stays checked.
     """
     model = KinematicModel.from_station(station)
-    normal = CollisionChecker(model, None, CollisionConfig(padding_m=config.padding_m, allowed={}))
-    inflated = CollisionChecker(
-        model, None, CollisionConfig(padding_m=config.padding_m + float(generation["never_margin_m"]), allowed={})
-    )
+    pad = config.self_padding_m
+    normal = CollisionChecker(model, None, CollisionConfig(self_padding_m=pad, allowed={}))
+    # both shapes of a pair grow by half the margin: 'near' = closer than never_margin_m beyond the padding
+    margin = float(generation["never_margin_m"])
+    inflated = CollisionChecker(model, None, CollisionConfig(self_padding_m=pad + margin / 2.0, allowed={}))
     adjacent = {frozenset(pair) for pair in adjacent_link_pairs(model, normal.robot_links)}
     rng = np.random.default_rng(int(generation["seed"]))
     samples = int(generation["samples"])
@@ -78,26 +82,40 @@ def compute_matrix(station: Station, config: CollisionConfig, generation: dict, 
     _, near = inflated.element_collision_matrix(q)
     log(f"sampled {samples} states in {time.perf_counter() - started:.1f} s")
     fraction, ever_near = colliding.mean(axis=0), near.any(axis=0)
-    by_link: dict[frozenset, list[tuple[tuple, str]]] = {}
+    always_fraction = float(generation["always_fraction"])
+    by_link: dict[frozenset, list[tuple[frozenset, str]]] = {}
     for k, ((a, i), (b, j)) in enumerate(names):
-        kind = (
-            "always"
-            if fraction[k] >= float(generation["always_fraction"])
-            else ("sometimes" if ever_near[k] else "never")
+        if fraction[k] >= always_fraction:
+            kind = "always"
+        elif fraction[k] > 0.0:
+            kind = "sometimes"  # seen both free and in collision: a real self-collision, always checked
+        else:
+            kind = "near" if ever_near[k] else "never"
+        by_link.setdefault(frozenset((a, b)), []).append((frozenset(((a, i), (b, j))), kind))
+        log(
+            f"  {a:>20}[{i}] - {b:<20}[{j}] colliding in {100 * fraction[k]:6.2f} %"
+            f"  near in {100 * near[:, k].mean():6.2f} %  -> {kind}"
         )
-        by_link.setdefault(frozenset((a, b)), []).append((((a, i), (b, j)), kind))
-        log(f"  {a:>20}[{i}] - {b:<20}[{j}] colliding in {100 * fraction[k]:6.2f} %  near in {100 * near[:, k].mean():6.2f} %  -> {kind}")
     entries = {}
     for key, elements in by_link.items():
-        kinds = {kind for _, kind in elements}
-        always = frozenset(frozenset(pair) for pair, kind in elements if kind == "always")
-        reason = "Adjacent" if key in adjacent else ("Always" if always else "Never")
-        if "sometimes" not in kinds:
-            entries[key] = AllowedEntry(reason)
-        elif always:
-            entries[key] = AllowedEntry(reason, always)
-            if reason == "Adjacent" or fraction[[names.index(p) for p, k in elements if k == "sometimes"]].max() > 0.5:
-                log(f"  note: {' - '.join(sorted(key))}: element pairs colliding sometimes stay checked")
+        if key in adjacent:
+            # joined by a joint: everything but the element pairs seen colliding only sometimes
+            disabled = frozenset(pair for pair, kind in elements if kind != "sometimes")
+            reason = "Adjacent"
+        else:
+            # elements only near each other stay checked: no sampled collision is no proof they cannot meet
+            disabled = frozenset(pair for pair, kind in elements if kind == "always")
+            reason = "Always"
+            if all(kind == "never" for _, kind in elements):
+                disabled, reason = frozenset(pair for pair, _ in elements), "Never"
+            elif disabled and all(kind in ("always", "never") for _, kind in elements):
+                disabled = frozenset(pair for pair, _ in elements)
+        if not disabled:
+            continue
+        whole = len(disabled) == len(elements)
+        entries[key] = AllowedEntry(reason, None if whole else disabled)
+        if not whole and reason == "Adjacent":
+            log(f"  note: {' - '.join(sorted(key))}: element pairs colliding in some states stay checked")
     return entries
 
 
@@ -114,11 +132,13 @@ def _format_entry(a: str, b: str, entry: AllowedEntry) -> str:
 
 def render(config: CollisionConfig, generation: dict, computed: dict) -> str:
     user = {pair: entry for pair, entry in config.allowed.items() if entry.reason == "User"}
-    lines = [HEADER, f"padding_m: {config.padding_m}", "generation:"]
+    lines = [HEADER, f"padding_m: {config.padding_m}", f"self_padding_m: {config.self_padding_m}", "generation:"]
     lines += [f"  {key}: {generation[key]}" for key in DEFAULT_GENERATION]
     lines.append("allowed_collisions:")
     for reason in ALLOWED_REASONS_ORDER:
-        table = user if reason == "User" else {p: e for p, e in computed.items() if e.reason == reason and p not in user}
+        table = (
+            user if reason == "User" else {p: e for p, e in computed.items() if e.reason == reason and p not in user}
+        )
         if table:
             lines.append(f"  # {reason}")
         for pair in sorted(table, key=sorted):

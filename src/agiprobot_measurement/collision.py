@@ -62,9 +62,15 @@ class AllowedEntry:
 
 @dataclass
 class CollisionConfig:
-    """Padding (m) and the allowed-collision matrix: unordered name pair -> :class:`AllowedEntry`."""
+    """Paddings (m) and the allowed-collision matrix: unordered name pair -> :class:`AllowedEntry`.
+
+    ``padding_m`` inflates the robot against scene objects and the part (their poses are uncertain);
+    ``self_padding_m`` inflates it against itself (its own geometry is known, and a large value would forbid
+    wrist poses that are physically fine).
+    """
 
     padding_m: float = 0.01
+    self_padding_m: float = 0.005
     allowed: dict[frozenset, AllowedEntry] = field(default_factory=dict)
     generation: dict = field(default_factory=dict)
     source: Path | None = None
@@ -101,12 +107,14 @@ def load_collision_config(path: str | Path | None = None) -> CollisionConfig:
     where = str(path)
     if not isinstance(data, dict):
         raise ConfigError(f"{where}: expected a mapping")
-    try:
-        padding = float(data.get("padding_m", 0.0))
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(f"{where}: padding_m must be a number") from exc
-    if not math.isfinite(padding) or padding < 0.0:
-        raise ConfigError(f"{where}: padding_m must be a finite number >= 0, got {padding}")
+    paddings = {}
+    for key in ("padding_m", "self_padding_m"):
+        try:
+            paddings[key] = float(data.get(key, 0.0))
+        except (TypeError, ValueError) as exc:
+            raise ConfigError(f"{where}: {key} must be a number") from exc
+        if not math.isfinite(paddings[key]) or paddings[key] < 0.0:
+            raise ConfigError(f"{where}: {key} must be a finite number >= 0, got {paddings[key]}")
     allowed = {}
     entries = data.get("allowed_collisions") or []
     if not isinstance(entries, list):
@@ -128,7 +136,7 @@ def load_collision_config(path: str | Path | None = None) -> CollisionConfig:
     generation = data.get("generation") or {}
     if not isinstance(generation, dict):
         raise ConfigError(f"{where}: generation must be a mapping")
-    return CollisionConfig(padding_m=padding, allowed=allowed, generation=dict(generation), source=path)
+    return CollisionConfig(**paddings, allowed=allowed, generation=dict(generation), source=path)
 
 
 # --------------------------------------------------------------------------------------------- geometry
@@ -145,16 +153,41 @@ def _bvh(vertices: np.ndarray, faces: np.ndarray) -> fcl.BVHModel:
 
 
 @dataclass
+class _Padded:
+    """One robot shape inflated by one padding, with its bounding capsule (segment along ``axis``)."""
+
+    obj: fcl.CollisionObject
+    half_length: float  # m, half the capsule's segment
+    radius: float  # m, capsule radius (padding included)
+
+
+def _padded(geometry, pad: float) -> tuple[_Padded, int]:
+    if geometry.type == "box":
+        size = np.asarray(geometry.size, dtype=float) + 2.0 * pad
+        axis = int(np.argmax(size))
+        others = np.delete(size, axis) / 2.0
+        return _Padded(fcl.CollisionObject(fcl.Box(*size)), size[axis] / 2.0, float(np.hypot(*others))), axis
+    if geometry.type == "cylinder":
+        radius, length = geometry.radius + pad, geometry.length + 2.0 * pad
+        return _Padded(fcl.CollisionObject(fcl.Cylinder(radius, length)), length / 2.0, radius), 2
+    if geometry.type == "sphere":
+        radius = geometry.radius + pad
+        return _Padded(fcl.CollisionObject(fcl.Sphere(radius)), 0.0, radius), 2
+    raise ConfigError(
+        f"link '{geometry.link}': collision geometry '{geometry.type}' is not supported (use box, cylinder, sphere)"
+    )
+
+
+@dataclass
 class _RobotShape:
     link: str
     element: int  # index among the link's collision elements (URDF order)
     kind: str
     offset: np.ndarray  # moving frame -> shape frame (4x4)
     anchor: int  # index of the moving frame (-1: fixed to the world)
-    obj: fcl.CollisionObject
     axis: int  # shape-frame axis of the bounding capsule's segment
-    half_length: float  # m, half the segment
-    radius: float  # m, capsule radius (padding included)
+    world: _Padded  # against scene objects and the part
+    own: _Padded  # against the robot's other links
 
 
 @dataclass
@@ -171,7 +204,7 @@ class _WorldObject:
 
 
 class Clearance(NamedTuple):
-    """Smallest distance (m, padding included; <= 0 in collision) and the pair it belongs to."""
+    """Smallest distance (m, between padded shapes; <= 0 in collision) and the pair it belongs to."""
 
     distance_m: float
     pair: tuple[str, str]
@@ -272,8 +305,8 @@ class CollisionChecker:
     """Validity of joint states: joint limits, self-collision, collision with the scene objects and the part.
 
     Build it with :meth:`from_station`. Checked pairs: every robot link against every world object, and every
-    two robot links, except the pairs of the allowed-collision matrix. A robot shape touching an obstacle
-    within ``padding_m`` counts as a collision.
+    two robot links, except the pairs of the allowed-collision matrix. A robot shape closer than ``padding_m``
+    to an obstacle or the part, or two robot shapes closer than ``2 * self_padding_m``, count as a collision.
     """
 
     def __init__(
@@ -288,6 +321,7 @@ class CollisionChecker:
         # a private copy: allow_collision() must not change a configuration other checkers share
         self.config = replace(config, allowed=dict(config.allowed), generation=dict(config.generation))
         self.padding_m = float(self.config.padding_m)
+        self.self_padding_m = float(self.config.self_padding_m)
         self._poser = _FramePoser(model)
         self._request = fcl.CollisionRequest()
         self._distance_request = fcl.DistanceRequest(enable_signed_distance=True)
@@ -301,8 +335,10 @@ class CollisionChecker:
         self._shape_anchor = np.array([s.anchor for s in self.shapes])
         self._shape_offset = np.array([s.offset for s in self.shapes])
         self._axis_select = np.eye(3)[[s.axis for s in self.shapes]].reshape(-1, 3)
-        self._shape_half = np.array([s.half_length for s in self.shapes])
-        self._shape_radius = np.array([s.radius for s in self.shapes])
+        self._world_half = np.array([s.world.half_length for s in self.shapes])
+        self._world_radius = np.array([s.world.radius for s in self.shapes])
+        self._own_half = np.array([s.own.half_length for s in self.shapes])
+        self._own_radius = np.array([s.own.radius for s in self.shapes])
         self._static = self._shape_anchor < 0
         self._objects: dict[str, _WorldObject] = {}
         self.part_name: str | None = None
@@ -344,27 +380,9 @@ class CollisionChecker:
                         )
 
     def _make_shape(self, link, element, anchor, offset, geometry) -> _RobotShape:
-        pad = self.padding_m
-        if geometry.type == "box":
-            size = np.asarray(geometry.size, dtype=float) + 2.0 * pad
-            axis = int(np.argmax(size))
-            others = np.delete(size, axis) / 2.0
-            return _RobotShape(
-                link, element, "box", offset, anchor, fcl.CollisionObject(fcl.Box(*size)),
-                axis, size[axis] / 2.0, float(np.hypot(*others)),
-            )  # fmt: skip
-        if geometry.type == "cylinder":
-            radius, length = geometry.radius + pad, geometry.length + 2.0 * pad
-            return _RobotShape(
-                link, element, "cylinder", offset, anchor, fcl.CollisionObject(fcl.Cylinder(radius, length)),
-                2, length / 2.0, radius,
-            )  # fmt: skip
-        if geometry.type == "sphere":
-            radius = geometry.radius + pad
-            return _RobotShape(link, element, "sphere", offset, anchor, fcl.CollisionObject(fcl.Sphere(radius)), 2, 0.0, radius)
-        raise ConfigError(
-            f"link '{link}': collision geometry '{geometry.type}' is not supported (use box, cylinder, sphere)"
-        )
+        world, axis = _padded(geometry, self.padding_m)
+        own, _ = _padded(geometry, self.self_padding_m)
+        return _RobotShape(link, element, geometry.type, offset, anchor, axis, world, own)
 
     # ---------------------------------------------------------------------------------- world objects
     def add_box(self, name: str, size_m, pose: np.ndarray) -> None:
@@ -488,6 +506,7 @@ class CollisionChecker:
         n_obj = len(objects)
         self._box_center = np.array([o.box_center for o in objects]).reshape(n_obj, 3)
         self._box_rotation = np.array([o.box_rotation for o in objects]).reshape(n_obj, 3, 3)
+        self._box_center_local = np.einsum("oi,oij->oj", self._box_center, self._box_rotation)
         self._box_half = np.array([o.box_half for o in objects]).reshape(n_obj, 3)
         self._solid_box = np.array([o.solid_box for o in objects], dtype=bool)
         self._env_checked = np.array(
@@ -500,7 +519,7 @@ class CollisionChecker:
             if self.shapes[i].link != self.shapes[j].link and not self._allowed(self.shapes[i], self.shapes[j])
         ]
         self._self_pairs = np.array(pairs, dtype=int).reshape(-1, 2)
-        self._self_reach = self._shape_radius[self._self_pairs].sum(axis=1) if pairs else np.zeros(0)
+        self._self_reach = self._own_radius[self._self_pairs].sum(axis=1) if pairs else np.zeros(0)
 
     def _allowed(self, shape: _RobotShape, other: _RobotShape | _WorldObject) -> bool:
         if isinstance(other, _RobotShape):
@@ -524,8 +543,10 @@ class CollisionChecker:
             poses[:, self._static] = self._shape_offset[self._static]
         return poses
 
-    def _set_shape_pose(self, s: int, pose: np.ndarray) -> None:
-        self.shapes[s].obj.setTransform(fcl.Transform(pose[:3, :3], pose[:3, 3]))
+    def _pose_shapes(self, pose: np.ndarray, *padded: _Padded) -> None:
+        transform = fcl.Transform(pose[:3, :3], pose[:3, 3])
+        for item in padded:
+            item.obj.setTransform(transform)
 
     # ------------------------------------------------------------------------------------- queries
     def _check_q(self, q: np.ndarray) -> np.ndarray:
@@ -548,39 +569,39 @@ class CollisionChecker:
             valid[chunk] = self._collision_free(q[chunk])
         return valid
 
-    def _segments(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """End points (N, S, 3) of the robot shapes' bounding-capsule segments."""
-        axes = np.einsum("nsij,sj->nsi", poses[:, :, :3, :3], self._axis_select)
+    def _segments(self, poses: np.ndarray, half: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """End points (N, S, 3) of the robot shapes' bounding-capsule segments of half lengths ``half`` (m)."""
+        axes = np.einsum("nsij,sj->nsi", poses[:, :, :3, :3], self._axis_select) * half[:, None]
         centers = poses[:, :, :3, 3]
-        return centers - self._shape_half[:, None] * axes, centers + self._shape_half[:, None] * axes
+        return centers - axes, centers + axes
 
     def _broad_phase(self, poses: np.ndarray):
-        """Candidate pairs of the numpy broad phase.
+        """Candidate pairs of the numpy broad phase for (N, S, 4, 4) shape poses.
 
-        Returns (sure (N,) states certainly in collision, env (K, 3) rows [state, shape, object],
-        self (K, 2) rows [state, pair index], local capsule extents used by the inside test).
+        Returns (sure: (N,) states certainly in collision, env: (K, 3) rows [state, shape, object],
+        pairs: (K, 2) rows [state, self-pair index]), candidates of the sure states left out.
         """
-        ends0, ends1 = self._segments(poses)
         n = poses.shape[0]
         sure = np.zeros(n, dtype=bool)
         env = np.zeros((0, 3), dtype=int)
         if len(self._object_list):
+            ends0, ends1 = self._segments(poses, self._world_half)
             # capsule ends in every obstacle's box frame: (N, S, O, 3)
-            local0 = np.einsum("nsi,oij->nsoj", ends0, self._box_rotation) - np.einsum(
-                "oi,oij->oj", self._box_center, self._box_rotation
-            )
+            local0 = np.einsum("nsi,oij->nsoj", ends0, self._box_rotation) - self._box_center_local
             local1 = local0 + np.einsum("nsi,oij->nsoj", ends1 - ends0, self._box_rotation)
-            radius = self._shape_radius[None, :, None, None]
-            low = np.minimum(local0, local1) - radius
-            high = np.maximum(local0, local1) + radius
+            radius = self._world_radius[None, :, None, None]
             half = self._box_half[None, None]
-            near = np.all((low <= half) & (high >= -half), axis=-1) & self._env_checked[None]
-            # a capsule segment end inside a solid box: the shape reaches into the box for certain
+            near = np.all(
+                (np.minimum(local0, local1) - radius <= half) & (np.maximum(local0, local1) + radius >= -half), axis=-1
+            )
+            near &= self._env_checked[None]
+            # an end of a shape's axis inside a solid box: the shape reaches into the box for certain
             inside = np.all(np.abs(local0) < half, axis=-1) | np.all(np.abs(local1) < half, axis=-1)
             sure |= np.any(inside & near & self._solid_box[None, None], axis=(1, 2))
             env = np.argwhere(near & ~sure[:, None, None])
         pairs = np.zeros((0, 2), dtype=int)
         if len(self._self_pairs):
+            ends0, ends1 = self._segments(poses, self._own_half)
             i, j = self._self_pairs[:, 0], self._self_pairs[:, 1]
             distance = _segment_distances(ends0[:, i], ends1[:, i], ends0[:, j], ends1[:, j])
             pairs = np.argwhere((distance < self._self_reach) & ~sure[:, None])
@@ -592,48 +613,47 @@ class CollisionChecker:
         free = ~sure
         if len(env) == 0 and len(pairs) == 0:
             return free
-        # group candidate rows by state; FCL only for those, stopping at a state's first collision
+        # FCL only for the candidates, grouped by state, stopping at a state's first collision
         states = np.union1d(env[:, 0], pairs[:, 0])
-        env_split = np.searchsorted(env[:, 0], states), np.searchsorted(env[:, 0], states, side="right")
-        pair_split = np.searchsorted(pairs[:, 0], states), np.searchsorted(pairs[:, 0], states, side="right")
+        env_lo, env_hi = np.searchsorted(env[:, 0], states), np.searchsorted(env[:, 0], states, side="right")
+        pair_lo, pair_hi = np.searchsorted(pairs[:, 0], states), np.searchsorted(pairs[:, 0], states, side="right")
         env_rows, pair_rows = env[:, 1:].tolist(), pairs[:, 1].tolist()
         self_pairs = self._self_pairs.tolist()
-        objects = self._object_list
-        shapes = self.shapes
-        request = self._request
+        objects, shapes, request = self._object_list, self.shapes, self._request
+        collide, result = fcl.collide, fcl.CollisionResult
         for k, state in enumerate(states.tolist()):
             state_poses = poses[state]
-            posed = set()
+            posed_world, posed_own = set(), set()
             hit = False
-            for s, o in env_rows[env_split[0][k] : env_split[1][k]]:
-                if s not in posed:
-                    self._set_shape_pose(s, state_poses[s])
-                    posed.add(s)
-                if fcl.collide(shapes[s].obj, objects[o].obj, request, fcl.CollisionResult()):
-                    hit = True
-                    break
-                if objects[o].mesh is not None and self._inside_mesh(state_poses[s], s, objects[o]):
+            for s, o in env_rows[env_lo[k] : env_hi[k]]:
+                if s not in posed_world:
+                    self._pose_shapes(state_poses[s], shapes[s].world)
+                    posed_world.add(s)
+                obj = objects[o]
+                if collide(shapes[s].world.obj, obj.obj, request, result()) or (
+                    obj.mesh is not None and self._inside_mesh(state_poses[s], obj)
+                ):
                     hit = True
                     break
             if not hit:
-                for p in pair_rows[pair_split[0][k] : pair_split[1][k]]:
+                for p in pair_rows[pair_lo[k] : pair_hi[k]]:
                     a, b = self_pairs[p]
                     for s in (a, b):
-                        if s not in posed:
-                            self._set_shape_pose(s, state_poses[s])
-                            posed.add(s)
-                    if fcl.collide(shapes[a].obj, shapes[b].obj, request, fcl.CollisionResult()):
+                        if s not in posed_own:
+                            self._pose_shapes(state_poses[s], shapes[s].own)
+                            posed_own.add(s)
+                    if collide(shapes[a].own.obj, shapes[b].own.obj, request, result()):
                         hit = True
                         break
             if hit:
                 free[state] = False
         return free
 
-    def _inside_mesh(self, shape_pose: np.ndarray, s: int, obj: _WorldObject) -> bool:
-        """Whether shape ``s`` lies entirely inside a closed mesh, which FCL's surface BVH does not report.
+    def _inside_mesh(self, shape_pose: np.ndarray, obj: _WorldObject) -> bool:
+        """Whether a shape lies entirely inside a closed mesh, which FCL's surface BVH does not report.
 
         Called only after FCL found no surface contact: then the shape is either wholly inside or wholly
-        outside, and its centre decides. Cheap bounding-box test first: it is rare that it is needed at all.
+        outside, and its centre decides. The bounding-box test first, as it is rare that the mesh test is needed.
         """
         rotation, translation = obj.pose[:3, :3], obj.pose[:3, 3]
         center_local = rotation.T @ (shape_pose[:3, 3] - translation)
@@ -643,21 +663,24 @@ class CollisionChecker:
         return bool(obj.mesh.contains(center_local[None])[0])
 
     def _all_pairs(self, include_allowed: bool):
-        """(shape, shape-or-object, names) of every pair to test for the diagnostic queries."""
+        """(shape index, padded shape, padded other, other, names) of every pair for the diagnostic queries."""
         for i in range(len(self.shapes)):
             for j in range(i + 1, len(self.shapes)):
                 a, b = self.shapes[i], self.shapes[j]
                 if a.link != b.link and (include_allowed or not self._allowed(a, b)):
-                    yield i, b, (a.link, b.link)
+                    yield i, a.own, b.own, b, (a.link, b.link)
         for i, shape in enumerate(self.shapes):
             for obj in self._object_list:
                 if include_allowed or not self._allowed(shape, obj):
-                    yield i, obj, (shape.link, obj.name)
+                    yield i, shape.world, obj, obj, (shape.link, obj.name)
 
     def _pose_all(self, q: np.ndarray) -> np.ndarray:
+        q = np.asarray(q, dtype=float)
+        if q.ndim != 1:
+            raise ValueError(f"expected one joint state of {self.model.dof} values, got shape {q.shape}")
         poses = self.shape_poses(self._check_q(q))[0]
-        for s in range(len(self.shapes)):
-            self._set_shape_pose(s, poses[s])
+        for shape, pose in zip(self.shapes, poses, strict=True):
+            self._pose_shapes(pose, shape.world, shape.own)
         return poses
 
     def colliding_pairs(self, q: np.ndarray, include_allowed: bool = False) -> list[tuple[str, str]]:
@@ -665,38 +688,40 @@ class CollisionChecker:
 
         Joint limits are not looked at. ``include_allowed`` also reports pairs the matrix allows.
         """
-        poses = self._pose_all(np.asarray(q, dtype=float).reshape(-1))
+        poses = self._pose_all(q)
         found = []
-        for i, other, names in self._all_pairs(include_allowed):
-            other_obj = other.obj
-            hit = fcl.collide(self.shapes[i].obj, other_obj, self._request, fcl.CollisionResult()) > 0
-            if not hit and isinstance(other, _WorldObject) and other.mesh is not None:
-                hit = self._inside_mesh(poses[i], i, other)
+        for i, mine, other, owner, names in self._all_pairs(include_allowed):
+            hit = fcl.collide(mine.obj, other.obj, self._request, fcl.CollisionResult()) > 0
+            if not hit and isinstance(owner, _WorldObject) and owner.mesh is not None:
+                hit = self._inside_mesh(poses[i], owner)
             if hit and names not in found:
                 found.append(names)
         return found
 
     def min_distance(self, q: np.ndarray) -> Clearance:
-        """Smallest distance (m) between checked pairs at ``q``, measured on the padded robot geometry.
+        """Smallest distance (m) over the checked pairs at joint state ``q`` (rad), between padded shapes.
 
-        Positive: free with ``padding_m`` to spare; <= 0: in collision (negative values are penetration
-        depths where FCL computes them, 0 otherwise).
+        Positive: free, with that much to spare beyond the paddings; <= 0: in collision (negative values are
+        penetration depths where FCL computes them, 0 otherwise). Joint limits are not looked at.
         """
-        poses = self._pose_all(np.asarray(q, dtype=float).reshape(-1))
+        poses = self._pose_all(q)
         best = Clearance(math.inf, ("", ""))
-        for i, other, names in self._all_pairs(False):
-            result = fcl.DistanceResult()
-            distance = fcl.distance(self.shapes[i].obj, other.obj, self._distance_request, result)
-            if fcl.collide(self.shapes[i].obj, other.obj, self._request, fcl.CollisionResult()):
-                distance = min(distance, 0.0) if distance != -1.0 else 0.0
-            elif isinstance(other, _WorldObject) and other.mesh is not None and self._inside_mesh(poses[i], i, other):
+        for i, mine, other, owner, names in self._all_pairs(False):
+            distance = fcl.distance(mine.obj, other.obj, self._distance_request, fcl.DistanceResult())
+            if fcl.collide(mine.obj, other.obj, self._request, fcl.CollisionResult()):
+                # FCL returns -1 instead of a depth for meshes
+                distance = 0.0 if distance == -1.0 else min(distance, 0.0)
+            elif isinstance(owner, _WorldObject) and owner.mesh is not None and self._inside_mesh(poses[i], owner):
                 distance = -abs(distance)
             if distance < best.distance_m:
                 best = Clearance(float(distance), names)
         return best
 
-    def element_collision_matrix(self, q: np.ndarray) -> tuple[list[tuple[tuple[str, int], tuple[str, int]]], np.ndarray]:
-        """Which pairs of collision elements of different robot links collide, in each of (N, dof) states.
+    def element_collision_matrix(
+        self, q: np.ndarray
+    ) -> tuple[list[tuple[tuple[str, int], tuple[str, int]]], np.ndarray]:
+        """Which pairs of collision elements of different robot links collide (with ``self_padding_m``), in each
+        of (N, dof) states.
 
         The allowed-collision matrix is ignored: this is what ``scripts/generate_collision_matrix.py`` samples
         to build it. Returns the element pairs ``((link_a, i), (link_b, j))`` and an (N, P) bool matrix.
@@ -716,17 +741,17 @@ class CollisionChecker:
             for i, j in shape_pairs
         ]
         result = np.zeros((q.shape[0], len(shape_pairs)), dtype=bool)
-        reach = self._shape_radius[shape_pairs].sum(axis=1)
+        reach = self._own_radius[shape_pairs].sum(axis=1)
         i, j = shape_pairs[:, 0], shape_pairs[:, 1]
         for start in range(0, q.shape[0], _CHUNK):
             poses = self.shape_poses(q[start : start + _CHUNK])
-            ends0, ends1 = self._segments(poses)
+            ends0, ends1 = self._segments(poses, self._own_half)
             near = _segment_distances(ends0[:, i], ends1[:, i], ends0[:, j], ends1[:, j]) < reach
             for state, p in np.argwhere(near).tolist():
-                a, b = shape_pairs[p]
-                self._set_shape_pose(a, poses[state, a])
-                self._set_shape_pose(b, poses[state, b])
-                if fcl.collide(self.shapes[a].obj, self.shapes[b].obj, self._request, fcl.CollisionResult()):
+                a, b = self.shapes[shape_pairs[p, 0]], self.shapes[shape_pairs[p, 1]]
+                self._pose_shapes(poses[state, shape_pairs[p, 0]], a.own)
+                self._pose_shapes(poses[state, shape_pairs[p, 1]], b.own)
+                if fcl.collide(a.own.obj, b.own.obj, self._request, fcl.CollisionResult()):
                     result[start + state, p] = True
         return names, result
 

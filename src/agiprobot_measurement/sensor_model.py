@@ -481,21 +481,20 @@ class SensorModel:
 
         Returns view indices (relative to the chunk) and point indices, view-major and points ascending.
         """
+        count, n_points = poses.shape[0], pts32.shape[1]
         rot = poses[:, :3, :3]
-        anchors = poses[:, :3, 3] - ctx.center
-        # rows t, l, s of each view: (3 * Vc, 3) so one matrix product serves all three axes
-        axes = np.ascontiguousarray(rot.transpose(0, 2, 1)).reshape(-1, 3)
-        offsets = np.einsum("vij,vi->vj", rot, anchors).astype(np.float32)  # (Vc, 3): a.t, a.l, a.s
-        axes32 = axes.astype(np.float32)
-        count = poses.shape[0]
+        # rows t, l, s of each view stacked: one product serves all three axes. einsum, because BLAS is
+        # an order of magnitude slower than numpy's own loop for an inner dimension of 3.
+        axes32 = np.ascontiguousarray(rot.transpose(0, 2, 1)).reshape(-1, 3).astype(np.float32)
+        offsets = np.einsum("vij,vi->vj", rot, poses[:, :3, 3] - ctx.center).astype(np.float32)
 
-        normal_proj = (axes32 @ nrm32).reshape(count, 3, -1)  # n.t, n.l, n.s
+        normal_proj = np.einsum("ij,jk->ik", axes32, nrm32).reshape(count, 3, n_points)  # n.t, n.l, n.s
         # |psi| < psi_max  <=>  |n.t| < tan(psi_max) * (-n.s)  (which also demands -n.s > 0)
         limit = normal_proj[:, 2] * np.float32(-math.tan(self.psi_max))
         limit += ang_margin
         mask = np.abs(normal_proj[:, 0]) < limit
 
-        local = (axes32 @ pts32).reshape(count, 3, -1)
+        local = np.einsum("ij,jk->ik", axes32, pts32).reshape(count, 3, n_points)
         local -= offsets[:, :, None]
         qx, qy, qz = local[:, 0], local[:, 1], local[:, 2]
         mask &= qz > np.float32(self.minimum_standoff) - pos_margin
@@ -504,52 +503,61 @@ class SensorModel:
         half_width += pos_margin
         mask &= np.abs(qy) <= half_width
         mask &= np.abs(qx) <= np.float32(deflection) + pos_margin
-        vi, pi = np.nonzero(mask)
-        return vi.astype(np.int64), pi.astype(np.int64)
+        return np.divmod(np.flatnonzero(mask), n_points)
 
-    def _evaluate_pairs(self, poses, ctx, vi, pi, threshold, deflection):
-        """Exact float64 tests and ray casts of candidate pairs. Returns (keep mask, u, t0) of the kept."""
-        rot = poses[vi, :3, :3]
-        t_ax, l_ax, s_ax = rot[:, :, 0], rot[:, :, 1], rot[:, :, 2]
-        p = ctx.points[pi]
-        n = ctx.normals[pi]
-        d = p - poses[vi, :3, 3]
-        qx, qy, qz = _dot3(d, t_ax), _dot3(d, l_ax), _dot3(d, s_ax)
-        nt, nl, ns = _dot3(n, t_ax), _dot3(n, l_ax), _dot3(n, s_ax)
+    def _evaluate_pairs(self, view_data, ctx, vi, pi, threshold, deflection):
+        """Exact float64 tests and ray casts of candidate pairs. Returns (keep mask, u, t0) of the kept.
+
+        ``view_data`` (12, Vc): rows t, l, s (3 each) and the anchor; gathered as rows so that every
+        quantity below is a contiguous 1-D array.
+        """
+        tx, ty, tz, lx, ly, lz, sx, sy, sz, ax, ay, az = np.take(view_data, vi, axis=1)
+        px, py, pz, nx, ny, nz = np.take(ctx.point_data, pi, axis=1)
+        dx, dy, dz = px - ax, py - ay, pz - az
+        qx = dx * tx + dy * ty + dz * tz
+        qy = dx * lx + dy * ly + dz * lz
+        qz = dx * sx + dy * sy + dz * sz
+        nt = nx * tx + ny * ty + nz * tz
+        nl = nx * lx + ny * ly + nz * lz
+        ns = nx * sx + ny * sy + nz * sz
 
         psi = np.arctan2(nt, -ns)
+        facing = qy * nl + qz * ns  # (p - e) . n
         with np.errstate(invalid="ignore", divide="ignore"):
-            cos_theta = -(qy * nl + qz * ns) / (np.hypot(qy, qz) * np.hypot(nl, ns))
-            theta = np.arccos(np.clip(cos_theta, -1.0, 1.0))
-        keep = (
-            (np.abs(qx) <= deflection)
-            & (qz > self.minimum_standoff)
-            & (qz < self.maximum_standoff)
-            & (np.abs(qy) <= qz * self._tan_half_fan)
-            & (np.abs(psi) < self.psi_max)
-            & (theta < self.theta_max)
-        )
+            theta = np.arccos(np.clip(-facing / (np.hypot(qy, qz) * np.hypot(nl, ns)), -1.0, 1.0))
+        baseline = self.laser_emission_perception_distance
+        keep = np.abs(qx) <= deflection
+        keep &= qz > self.minimum_standoff
+        keep &= qz < self.maximum_standoff
+        keep &= np.abs(qy) <= qz * self._tan_half_fan
+        keep &= np.abs(psi) < self.psi_max
+        keep &= theta < self.theta_max
         # the emitter must see the front of the face (implied by theta < pi/2, stated for clarity), and so
         # must the detector, which sits laser_emission_perception_distance behind the emitter along -x
-        baseline = self.laser_emission_perception_distance
-        keep &= qy * nl + qz * ns < 0.0
-        keep &= qy * nl + qz * ns + baseline * nt < 0.0
+        keep &= facing < 0.0
+        keep &= facing + baseline * nt < 0.0
         u = self._u(qz, psi) * np.abs(ns)
         keep &= u <= threshold
 
-        if not ctx.convex:
-            idx = np.flatnonzero(keep)
+        # points on faces whose plane supports the whole mesh cannot be occluded from their front side
+        idx = np.flatnonzero(keep)
+        idx = idx[~ctx.unoccludable[pi[idx]]]
+        if idx.size:
+            p = np.stack([px[idx], py[idx], pz[idx]], axis=1)
+            t_ax = np.stack([tx[idx], ty[idx], tz[idx]], axis=1)
             # emitter ray: from e = anchor + t0 * t to p, i.e. along qy * l + qz * s
-            ray = qy[idx, None] * l_ax[idx] + qz[idx, None] * s_ax[idx]
-            length = np.sqrt(_dot3(ray, ray))
-            direction = ray / length[:, None]
-            blocked = ctx.caster.occluded(p[idx] - ray, direction, length - self.occlusion_tolerance)
-            keep[idx[blocked]] = False
-            idx = idx[~blocked]
+            ray = qy[idx, None] * np.stack([lx[idx], ly[idx], lz[idx]], axis=1)
+            ray += qz[idx, None] * np.stack([sx[idx], sy[idx], sz[idx]], axis=1)
+            blocked = self._blocked(ctx, p, ray)
             # detector ray: from e - baseline * t to p
-            ray = qy[idx, None] * l_ax[idx] + qz[idx, None] * s_ax[idx] + baseline * t_ax[idx]
-            length = np.sqrt(_dot3(ray, ray))
-            direction = ray / length[:, None]
-            blocked = ctx.caster.occluded(p[idx] - ray, direction, length - self.occlusion_tolerance)
+            ray += baseline * t_ax
+            blocked[~blocked] = self._blocked(ctx, p[~blocked], ray[~blocked])
             keep[idx[blocked]] = False
         return keep, u[keep], qx[keep]
+
+    def _blocked(self, ctx, points, rays):
+        """Occlusion of the segments ``points - rays -> points`` (minus the tolerance at the point)."""
+        length = np.sqrt(np.einsum("ij,ij->i", rays, rays))
+        return ctx.caster.occluded(
+            points - rays, rays / length[:, None], length - self.occlusion_tolerance
+        )

@@ -363,7 +363,7 @@ class ScanTrajectory:
 
     @property
     def speed_reduced(self) -> bool:
-        return self.scan_speed_mm_s < self.requested_scan_speed_mm_s * (1.0 - 1e-9)
+        return self.scan_speed_mm_s < self.requested_scan_speed_mm_s * (1.0 - CRUISE_SPEED_TOLERANCE)
 
 
 def constant_speed_scan_trajectory(

@@ -25,6 +25,7 @@ class BagRecordTest(unittest.TestCase):
     def test_recorded_motion_replays(self):
         rospy.init_node("test_bag_record")
         bag_path = Path(rospy.get_param("~bag"))
+        bag_path.unlink(missing_ok=True)  # a bag of an earlier run; this run's is still <bag>.active
         live = {}
         sub = rospy.Subscriber("/joint_states", JointState, lambda m: live.__setitem__(m.header.stamp, m.position))
         place_robot("home")
