@@ -50,8 +50,9 @@ HEADER = """\
 #   Always    in collision in every sampled state: overlapping housings, a modelling artefact
 #   Never     never closer than never_margin_m (beyond the self padding) in any sampled state
 #   `elements: [[i, j], ...]` limits an entry to collision element i of `a` vs. element j of `b` (URDF order);
-#   the pair's other elements are checked: for Adjacent those seen both free and in collision (the forearm
-#   folding back onto the shoulder housing of the upper arm), for Always also those that came near.
+#   the pair's other elements are checked: for Adjacent those whose distance varies and that came near or
+#   touched (the forearm folding back onto the shoulder housing of the upper arm), for Always all but the
+#   always-overlapping ones.
 #   Every other link pair and every link vs. every scene object or the part is checked.
 # generation: how scripts/generate_collision_matrix.py sampled (uniform in the joint limits, seeded).
 #
@@ -81,7 +82,7 @@ def compute_matrix(station: Station, config: CollisionConfig, generation: dict, 
     names, colliding = normal.element_collision_matrix(q)
     _, near = inflated.element_collision_matrix(q)
     log(f"sampled {samples} states in {time.perf_counter() - started:.1f} s")
-    fraction, ever_near = colliding.mean(axis=0), near.any(axis=0)
+    fraction, near_fraction = colliding.mean(axis=0), near.mean(axis=0)
     always_fraction = float(generation["always_fraction"])
     by_link: dict[frozenset, list[tuple[frozenset, str]]] = {}
     for k, ((a, i), (b, j)) in enumerate(names):
@@ -89,18 +90,20 @@ def compute_matrix(station: Station, config: CollisionConfig, generation: dict, 
             kind = "always"
         elif fraction[k] > 0.0:
             kind = "sometimes"  # seen both free and in collision: a real self-collision, always checked
+        elif near_fraction[k] >= 1.0:
+            kind = "close"  # near in every state but never touching: a fixed clearance built into the arm
         else:
-            kind = "near" if ever_near[k] else "never"
+            kind = "near" if near_fraction[k] > 0.0 else "never"
         by_link.setdefault(frozenset((a, b)), []).append((frozenset(((a, i), (b, j))), kind))
         log(
             f"  {a:>20}[{i}] - {b:<20}[{j}] colliding in {100 * fraction[k]:6.2f} %"
-            f"  near in {100 * near[:, k].mean():6.2f} %  -> {kind}"
+            f"  near in {100 * near_fraction[k]:6.2f} %  -> {kind}"
         )
     entries = {}
     for key, elements in by_link.items():
         if key in adjacent:
-            # joined by a joint: everything but the element pairs seen colliding only sometimes
-            disabled = frozenset(pair for pair, kind in elements if kind != "sometimes")
+            # joined by a joint: all but the element pairs whose distance varies so that they touch or come near
+            disabled = frozenset(pair for pair, kind in elements if kind in ("always", "close", "never"))
             reason = "Adjacent"
         else:
             # elements only near each other stay checked: no sampled collision is no proof they cannot meet

@@ -86,9 +86,7 @@ class LoadedPart:
 
     def sample(self, density: float, seed: int | None = 0, oversampling: int = 5) -> SurfaceSamples:
         """Sample the measurable faces with ``density`` points/mm^2 (see :func:`sample_surface`)."""
-        return sample_surface(
-            self.mesh, density, faces=self.measurable_faces, seed=seed, oversampling=oversampling
-        )
+        return sample_surface(self.mesh, density, faces=self.measurable_faces, seed=seed, oversampling=oversampling)
 
 
 def _warn(messages: list[str], text: str) -> None:

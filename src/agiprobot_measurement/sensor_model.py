@@ -182,9 +182,7 @@ class _RayCaster:
             )
             # embreex reports 0 for an occluded ray and -1 for a free one
             return np.asarray(hit) != -1
-        tri, ray, loc = self.mesh.ray.intersects_id(
-            origins, directions, multiple_hits=False, return_locations=True
-        )
+        tri, ray, loc = self.mesh.ray.intersects_id(origins, directions, multiple_hits=False, return_locations=True)
         result = np.zeros(count, dtype=bool)
         if len(ray):
             hit_distance = np.einsum("ij,ij->i", loc - origins[ray], directions[ray])
@@ -198,9 +196,36 @@ class _Context:
     points: np.ndarray  # (P, 3) mm
     face_ids: np.ndarray  # (P,)
     normals: np.ndarray  # (P, 3)
+    point_data: np.ndarray  # (6, P): points and normals as rows
     caster: _RayCaster
-    convex: bool
+    unoccludable: np.ndarray  # (P,) bool: the sample's face plane supports the whole mesh
     center: np.ndarray  # (3,)
+
+
+def supporting_faces(mesh: trimesh.Trimesh, tolerance: float | None = None) -> np.ndarray:
+    """Boolean per face: does the face's plane support the mesh (no vertex lies in front of it)?
+
+    Every face of a convex mesh does. A segment from a point in front of such a face to a point on it cannot
+    meet the mesh anywhere else. ``tolerance`` (mm) defaults to 1e-6 of the mesh's scale.
+    """
+    if tolerance is None:
+        tolerance = 1e-6 * float(mesh.scale)
+    try:
+        hull = np.asarray(mesh.convex_hull.vertices)
+    except Exception:  # qhull fails on flat or degenerate meshes: then nothing is culled
+        return np.zeros(len(mesh.faces), dtype=bool)
+    normals = np.asarray(mesh.face_normals)
+    origins = np.asarray(mesh.triangles[:, 0])
+    # the largest height of any hull vertex above each face plane, in blocks to bound the memory
+    result = np.zeros(len(normals), dtype=bool)
+    block = max(1, (1 << 22) // max(1, len(hull)))
+    for start in range(0, len(normals), block):
+        n = normals[start : start + block]
+        height = n @ hull.T - np.einsum("ij,ij->i", n, origins[start : start + block])[:, None]
+        result[start : start + block] = height.max(axis=1) <= tolerance
+    # degenerate faces have no normal and so no front side
+    result &= np.linalg.norm(normals, axis=1) > 0.5
+    return result
 
 
 class SensorModel:
@@ -278,9 +303,7 @@ class SensorModel:
         psi_arr = np.asarray(psi, dtype=float)
         with np.errstate(invalid="ignore"):
             valid = (
-                (z_arr >= self.minimum_standoff)
-                & (z_arr <= self.maximum_standoff)
-                & (np.abs(psi_arr) <= self.psi_max)
+                (z_arr >= self.minimum_standoff) & (z_arr <= self.maximum_standoff) & (np.abs(psi_arr) <= self.psi_max)
             )
             result = np.where(valid, self._u(z_arr, psi_arr), np.nan)
         return float(result) if result.ndim == 0 else result
@@ -331,43 +354,48 @@ class SensorModel:
 
     # ---------------------------------------------------------------------------------------- context
     def set_processing_context(
-        self, mesh: trimesh.Trimesh, sampled_surface_points, sampled_face_indices, *, assume_convex=None
+        self,
+        mesh: trimesh.Trimesh,
+        sampled_surface_points,
+        sampled_face_indices,
+        *,
+        cull_supporting_faces: bool = True,
     ) -> None:
         """Load the occluding mesh (mm) into the ray tracer and remember the samples to evaluate.
 
         ``sampled_surface_points``: (P, 3) mm; ``sampled_face_indices``: (P,) face of ``mesh`` each sample
         lies on (its normal is the face normal). Replaces any previous context.
 
-        ``assume_convex``: ``None`` (default) asks trimesh whether the mesh is convex. For a convex mesh a
-        point that faces both the emitter and the detector cannot be occluded, so no rays are cast; the
-        result is the same. ``False`` forces ray casting.
+        ``cull_supporting_faces``: no rays are cast for samples on faces whose plane supports the whole mesh
+        (the mesh lies behind it, e.g. every face of a convex part): seen from the front, nothing can occlude
+        them, so the result is the same. ``False`` casts rays for every pair (for comparisons).
         """
         if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
             raise ValueError("set_processing_context needs a trimesh.Trimesh with faces")
         points = np.asarray(sampled_surface_points, dtype=float).reshape(-1, 3)
         face_ids = np.asarray(sampled_face_indices).reshape(-1)
         if face_ids.shape[0] != points.shape[0]:
-            raise ValueError(
-                f"{points.shape[0]} sample points but {face_ids.shape[0]} face indices: they must match"
-            )
+            raise ValueError(f"{points.shape[0]} sample points but {face_ids.shape[0]} face indices: they must match")
         if not np.all(np.isfinite(points)):
             raise ValueError("sample points must be finite")
         if face_ids.size and (
-            not np.issubdtype(face_ids.dtype, np.integer)
-            or face_ids.min() < 0
-            or face_ids.max() >= len(mesh.faces)
+            not np.issubdtype(face_ids.dtype, np.integer) or face_ids.min() < 0 or face_ids.max() >= len(mesh.faces)
         ):
             raise ValueError(f"face indices must be integers in [0, {len(mesh.faces)})")
         face_ids = face_ids.astype(np.int64)
         normals = np.asarray(mesh.face_normals, dtype=float)[face_ids]
-        convex = bool(mesh.is_convex) if assume_convex is None else bool(assume_convex)
+        if cull_supporting_faces:
+            unoccludable = supporting_faces(mesh)[face_ids]
+        else:
+            unoccludable = np.zeros(face_ids.shape, dtype=bool)
         self._context = _Context(
             mesh=mesh,
             points=points,
             face_ids=face_ids,
             normals=normals,
+            point_data=np.ascontiguousarray(np.concatenate([points, normals], axis=1).T),
             caster=_RayCaster(mesh),
-            convex=convex,
+            unoccludable=unoccludable,
             center=points.mean(axis=0) if len(points) else np.zeros(3),
         )
 
@@ -456,10 +484,11 @@ class SensorModel:
         view_chunks, point_chunks, u_chunks, t0_chunks = [], [], [], []
         for start in range(0, n_views, per_chunk):
             stop = min(n_views, start + per_chunk)
-            vi, pi = self._prefilter(poses[start:stop], ctx, pts32, nrm32, deflection, pos_margin, ang_margin)
-            vi += start
-            keep, u, t0 = self._evaluate_pairs(poses, ctx, vi, pi, threshold, deflection)
-            view_chunks.append(vi[keep].astype(np.int32))
+            chunk = poses[start:stop]
+            vi, pi = self._prefilter(chunk, ctx, pts32, nrm32, deflection, pos_margin, ang_margin)
+            view_data = np.concatenate([chunk[:, :3, :3].transpose(0, 2, 1).reshape(-1, 9), chunk[:, :3, 3]], axis=1)
+            keep, u, t0 = self._evaluate_pairs(np.ascontiguousarray(view_data.T), ctx, vi, pi, threshold, deflection)
+            view_chunks.append((vi[keep] + start).astype(np.int32))
             point_chunks.append(pi[keep].astype(np.int32))
             u_chunks.append(u)
             t0_chunks.append(t0)
@@ -557,7 +586,5 @@ class SensorModel:
 
     def _blocked(self, ctx, points, rays):
         """Occlusion of the segments ``points - rays -> points`` (minus the tolerance at the point)."""
-        length = np.sqrt(np.einsum("ij,ij->i", rays, rays))
-        return ctx.caster.occluded(
-            points - rays, rays / length[:, None], length - self.occlusion_tolerance
-        )
+        length = np.sqrt(_dot3(rays, rays))
+        return ctx.caster.occluded(points - rays, rays / length[:, None], length - self.occlusion_tolerance)

@@ -200,8 +200,7 @@ def _worst_uncertainty(matrix, cols: _Columns, values, uncertainties) -> np.ndar
     if sparse.issparse(uncertainties) or np.ndim(uncertainties) == 2:
         if tuple(uncertainties.shape) != (cols.n_rows, cols.n_cols):
             raise SetCoverError(
-                f"uncertainties matrix has shape {tuple(uncertainties.shape)}, expected "
-                f"{(cols.n_rows, cols.n_cols)}"
+                f"uncertainties matrix has shape {tuple(uncertainties.shape)}, expected {(cols.n_rows, cols.n_cols)}"
             )
         u = sparse.csc_array(uncertainties, dtype=np.float64)
         mask = sparse.csc_array(
@@ -459,9 +458,7 @@ def _reduce(cols: _Columns, costs: np.ndarray, tie: np.ndarray) -> _Reduction:
             sub = cols.submatrix(rows, cur_cols)
         # Dominated columns: a strict subset of a column that costs no more.
         local_costs = costs[cur_cols]
-        a, _b, complete = _subset_pairs(
-            sub, np.arange(sub.n_cols), lambda a, b, c=local_costs: c[b] <= c[a]
-        )
+        a, _b, complete = _subset_pairs(sub, np.arange(sub.n_cols), lambda a, b, c=local_costs: c[b] <= c[a])
         stats["dominance_complete"] &= complete
         if a.size:
             dominated = np.unique(a)

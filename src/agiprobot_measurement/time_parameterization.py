@@ -214,7 +214,8 @@ def _grid(spline: CubicSpline, s_waypoints: np.ndarray) -> np.ndarray:
     with np.errstate(divide="ignore"):
         by_error = np.ceil(lengths / np.sqrt(2.0 * GRID_MAX_ERROR / np.maximum(peak, 1e-300)))
     # At least MIN_GRID_INTERVALS over the whole path; at most MAX_INTERVALS_PER_WAYPOINT per interval.
-    by_length = np.ceil(lengths / (s_waypoints[-1] - s_waypoints[0]) * MIN_GRID_INTERVALS)
+    # (less a hair, so equally spaced waypoints with round-off all get the same count)
+    by_length = np.ceil(lengths / (s_waypoints[-1] - s_waypoints[0]) * MIN_GRID_INTERVALS - 1e-6)
     counts = np.clip(np.maximum(by_error, by_length), 1, MAX_INTERVALS_PER_WAYPOINT).astype(int)
     pieces = [
         np.linspace(a, b, c, endpoint=False) for a, b, c in zip(s_waypoints[:-1], s_waypoints[1:], counts, strict=True)
@@ -234,6 +235,7 @@ def _sample_times(knot_times: np.ndarray, duration_s: float, sample_step_s: floa
 def _build(
     timing: _Timing,
     s_knots: np.ndarray,
+    q_knots: np.ndarray,
     names: list[str],
     limits: JointLimits,
     max_velocity: np.ndarray,
@@ -248,8 +250,8 @@ def _build(
     _, _, _, q, qd, qdd = timing.evaluate(times)
     q, qd, qdd = q[:, joints], qd[:, joints], qdd[:, joints]
     qd[0] = qd[-1] = 0.0
-    # Waypoints are hit exactly; elsewhere the spline value is used.
-    q[np.searchsorted(times, knot_times)] = timing.spline(s_knots)[:, joints]
+    # The knots at the waypoints get the waypoints' own values, not the spline's (equal up to round-off).
+    q[np.searchsorted(times, knot_times)] = q_knots
     trajectory = JointTrajectory(names, times, q, qd, qdd, frame_id)
 
     grid_acc = timing.grid_acceleration_peak()[joints]
@@ -337,7 +339,7 @@ def time_optimal_trajectory(
     max_velocity = limits.max_velocity * vel_scale
     max_acceleration = limits.max_acceleration * acc_scale
     timing = _Timing.solve(spline, s, max_velocity, max_acceleration)
-    trajectory, _ = _build(timing, s, names, limits, max_velocity, max_acceleration, sample_step_s, frame_id)
+    trajectory, _ = _build(timing, s, q, names, limits, max_velocity, max_acceleration, sample_step_s, frame_id)
     return trajectory
 
 
@@ -466,6 +468,7 @@ def constant_speed_scan_trajectory(
     trajectory, factor = _build(
         timing,
         s,
+        q,
         names,
         limits,
         max_velocity,

@@ -29,9 +29,7 @@ import numpy as np
 TILT_MODES = ("none", "limited", "full")
 
 #: (theta, psi) deviations in units of the sensor's median deviation angle, in the order 'limited' tries.
-TILT_STEPS = np.array(
-    [(0, 0), (1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1)], dtype=float
-)
+TILT_STEPS = np.array([(0, 0), (1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1)], dtype=float)
 
 
 class ViewpointCandidates(NamedTuple):
@@ -133,12 +131,8 @@ def generate_viewpoint_poses(
     angles = orientation_angles(orientations_around_boresight)
     poses = anchor_poses(points, normals, angles, tilts, sensor_model.get_optimal_standoff())
     n_points, n_angles, n_tilts = poses.shape[:3]
-    sample, orientation, tilt = np.meshgrid(
-        np.arange(n_points), np.arange(n_angles), np.arange(n_tilts), indexing="ij"
-    )
-    return ViewpointCandidates(
-        poses.reshape(-1, 4, 4), sample.reshape(-1), orientation.reshape(-1), tilt.reshape(-1)
-    )
+    sample, orientation, tilt = np.meshgrid(np.arange(n_points), np.arange(n_angles), np.arange(n_tilts), indexing="ij")
+    return ViewpointCandidates(poses.reshape(-1, 4, 4), sample.reshape(-1), orientation.reshape(-1), tilt.reshape(-1))
 
 
 def select_limited_tilt(valid, sample_index, orientation_index, tilt_index) -> np.ndarray:
@@ -229,9 +223,7 @@ class ViewPoint:
             if not math.isfinite(float(value)):
                 raise ValueError(f"{name} must be finite, got {value}")
         self._surface_point = np.asarray(surface_point, dtype=float).reshape(3)
-        self._surface_normal = _unit_rows(
-            np.asarray(surface_normal, dtype=float).reshape(1, 3), "surface_normal"
-        )[0]
+        self._surface_normal = _unit_rows(np.asarray(surface_normal, dtype=float).reshape(1, 3), "surface_normal")[0]
         self.angle_around_boresight = float(angle_around_boresight)
         self.standoff_distance = standoff_distance
         self.tilt_theta = float(tilt_theta)
