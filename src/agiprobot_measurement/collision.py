@@ -213,8 +213,8 @@ class Clearance(NamedTuple):
 class _FramePoser:
     """All moving frames of a chain for (N, dof) joint values, with the fixed parts folded into constants.
 
-    Equivalent to :meth:`KinematicModel.link_poses_batch` (the tests compare them) but it does only one small
-    matrix product per joint, which matters for the single-state checks a sampling planner makes.
+    Equivalent to :meth:`KinematicModel.link_poses_batch` (the tests compare them) but with a dozen numpy calls
+    in all, which matters for the single-state checks a sampling planner makes.
     """
 
     def __init__(self, model: KinematicModel):
@@ -239,31 +239,22 @@ class _FramePoser:
                     a, off = self.frames[parent]
                     self.frames[joint.child] = (a, off @ joint.origin)
                     frontier.append(joint.child)
-        self._z_axis = [bool(np.allclose(axis, (0.0, 0.0, 1.0))) for axis in self.axes]
+        self._pre = np.array(self.pre).reshape(-1, 4, 4)
+        skew = np.array([[[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]] for x, y, z in self.axes]).reshape(-1, 3, 3)
+        self._skew, self._skew2 = skew, skew @ skew
 
     def moving_frames(self, q: np.ndarray) -> np.ndarray:
-        """(N, dof, 4, 4): the frame after each joint's rotation."""
+        """(N, dof, 4, 4): the frame after each joint's rotation (all joints' steps built at once)."""
         n = q.shape[0]
-        out = np.empty((n, self.dof, 4, 4))
-        cos, sin = np.cos(q), np.sin(q)
-        previous = None
-        for k in range(self.dof):
-            frame = self.pre[k] if previous is None else previous @ self.pre[k]
-            frame = np.broadcast_to(frame, (n, 4, 4))
-            c, s = cos[:, k, None], sin[:, k, None]
-            if self._z_axis[k]:
-                col0, col1 = frame[:, :, 0], frame[:, :, 1]
-                out[:, k, :, 0] = c * col0 + s * col1
-                out[:, k, :, 1] = c * col1 - s * col0
-                out[:, k, :, 2:] = frame[:, :, 2:]
-            else:
-                kx, ky, kz = self.axes[k]
-                skew = np.array([[0.0, -kz, ky], [kz, 0.0, -kx], [-ky, kx, 0.0]])
-                rot = np.eye(3) + s[:, :, None] * skew + (1.0 - c[:, :, None]) * (skew @ skew)
-                out[:, k, :, :3] = frame[:, :, :3] @ rot
-                out[:, k, :, 3] = frame[:, :, 3]
-            previous = out[:, k]
-        return out
+        sin, cos = np.sin(q)[..., None, None], np.cos(q)[..., None, None]
+        rotation = np.eye(3) + sin * self._skew + (1.0 - cos) * self._skew2  # Rodrigues, (N, dof, 3, 3)
+        step = np.zeros((n, self.dof, 4, 4))
+        step[..., :3, :3] = self._pre[:, :3, :3] @ rotation
+        step[..., :3, 3] = self._pre[:, :3, 3]
+        step[..., 3, 3] = 1.0
+        for k in range(1, self.dof):
+            np.matmul(step[:, k - 1], step[:, k], out=step[:, k])
+        return step
 
     def link_poses(self, q: np.ndarray, links: list[str]) -> dict[str, np.ndarray]:
         moving = self.moving_frames(q)
@@ -277,27 +268,22 @@ class _FramePoser:
 def _segment_distances(p0, p1, q0, q1) -> np.ndarray:
     """Distances between segments p0-p1 and q0-q1 (arrays (..., 3)); Ericson, Real-Time Collision Detection 5.1.9.
 
-    Degenerate segments (spheres) are points.
+    Degenerate segments (spheres) work as points: their squared lengths are floored at a tiny value, which
+    makes the general formulas reduce to the point cases.
     """
     d1, d2, r = p1 - p0, q1 - q0, p0 - q0
-    a = np.einsum("...i,...i->...", d1, d1)
-    e = np.einsum("...i,...i->...", d2, d2)
-    f = np.einsum("...i,...i->...", d2, r)
-    c = np.einsum("...i,...i->...", d1, r)
-    b = np.einsum("...i,...i->...", d1, d2)
-    a_ok, e_ok = a > _EPS, e > _EPS
-    safe_a, safe_e = np.where(a_ok, a, 1.0), np.where(e_ok, e, 1.0)
+    a = np.maximum((d1 * d1).sum(-1), _EPS)
+    e = np.maximum((d2 * d2).sum(-1), _EPS)
+    b, c, f = (d1 * d2).sum(-1), (d1 * r).sum(-1), (d2 * r).sum(-1)
     denom = a * e - b * b
-    parallel = denom <= _EPS * np.maximum(a * e, _EPS)
-    s = np.where(parallel, 0.0, np.clip((b * f - c * e) / np.where(parallel, 1.0, denom), 0.0, 1.0))
-    t = (b * s + f) / safe_e
-    s = np.where(t < 0.0, np.clip(-c / safe_a, 0.0, 1.0), np.where(t > 1.0, np.clip((b - c) / safe_a, 0.0, 1.0), s))
-    t = np.clip(t, 0.0, 1.0)
-    both = a_ok & e_ok
-    s = np.where(both, s, np.where(a_ok, np.clip(-c / safe_a, 0.0, 1.0), 0.0))
-    t = np.where(both, t, np.where(e_ok, np.clip(f / safe_e, 0.0, 1.0), 0.0))
-    closest = (p0 + s[..., None] * d1) - (q0 + t[..., None] * d2)
-    return np.sqrt(np.einsum("...i,...i->...", closest, closest))
+    # parallel segments: any s works, 0 as in Ericson
+    s = np.where(denom > 1e-9 * a * e, (b * f - c * e) / np.maximum(denom, _EPS * _EPS), 0.0)
+    s = np.minimum(np.maximum(s, 0.0), 1.0)
+    t = (b * s + f) / e
+    clamped = np.minimum(np.maximum(t, 0.0), 1.0)
+    s = np.where(t != clamped, np.minimum(np.maximum((b * clamped - c) / a, 0.0), 1.0), s)
+    gap = r + d1 * s[..., None] - d2 * clamped[..., None]
+    return np.sqrt((gap * gap).sum(-1))
 
 
 # ----------------------------------------------------------------------------------------------- checker
@@ -339,6 +325,7 @@ class CollisionChecker:
         self._world_radius = np.array([s.world.radius for s in self.shapes])
         self._own_half = np.array([s.own.half_length for s in self.shapes])
         self._own_radius = np.array([s.own.radius for s in self.shapes])
+        self._world_ends = np.stack([-self._world_half, self._world_half], axis=1)  # (S, 2)
         self._static = self._shape_anchor < 0
         self._objects: dict[str, _WorldObject] = {}
         self.part_name: str | None = None
@@ -520,6 +507,10 @@ class CollisionChecker:
         ]
         self._self_pairs = np.array(pairs, dtype=int).reshape(-1, 2)
         self._self_reach = self._own_radius[self._self_pairs].sum(axis=1) if pairs else np.zeros(0)
+        extent = self._own_half + self._own_radius
+        self._self_sphere_reach2 = extent[self._self_pairs].sum(axis=1) ** 2 if pairs else np.zeros(0)
+        # box half extents grown by each shape's capsule radius: (S, O, 3)
+        self._env_reach = self._box_half[None] + self._world_radius[:, None, None]
 
     def _allowed(self, shape: _RobotShape, other: _RobotShape | _WorldObject) -> bool:
         if isinstance(other, _RobotShape):
@@ -582,29 +573,36 @@ class CollisionChecker:
         pairs: (K, 2) rows [state, self-pair index]), candidates of the sure states left out.
         """
         n = poses.shape[0]
+        directions = np.einsum("nsij,sj->nsi", poses[:, :, :3, :3], self._axis_select)
+        centers = poses[:, :, :3, 3]
         sure = np.zeros(n, dtype=bool)
         env = np.zeros((0, 3), dtype=int)
         if len(self._object_list):
-            ends0, ends1 = self._segments(poses, self._world_half)
-            # capsule ends in every obstacle's box frame: (N, S, O, 3)
-            local0 = np.einsum("nsi,oij->nsoj", ends0, self._box_rotation) - self._box_center_local
-            local1 = local0 + np.einsum("nsi,oij->nsoj", ends1 - ends0, self._box_rotation)
-            radius = self._world_radius[None, :, None, None]
-            half = self._box_half[None, None]
-            near = np.all(
-                (np.minimum(local0, local1) - radius <= half) & (np.maximum(local0, local1) + radius >= -half), axis=-1
-            )
-            near &= self._env_checked[None]
+            ends = centers[:, :, None] + directions[:, :, None] * self._world_ends[:, :, None]  # (N, S, 2, 3)
+            # the capsule's ends in every obstacle's box frame: (N, S, 2, O, 3)
+            local = np.einsum("nsei,oij->nseoj", ends, self._box_rotation) - self._box_center_local
+            near = np.all(local.min(axis=2) <= self._env_reach, axis=-1)
+            near &= np.all(local.max(axis=2) >= -self._env_reach, axis=-1)
+            near &= self._env_checked
             # an end of a shape's axis inside a solid box: the shape reaches into the box for certain
-            inside = np.all(np.abs(local0) < half, axis=-1) | np.all(np.abs(local1) < half, axis=-1)
-            sure |= np.any(inside & near & self._solid_box[None, None], axis=(1, 2))
+            inside = np.all(np.abs(local) < self._box_half, axis=-1).any(axis=2) & near & self._solid_box
+            sure = inside.any(axis=(1, 2))
             env = np.argwhere(near & ~sure[:, None, None])
         pairs = np.zeros((0, 2), dtype=int)
         if len(self._self_pairs):
-            ends0, ends1 = self._segments(poses, self._own_half)
             i, j = self._self_pairs[:, 0], self._self_pairs[:, 1]
-            distance = _segment_distances(ends0[:, i], ends1[:, i], ends0[:, j], ends1[:, j])
-            pairs = np.argwhere((distance < self._self_reach) & ~sure[:, None])
+            # bounding spheres of the capsules first: leaves few pairs for the segment distances
+            gap = centers[:, i] - centers[:, j]
+            close = (np.einsum("npi,npi->np", gap, gap) < self._self_sphere_reach2) & ~sure[:, None]
+            state, pair = np.nonzero(close)
+            if len(state):
+                a, b = i[pair], j[pair]
+                da = directions[state, a] * self._own_half[a, None]
+                db = directions[state, b] * self._own_half[b, None]
+                ca, cb = centers[state, a], centers[state, b]
+                distance = _segment_distances(ca - da, ca + da, cb - db, cb + db)
+                keep = distance < self._self_reach[pair]
+                pairs = np.stack([state[keep], pair[keep]], axis=1)
         return sure, env, pairs
 
     def _collision_free(self, q: np.ndarray) -> np.ndarray:

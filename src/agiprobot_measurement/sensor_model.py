@@ -473,8 +473,8 @@ class SensorModel:
             )
 
         # float32 copies for the dense prefilter; the centring keeps their rounding at the part's scale
-        pts32 = (ctx.points - ctx.center).T.astype(np.float32)
-        nrm32 = ctx.normals.T.astype(np.float32)
+        pts32 = np.ascontiguousarray((ctx.points - ctx.center).T, dtype=np.float32)
+        nrm32 = np.ascontiguousarray(ctx.normals.T, dtype=np.float32)
         span = float(np.abs(ctx.points - ctx.center).max()) + deflection + self.maximum_standoff
         # margins make the float32 prefilter a superset of the exact float64 tests
         pos_margin = np.float32(1e-5 * span + 1e-3)

@@ -124,7 +124,7 @@ class _Columns:
 
     def take(self, which: np.ndarray) -> _Columns:
         """The columns ``which`` (same rows), renumbered 0.."""
-        sizes = self.sizes()[which]
+        sizes = self.indptr[which + 1] - self.indptr[which]
         indptr = np.zeros(which.size + 1, dtype=np.int64)
         np.cumsum(sizes, out=indptr[1:])
         # Flat positions of all entries of the chosen columns, without a Python loop.
@@ -163,23 +163,32 @@ def _measurable_columns(matrix) -> tuple[_Columns, np.ndarray | None]:
     csc.sum_duplicates()
     csc.sort_indices()
     n_rows, n_cols = csc.shape
+    # int32 positions halve the memory traffic of every gather below (nnz stays far below 2**31 here).
+    small = csc.nnz < 2**31 - 1
+    indptr = csc.indptr.astype(np.int32, copy=False) if small else csc.indptr
+    indices = csc.indices.astype(np.int32, copy=False) if small else csc.indices
     data = csc.data
     if data.dtype == bool:
         keep, values = data, None
+        all_kept = bool(keep.all())
     elif np.issubdtype(data.dtype, np.number):
         values = data.astype(np.float64, copy=False)
-        keep = (values != 0.0) & ~np.isnan(values)
-        if np.any(values[keep] < 0.0) or not np.all(np.isfinite(values[keep])):
-            raise SetCoverError("uncertainty values in the matrix must be finite and non-negative")
+        # Fast path for the usual input (all stored values positive and finite): two passes, no copies.
+        positive = values > 0.0
+        all_kept = bool(positive.all()) and (values.size == 0 or math.isfinite(float(values.max())))
+        if not all_kept:
+            if np.any(values < 0.0) or np.any(np.isinf(values)):
+                raise SetCoverError("uncertainty values in the matrix must be finite and non-negative")
+            keep = positive  # zero and NaN entries are not measurable
     else:
         raise SetCoverError(f"matrix dtype {data.dtype} is neither boolean nor numeric")
-    if keep.all():
-        return _Columns(csc.indptr.copy(), csc.indices.copy(), n_rows), values
-    col_of_entry = np.repeat(np.arange(n_cols), np.diff(csc.indptr))
+    if all_kept:
+        return _Columns(indptr, indices, n_rows), values
+    col_of_entry = np.repeat(np.arange(n_cols), np.diff(indptr))
     counts = np.bincount(col_of_entry[keep], minlength=n_cols)
-    indptr = np.concatenate([[0], np.cumsum(counts)]).astype(csc.indptr.dtype)
-    cols = _Columns(indptr, csc.indices[keep], n_rows)
-    return cols, None if values is None else values[keep]
+    new_indptr = np.zeros(n_cols + 1, dtype=indptr.dtype)
+    np.cumsum(counts, out=new_indptr[1:])
+    return _Columns(new_indptr, indices[keep], n_rows), None if values is None else values[keep]
 
 
 def _column_max(cols: _Columns, values: np.ndarray) -> np.ndarray:
@@ -231,36 +240,100 @@ def _normalised(costs: np.ndarray) -> np.ndarray:
 # Greedy
 
 
-def _greedy(cols: _Columns, tie: np.ndarray, costs: np.ndarray | None = None) -> list[int]:
-    """Lazy greedy cover of every coverable row; returns the picks in order.
+def _fresh_gains(cols: _Columns, which: np.ndarray, covered: np.ndarray) -> np.ndarray:
+    """Number of rows not yet ``covered`` in each column of ``which`` (all non-empty), in one pass."""
+    part = cols.take(which)
+    hits = np.add.reduceat(covered[part.indices], part.indptr[:-1], dtype=np.int64)
+    return part.sizes() - hits
 
-    Without ``costs`` the key is the number of newly covered points (largest first); with ``costs`` it is
-    cost per newly covered point (Chvatal's rule, used to warm-start the weighted programmes). Ties: ``tie``
-    (lower first), then the index.
+
+def _greedy(cols: _Columns, tie: np.ndarray, n_uncovered: int) -> list[int]:
+    """Lazy greedy: each pick covers the most uncovered rows; ties: lower ``tie``, then lower index.
+
+    Gains only shrink as rows get covered, so a stored gain never understates a view. Views sit in buckets by
+    stored gain; a heap (heapq) holds the bucket gains. The top bucket's stale members (evaluated before the
+    latest pick) are re-evaluated in one vectorised pass and those that lost gain move down; the members
+    left are fresh and hold the true maximum, so the best of them by tie-break is the exact greedy choice.
+    Only views that reach the top are ever re-evaluated (no re-sort per step), and the Python work per step
+    is per bucket, not per view, which keeps 100k+ candidates well under a second.
     """
-    indptr, indices = cols.indptr, cols.indices
-    gains = cols.sizes()
+    n_cols = cols.n_cols
+    sizes = cols.sizes()
+    order = np.lexsort((np.arange(n_cols), tie))
+    rank = np.empty(n_cols, dtype=np.int64)
+    rank[order] = np.arange(n_cols)
+    buckets: dict[int, list[np.ndarray]] = {}
+    heap: list[int] = []
+
+    def file_under(members: np.ndarray, gains: np.ndarray) -> None:
+        keep = gains > 0
+        members, gains = members[keep], gains[keep]
+        if members.size == 0:
+            return
+        by_gain = np.argsort(gains, kind="stable")
+        values, starts = np.unique(gains[by_gain], return_index=True)
+        for value, group in zip(values.tolist(), np.split(members[by_gain], starts[1:]), strict=True):
+            if value not in buckets:
+                buckets[value] = []
+                heapq.heappush(heap, -value)
+            buckets[value].append(group)
+
+    cand = np.nonzero(sizes > 0)[0]
+    file_under(cand, sizes[cand])
+    stamp = np.zeros(n_cols, dtype=np.int64)  # number of picks when the stored gain was computed
     covered = np.zeros(cols.n_rows, dtype=bool)
-    n_uncovered = int(np.count_nonzero(np.bincount(indices, minlength=cols.n_rows)))
-    cand = np.nonzero(gains > 0)[0]
-    if costs is None:
-        keys = (-gains[cand]).astype(np.float64)
-    else:
-        keys = costs[cand] / gains[cand]
-    heap = list(zip(keys.tolist(), tie[cand].tolist(), cand.tolist(), strict=True))
+    picks: list[int] = []
+    while heap and n_uncovered > 0:
+        gain = -heap[0]
+        parts = buckets.pop(gain)
+        members = parts[0] if len(parts) == 1 else np.concatenate(parts)
+        stale = stamp[members] != len(picks)
+        if stale.any():
+            old = members[stale]
+            fresh = _fresh_gains(cols, old, covered)
+            stamp[old] = len(picks)
+            lost = fresh < gain
+            members = np.concatenate([members[~stale], old[~lost]])
+            heapq.heappop(heap)  # the moved views go to lower buckets only, so -gain is still on top
+            file_under(old[lost], fresh[lost])
+            if members.size == 0:
+                continue
+            heapq.heappush(heap, -gain)
+        best = int(members[np.argmin(rank[members])])
+        rows = cols.col(best)
+        covered[rows] = True
+        n_uncovered -= gain
+        picks.append(best)
+        rest = members[members != best]
+        if rest.size:
+            buckets[gain] = [rest]
+        else:
+            heapq.heappop(heap)
+    return picks
+
+
+def _greedy_weighted(cols: _Columns, tie: np.ndarray, costs: np.ndarray) -> list[int]:
+    """Chvatal's greedy (least cost per newly covered row) with a lazy heapq, for warm starts.
+
+    Runs on the reduced programme (a few thousand views), so a per-view heap entry is cheap enough. A popped
+    entry whose recomputed ratio is unchanged is the true best: ratios only grow as rows get covered.
+    """
+    sizes = cols.sizes()
+    cand = np.nonzero(sizes > 0)[0]
+    heap = list(zip((costs[cand] / sizes[cand]).tolist(), tie[cand].tolist(), cand.tolist(), strict=True))
     heapq.heapify(heap)
+    covered = np.zeros(cols.n_rows, dtype=bool)
+    n_uncovered = int(np.count_nonzero(np.bincount(cols.indices, minlength=cols.n_rows)))
     picks: list[int] = []
     while heap and n_uncovered > 0:
         key, t, j = heap[0]
-        rows = indices[indptr[j] : indptr[j + 1]]
+        rows = cols.col(j)
         gain = rows.size - int(np.count_nonzero(covered[rows]))
         if gain == 0:
             heapq.heappop(heap)
             continue
-        fresh = -float(gain) if costs is None else costs[j] / gain
+        fresh = float(costs[j]) / gain
         if fresh == key:
-            # Every other entry's stored key is no better than this one and stored keys only understate
-            # (gains only shrink), so this is the true best, tie-break included.
             heapq.heappop(heap)
             covered[rows] = True
             n_uncovered -= gain
@@ -349,8 +422,6 @@ def _subset_pairs(
     empty = np.zeros(0, dtype=np.int64)
     if alive.size < 2:
         return empty, empty, True
-    is_alive = np.zeros(cols.n_cols, dtype=bool)
-    is_alive[alive] = True
     sub = cols.take(alive)
     rows_t = sub.transpose()  # row -> positions in ``alive``
     degree = rows_t.sizes()
@@ -362,44 +433,45 @@ def _subset_pairs(
     rarest = sub.indices[order[sub.indptr[:-1]]]
     second = np.where(sizes > 1, sub.indices[order[np.minimum(sub.indptr[:-1] + 1, sub.indptr[1:] - 1)]], -1)
     bits = _bitsets(sub, np.arange(alive.size))
-    by_row = np.argsort(rarest, kind="stable")
-    row_starts = np.searchsorted(rarest[by_row], np.arange(cols.n_rows + 1))
-    work = np.diff(row_starts) * degree
+    # Cheapest searches first, so that a budget cut still removes as much as it can.
+    work = degree[rarest]
+    by_work = np.argsort(work, kind="stable")
+    cum = np.cumsum(work[by_work])
+    n_done = int(np.searchsorted(cum, budget, side="right"))
+    complete = n_done == alive.size
     out_a, out_b = [], []
-    spent = 0
-    complete = True
-    for r in np.argsort(work, kind="stable"):
-        if work[r] == 0:
+    start = 0
+    while start < n_done:
+        done_before = int(cum[start - 1]) if start else 0
+        stop = int(np.searchsorted(cum, done_before + _PAIR_CHUNK, side="right"))
+        stop = min(max(stop, start + 1), n_done)
+        group = by_work[start:stop]
+        start = stop
+        counts = work[group]
+        offsets = np.zeros(group.size, dtype=np.int64)
+        np.cumsum(counts[:-1], out=offsets[1:])
+        pos = np.repeat(rows_t.indptr[rarest[group]] - offsets, counts) + np.arange(int(counts.sum()))
+        b = rows_t.indices[pos].astype(np.int64)
+        a = np.repeat(group, counts)
+        # Equal sizes mean equal sets; then only the higher index counts as the subset, so one of a group of
+        # identical sets always survives.
+        m = (sizes[b] > sizes[a]) | ((sizes[b] == sizes[a]) & (b < a))
+        a, b = a[m], b[m]
+        s2 = second[a]
+        s2c = np.maximum(s2, 0)
+        has2 = (s2 < 0) | ((bits[b, s2c >> 6] >> (s2c & 63).astype(np.uint64)) & np.uint64(1)).astype(bool)
+        a, b = a[has2], b[has2]
+        if a.size == 0:
             continue
-        if spent + work[r] > budget:
-            complete = False
-            break
-        spent += int(work[r])
-        group = by_row[row_starts[r] : row_starts[r + 1]]
-        cand = rows_t.col(r)
-        step = max(1, _PAIR_CHUNK // max(cand.size, 1))
-        for g0 in range(0, group.size, step):
-            g = group[g0 : g0 + step]
-            a = np.repeat(g, cand.size)
-            b = np.tile(cand, g.size)
-            # Equal sizes mean equal sets; then only the higher index counts as the subset, so one of a
-            # group of identical sets always survives.
-            m = (sizes[b] > sizes[a]) | ((sizes[b] == sizes[a]) & (b < a))
-            a, b = a[m], b[m]
-            s2 = second[a]
-            has2 = s2 < 0
-            s2c = np.maximum(s2, 0)
-            has2 |= ((bits[b, s2c >> 6] >> (s2c & 63).astype(np.uint64)) & np.uint64(1)).astype(bool)
-            a, b = a[has2], b[has2]
-            if a.size == 0:
-                continue
-            m = pair_filter(alive[a], alive[b])
-            a, b = a[m], b[m]
-            if a.size == 0:
-                continue
-            ok = ~np.any(bits[a] & ~bits[b], axis=1)
-            out_a.append(alive[a[ok]])
-            out_b.append(alive[b[ok]])
+        m = pair_filter(alive[a], alive[b])
+        a, b = a[m], b[m]
+        if a.size == 0:
+            continue
+        ok = np.ones(a.size, dtype=bool)
+        for w in range(bits.shape[1]):  # word by word: no (pairs x words) temporary
+            ok &= (bits[a, w] & ~bits[b, w]) == 0
+        out_a.append(alive[a[ok]])
+        out_b.append(alive[b[ok]])
     if not out_a:
         return empty, empty, complete
     return np.concatenate(out_a), np.concatenate(out_b), complete
@@ -697,7 +769,7 @@ def solve_set_cover(
         return finish([], 0.0, True, 0.0, "no coverable points: nothing to select")
 
     if solver_type == "greedy":
-        picks = _greedy(cols, tie)
+        picks = _greedy(cols, tie, n_coverable)
         stats["greedy_picks"] = len(picks)
         picks = _make_irredundant(cols, picks, None)
         return finish(picks, None, False, None, f"greedy: {len(picks)} views")
@@ -722,7 +794,7 @@ def solve_set_cover(
     sub_costs = costs[red.cols_alive]
     greedy_local = None
     if warm_start:
-        local = _greedy(sub, tie[red.cols_alive], sub_costs)
+        local = _greedy_weighted(sub, tie[red.cols_alive], sub_costs)
         local = _make_irredundant(sub, local, sub_costs)
         greedy_local = np.zeros(sub.n_cols, dtype=bool)
         greedy_local[local] = True
@@ -743,7 +815,7 @@ def solve_set_cover(
     picks = _make_irredundant(cols, picks, costs)
     objective_n = float(costs[picks].sum())
     bound_n = outcome.bound + offset
-    if solver_type == "IP_basic":
+    if solver_type == "IP_basic" and math.isfinite(bound_n):
         bound_n = math.ceil(bound_n - 1e-6)  # the optimum of a count is an integer
     bound_n = min(bound_n, objective_n)
     gap = (objective_n - bound_n) / objective_n if objective_n > 0 else 0.0

@@ -121,7 +121,9 @@ def _densify(q: np.ndarray, max_step_rad: float) -> np.ndarray:
     rows = [q[:1]]
     for a, b in itertools.pairwise(q):
         count = max(1, int(np.ceil(np.max(np.abs(b - a)) / max_step_rad)))
-        rows.append(a + np.outer(np.arange(1, count + 1) / count, b - a))
+        piece = a + np.outer(np.arange(1, count + 1) / count, b - a)
+        piece[-1] = b  # the original waypoint exactly, not up to round-off
+        rows.append(piece)
     return np.vstack(rows)
 
 

@@ -1,0 +1,278 @@
+"""Joint-space motion planning with OMPL, checked with the FCL collision checker.
+
+:class:`MotionPlanner` plans collision-free paths between two joint states (rad) of the station's robot: a
+RealVectorStateSpace bounded by the joint limits, a planner chosen by name (RRTConnect by default), motions
+validated at ``resolution_rad`` with the batch checker of :mod:`agiprobot_measurement.collision`, the solution
+shortened with OMPL's PathSimplifier, then interpolated and verified once more. Failures come back as a
+:class:`PlanningResult` with a reason, within a time budget and a bounded number of attempts.
+
+Contract: every state of ``interpolate_path(result.path, planner.resolution_rad)`` is valid (joint limits,
+no collision with the paddings of ``config/collision.yaml``).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from ompl import base as ob
+from ompl import geometric as og
+from ompl import util as ou
+
+from agiprobot_measurement.collision import CollisionChecker
+
+DEFAULT_PLANNER = "RRTConnect"
+
+
+def _planner_classes() -> dict[str, type]:
+    return {
+        name: cls
+        for name in dir(og)
+        if isinstance(cls := getattr(og, name), type) and issubclass(cls, ob.Planner) and cls is not ob.Planner
+    }
+
+
+#: Geometric planners of the installed OMPL bindings, by name (RRTConnect, RRT, RRTstar, PRM, KPIECE1, ...).
+PLANNERS: dict[str, type] = _planner_classes()
+
+
+def available_planners() -> list[str]:
+    return sorted(PLANNERS)
+
+
+def _planner_class(name: str) -> type:
+    if name not in PLANNERS:
+        raise ValueError(f"unknown planner '{name}'; valid planners: {', '.join(available_planners())}")
+    return PLANNERS[name]
+
+
+@dataclass
+class PlanningResult:
+    """Outcome of :meth:`MotionPlanner.plan`.
+
+    ``path``: (K, dof) waypoints in rad, the start first and the goal last (K >= 2); (0, dof) on failure.
+    ``reason``: empty on success, otherwise why planning failed (e.g. which pair collides at the goal).
+    ``planning_time``: wall-clock seconds of the whole call (checks, planning, simplification, verification).
+    """
+
+    success: bool
+    path: np.ndarray
+    reason: str = ""
+    planning_time: float = 0.0
+    planner: str = ""
+    attempts: int = 0
+    stats: dict = field(default_factory=dict)
+
+    def __bool__(self) -> bool:
+        return self.success
+
+
+def interpolate_path(path: np.ndarray, max_step_rad: float) -> np.ndarray:
+    """Subdivide (K, dof) waypoints so no joint moves more than ``max_step_rad`` (rad) between two states.
+
+    Keeps every waypoint; straight lines in joint space between them, as the planner validated them.
+    """
+    path = np.asarray(path, dtype=float)
+    if path.ndim != 2 or len(path) == 0:
+        raise ValueError(f"expected (K, dof) waypoints, got shape {path.shape}")
+    if not max_step_rad > 0:
+        raise ValueError(f"max_step_rad must be positive, got {max_step_rad}")
+    pieces = [path[:1]]
+    for a, b in zip(path[:-1], path[1:], strict=True):
+        steps = max(1, math.ceil(float(np.max(np.abs(b - a))) / max_step_rad - 1e-9))
+        fractions = np.arange(1, steps + 1)[:, None] / steps
+        pieces.append(a + fractions * (b - a))
+    return np.concatenate(pieces)
+
+
+class _BatchMotionValidator(ob.MotionValidator):
+    """OMPL motion validator that checks a whole straight-line motion with one batch call to the checker.
+
+    OMPL assumes the first state valid (as its DiscreteMotionValidator does) and needs the rest checked.
+    """
+
+    def __init__(self, si: ob.SpaceInformation, planner: MotionPlanner):
+        super().__init__(si)
+        self._planner = planner
+
+    def checkMotion(self, s1, s2) -> bool:  # noqa: N802 - OMPL's name
+        p = self._planner
+        p.motion_checks += 1
+        a, b = p._to_array(s1), p._to_array(s2)
+        steps = max(1, math.ceil(float(np.max(np.abs(b - a))) / p.resolution_rad - 1e-9))
+        states = a + (np.arange(1, steps + 1)[:, None] / steps) * (b - a)
+        p.states_checked += steps
+        return bool(p.checker.check_states(states).all())
+
+
+class MotionPlanner:
+    """Joint-space planner for one robot and its :class:`CollisionChecker` (whose world may change between
+    calls: the checks read it live).
+
+    ``planner``: an OMPL geometric planner name (see :func:`available_planners`). ``resolution_rad``: largest
+    joint step between checked states of a motion. ``time_budget_s``: the whole call's limit; it is shared
+    by at most ``max_attempts`` fresh planner runs. ``simplify_time_s``: limit for PathSimplifier.
+    ``try_direct``: take the straight line when it is free (no OMPL call). Optimizing planners (RRTstar,
+    BITstar, ...) use the whole time of an attempt. ``seed``: OMPL's global seed, which takes effect only
+    before OMPL first draws random numbers in this process.
+    """
+
+    def __init__(
+        self,
+        checker: CollisionChecker,
+        planner: str = DEFAULT_PLANNER,
+        resolution_rad: float = math.radians(1.0),
+        time_budget_s: float = 5.0,
+        max_attempts: int = 3,
+        simplify: bool = True,
+        simplify_time_s: float = 0.5,
+        try_direct: bool = True,
+        range_rad: float | None = None,
+        seed: int | None = None,
+        log_level=ou.LOG_WARN,
+    ):
+        _planner_class(planner)
+        if not resolution_rad > 0:
+            raise ValueError(f"resolution_rad must be positive, got {resolution_rad}")
+        if not time_budget_s > 0:
+            raise ValueError(f"time_budget_s must be positive, got {time_budget_s}")
+        if int(max_attempts) < 1:
+            raise ValueError(f"max_attempts must be >= 1, got {max_attempts}")
+        self.checker = checker
+        self.model = checker.model
+        self.dof = self.model.dof
+        self.planner_name = planner
+        self.resolution_rad = float(resolution_rad)
+        self.time_budget_s = float(time_budget_s)
+        self.max_attempts = int(max_attempts)
+        self.simplify = simplify
+        self.simplify_time_s = float(simplify_time_s)
+        self.try_direct = try_direct
+        self.range_rad = range_rad
+        if seed is not None:
+            ou.RNG.setSeed(int(seed))
+        ou.setLogLevel(log_level)
+        self.motion_checks = 0
+        self.states_checked = 0
+        self.space = ob.RealVectorStateSpace(self.dof)
+        bounds = ob.RealVectorBounds(self.dof)
+        for i, name in enumerate(self.model.joint_names):
+            bounds.setLow(i, float(self.model.lower[i]))
+            bounds.setHigh(i, float(self.model.upper[i]))
+            self.space.setDimensionName(i, name)
+        self.space.setBounds(bounds)
+        self.si = ob.SpaceInformation(self.space)
+        self.si.setStateValidityChecker(self._state_valid)
+        self._motion_validator = _BatchMotionValidator(self.si, self)
+        self.si.setMotionValidator(self._motion_validator)
+        self.si.setup()
+
+    # ---------------------------------------------------------------------------------------- helpers
+    def _to_array(self, state) -> np.ndarray:
+        return np.array([state[i] for i in range(self.dof)])
+
+    def _to_state(self, q: np.ndarray):
+        state = self.si.allocState()
+        for i, value in enumerate(q):
+            state[i] = float(value)
+        return state
+
+    def _state_valid(self, state) -> bool:
+        return self.checker.is_state_valid(self._to_array(state))
+
+    def _check_input(self, q, what: str) -> np.ndarray:
+        q = np.asarray(q, dtype=float)
+        if q.shape != (self.dof,):
+            raise ValueError(
+                f"{what}: expected {self.dof} joint values ({', '.join(self.model.joint_names)}), got shape {q.shape}"
+            )
+        if not np.all(np.isfinite(q)):
+            raise ValueError(f"{what}: joint values must be finite, got {q}")
+        return q
+
+    def check_path(self, path: np.ndarray, resolution_rad: float | None = None) -> int:
+        """Index of the first invalid state of the interpolated ``path`` (at ``resolution_rad``), or -1."""
+        dense = interpolate_path(path, resolution_rad or self.resolution_rad)
+        valid = self.checker.check_states(dense)
+        return -1 if valid.all() else int(np.argmin(valid))
+
+    def _path_array(self, path) -> np.ndarray:
+        return np.array([self._to_array(path.getState(i)) for i in range(path.getStateCount())])
+
+    # ------------------------------------------------------------------------------------------- plan
+    def plan(
+        self, start, goal, planner: str | None = None, time_budget_s: float | None = None
+    ) -> PlanningResult:
+        """Plan from ``start`` to ``goal`` (joint values, rad). Raises ValueError on malformed input
+        (wrong joint count, NaN, unknown planner); every planning failure is a result with a reason."""
+        started = time.perf_counter()
+        name = planner or self.planner_name
+        planner_class = _planner_class(name)
+        start = self._check_input(start, "start")
+        goal = self._check_input(goal, "goal")
+        budget = self.time_budget_s if time_budget_s is None else float(time_budget_s)
+        if not budget > 0:
+            raise ValueError(f"time_budget_s must be positive, got {budget}")
+        deadline = started + budget
+        checks_before, states_before = self.motion_checks, self.states_checked
+
+        def result(success, path, reason, attempts=0, used=name):
+            stats = {
+                "motion_checks": self.motion_checks - checks_before,
+                "states_checked": self.states_checked - states_before,
+            }
+            path = np.asarray(path, dtype=float).reshape(-1, self.dof)
+            return PlanningResult(success, path, reason, time.perf_counter() - started, used, attempts, stats)
+
+        for label, q in (("start", start), ("goal", goal)):
+            problem = self.checker.explain(q)
+            if problem:
+                return result(False, [], f"{label} state {problem}")
+        if np.max(np.abs(goal - start)) < 1e-9:
+            return result(True, [start, goal], "", used="trivial")
+        if self.try_direct and self.check_path(np.array([start, goal])) < 0:
+            return result(True, [start, goal], "", used="direct")
+
+        pdef = ob.ProblemDefinition(self.si)
+        pdef.setStartAndGoalStates(self._to_state(start), self._to_state(goal))
+        reasons = []
+        attempts = 0
+        while attempts < self.max_attempts:
+            remaining = deadline - time.perf_counter()
+            if remaining <= 0.0:
+                break
+            attempts += 1
+            attempt_time = remaining / (self.max_attempts - attempts + 1)
+            ompl_planner = planner_class(self.si)
+            if self.range_rad is not None and hasattr(ompl_planner, "setRange"):
+                ompl_planner.setRange(float(self.range_rad))
+            pdef.clearSolutionPaths()
+            ompl_planner.setProblemDefinition(pdef)
+            ompl_planner.setup()
+            status = ompl_planner.solve(attempt_time)
+            if not pdef.hasExactSolution():
+                reasons.append(f"attempt {attempts}: {status.asString()} after {attempt_time:.2f} s")
+                ompl_planner.clear()
+                continue
+            solution = og.PathGeometric(pdef.getSolutionPath())
+            raw = self._path_array(solution)
+            path = raw
+            if self.simplify and len(raw) > 2:
+                simplify_time = min(self.simplify_time_s, max(0.0, deadline - time.perf_counter()))
+                og.PathSimplifier(self.si).simplify(solution, simplify_time)
+                path = self._path_array(solution)
+            ompl_planner.clear()
+            for candidate in (path, raw):
+                candidate = candidate.copy()
+                # OMPL's states are exact copies, but the caller gets exactly what it asked for
+                candidate[0], candidate[-1] = start, goal
+                if self.check_path(candidate) < 0:
+                    return result(True, candidate, "", attempts)
+            reasons.append(f"attempt {attempts}: the solution failed the dense re-check")
+        spent = time.perf_counter() - started
+        detail = "; ".join(reasons) if reasons else "no time left"
+        return result(
+            False, [], f"no path found by {name} in {spent:.2f} s ({attempts} attempt(s)): {detail}", attempts
+        )
