@@ -159,6 +159,10 @@ class _Padded:
     obj: fcl.CollisionObject
     half_length: float  # m, half the capsule's segment
     radius: float  # m, capsule radius (padding included)
+    # exact support (extent along a unit direction n, m): sum_k |n.u_k| extents_k + disc * sin(n, axis) + ball
+    extents: np.ndarray  # half extents along the shape frame's axes (box; cylinder: 0, 0, half length)
+    disc: float = 0.0  # cylinder radius
+    ball: float = 0.0  # sphere radius
 
 
 def _padded(geometry, pad: float) -> tuple[_Padded, int]:
@@ -166,13 +170,15 @@ def _padded(geometry, pad: float) -> tuple[_Padded, int]:
         size = np.asarray(geometry.size, dtype=float) + 2.0 * pad
         axis = int(np.argmax(size))
         others = np.delete(size, axis) / 2.0
-        return _Padded(fcl.CollisionObject(fcl.Box(*size)), size[axis] / 2.0, float(np.hypot(*others))), axis
+        capsule_radius = float(np.hypot(*others))
+        return _Padded(fcl.CollisionObject(fcl.Box(*size)), size[axis] / 2.0, capsule_radius, size / 2.0), axis
     if geometry.type == "cylinder":
         radius, length = geometry.radius + pad, geometry.length + 2.0 * pad
-        return _Padded(fcl.CollisionObject(fcl.Cylinder(radius, length)), length / 2.0, radius), 2
+        extents = np.array([0.0, 0.0, length / 2.0])
+        return _Padded(fcl.CollisionObject(fcl.Cylinder(radius, length)), length / 2.0, radius, extents, disc=radius), 2
     if geometry.type == "sphere":
         radius = geometry.radius + pad
-        return _Padded(fcl.CollisionObject(fcl.Sphere(radius)), 0.0, radius), 2
+        return _Padded(fcl.CollisionObject(fcl.Sphere(radius)), 0.0, radius, np.zeros(3), ball=radius), 2
     raise ConfigError(
         f"link '{geometry.link}': collision geometry '{geometry.type}' is not supported (use box, cylinder, sphere)"
     )
@@ -320,12 +326,18 @@ class CollisionChecker:
         self._shape_link = np.array([self.robot_links.index(s.link) for s in self.shapes])
         self._shape_anchor = np.array([s.anchor for s in self.shapes])
         self._shape_offset = np.array([s.offset for s in self.shapes])
-        self._axis_select = np.eye(3)[[s.axis for s in self.shapes]].reshape(-1, 3)
+        self._shape_axis = np.array([s.axis for s in self.shapes], dtype=int)
+        self._axis_select = np.eye(3)[self._shape_axis].reshape(-1, 3)
         self._world_half = np.array([s.world.half_length for s in self.shapes])
         self._world_radius = np.array([s.world.radius for s in self.shapes])
         self._own_half = np.array([s.own.half_length for s in self.shapes])
         self._own_radius = np.array([s.own.radius for s in self.shapes])
-        self._world_ends = np.stack([-self._world_half, self._world_half], axis=1)  # (S, 2)
+        self._world_extents = np.array([s.world.extents for s in self.shapes]).reshape(-1, 3)
+        self._world_disc = np.array([s.world.disc for s in self.shapes])
+        self._world_ball = np.array([s.world.ball for s in self.shapes])
+        # extent of each shape along its own main axis
+        self._world_axis_extent = (self._world_extents * self._axis_select).sum(axis=1) + self._world_ball
+        self._world_bound = np.linalg.norm(self._world_extents, axis=1) + self._world_disc + self._world_ball
         self._static = self._shape_anchor < 0
         self._objects: dict[str, _WorldObject] = {}
         self.part_name: str | None = None
@@ -496,6 +508,10 @@ class CollisionChecker:
         self._box_center_local = np.einsum("oi,oij->oj", self._box_center, self._box_rotation)
         self._box_half = np.array([o.box_half for o in objects]).reshape(n_obj, 3)
         self._solid_box = np.array([o.solid_box for o in objects], dtype=bool)
+        # all obstacles' box axes as rows (3 O, 3); flat per-axis centre coordinates and half extents (3 O,)
+        self._box_axes = self._box_rotation.transpose(0, 2, 1).reshape(-1, 3)
+        self._box_center_flat = self._box_center_local.reshape(-1)
+        self._box_half_flat = self._box_half.reshape(-1)
         self._env_checked = np.array(
             [[not self._allowed(s, o) for o in objects] for s in self.shapes], dtype=bool
         ).reshape(len(self.shapes), n_obj)
@@ -509,8 +525,6 @@ class CollisionChecker:
         self._self_reach = self._own_radius[self._self_pairs].sum(axis=1) if pairs else np.zeros(0)
         extent = self._own_half + self._own_radius
         self._self_sphere_reach2 = extent[self._self_pairs].sum(axis=1) ** 2 if pairs else np.zeros(0)
-        # box half extents grown by each shape's capsule radius: (S, O, 3)
-        self._env_reach = self._box_half[None] + self._world_radius[:, None, None]
 
     def _allowed(self, shape: _RobotShape, other: _RobotShape | _WorldObject) -> bool:
         if isinstance(other, _RobotShape):
@@ -573,21 +587,35 @@ class CollisionChecker:
         pairs: (K, 2) rows [state, self-pair index]), candidates of the sure states left out.
         """
         n = poses.shape[0]
-        directions = np.einsum("nsij,sj->nsi", poses[:, :, :3, :3], self._axis_select)
         centers = poses[:, :, :3, 3]
         sure = np.zeros(n, dtype=bool)
         env = np.zeros((0, 3), dtype=int)
         if len(self._object_list):
-            ends = centers[:, :, None] + directions[:, :, None] * self._world_ends[:, :, None]  # (N, S, 2, 3)
-            # the capsule's ends in every obstacle's box frame: (N, S, 2, O, 3)
-            local = np.einsum("nsei,oij->nseoj", ends, self._box_rotation) - self._box_center_local
-            near = np.all(local.min(axis=2) <= self._env_reach, axis=-1)
-            near &= np.all(local.max(axis=2) >= -self._env_reach, axis=-1)
-            near &= self._env_checked
+            n_obj = len(self._object_list)
+            # stage 1, all (state, shape, obstacle): the shape's bounding sphere against the obstacle's box
+            offset = centers @ self._box_axes.T - self._box_center_flat  # centres in box coordinates (N, S, 3 O)
+            apart = np.abs(offset) > self._box_half_flat + self._world_bound[:, None]
+            state, shape, obstacle = np.nonzero(~apart.reshape(n, -1, n_obj, 3).any(axis=-1) & self._env_checked)
+            # stage 2, the few left: separating axes with exact supports (the box's axes, the shape's axis)
+            rows = 3 * obstacle[:, None] + np.arange(3)
+            local = offset[state[:, None], shape[:, None], rows]  # (K, 3)
+            box_rotation = self._box_rotation[obstacle]
+            cosines = box_rotation.transpose(0, 2, 1) @ poses[state, shape, :3, :3]  # box axis i . shape axis k
+            along = np.take_along_axis(cosines, self._shape_axis[shape, None, None], axis=2)[..., 0]  # (K, 3)
+            extent = (np.abs(cosines) @ self._world_extents[shape, :, None])[..., 0] + self._world_ball[shape, None]
+            extent += self._world_disc[shape, None] * np.sqrt(np.maximum(1.0 - along * along, 0.0))
+            half = self._box_half[obstacle]
+            apart = np.any(np.abs(local) > extent + half, axis=1)
+            box_extent = (np.abs(along) * half).sum(axis=1)
+            apart |= np.abs((along * local).sum(axis=1)) > self._world_axis_extent[shape] + box_extent
+            near = ~apart
             # an end of a shape's axis inside a solid box: the shape reaches into the box for certain
-            inside = np.all(np.abs(local) < self._box_half, axis=-1).any(axis=2) & near & self._solid_box
-            sure = inside.any(axis=(1, 2))
-            env = np.argwhere(near & ~sure[:, None, None])
+            reach = along * self._world_half[shape, None]
+            inside = np.all(np.abs(local - reach) < half, axis=1) | np.all(np.abs(local + reach) < half, axis=1)
+            inside &= near & self._solid_box[obstacle]
+            sure[state[inside]] = True
+            near &= ~sure[state]
+            env = np.stack([state[near], shape[near], obstacle[near]], axis=1)
         pairs = np.zeros((0, 2), dtype=int)
         if len(self._self_pairs):
             i, j = self._self_pairs[:, 0], self._self_pairs[:, 1]
@@ -597,8 +625,8 @@ class CollisionChecker:
             state, pair = np.nonzero(close)
             if len(state):
                 a, b = i[pair], j[pair]
-                da = directions[state, a] * self._own_half[a, None]
-                db = directions[state, b] * self._own_half[b, None]
+                da = poses[state, a, :3, self._shape_axis[a]] * self._own_half[a, None]
+                db = poses[state, b, :3, self._shape_axis[b]] * self._own_half[b, None]
                 ca, cb = centers[state, a], centers[state, b]
                 distance = _segment_distances(ca - da, ca + da, cb - db, cb + db)
                 keep = distance < self._self_reach[pair]

@@ -161,13 +161,14 @@ def _read_mesh(path: Path) -> trimesh.Trimesh:
     return loaded
 
 
-def _check_geometry(mesh: trimesh.Trimesh, path: Path, messages: list[str]) -> None:
+def _check_geometry(mesh: trimesh.Trimesh, path: Path, messages: list[str], merged: bool) -> None:
     bodies = int(mesh.body_count)
     if bodies > max(1, len(mesh.faces) // 4):
+        hint = "" if merged else " (unmerged vertices? load with merge_vertices=True)"
         _warn(
             messages,
-            f"{path}: looks like a triangle soup ({len(mesh.faces)} faces in {bodies} disconnected pieces): "
-            "occlusion and collision checks may be unreliable",
+            f"{path}: looks like a triangle soup ({len(mesh.faces)} faces in {bodies} disconnected pieces"
+            f"{hint}): occlusion and collision checks may be unreliable",
         )
     elif not mesh.is_watertight:
         _warn(messages, f"{path}: the mesh is open (not watertight) even after merging vertices")
@@ -226,7 +227,7 @@ def load_part(
         mesh.remove_unreferenced_vertices()
         if len(mesh.faces) == 0:
             raise PartLoadError(f"{path}: every triangle of the mesh is degenerate")
-    _check_geometry(mesh, path, messages)
+    _check_geometry(mesh, path, messages, merge_vertices)
     mesh.apply_scale(scale_to_mm)
     _check_size(mesh, scale_to_mm, path, messages)
     mesh.apply_transform(placement)

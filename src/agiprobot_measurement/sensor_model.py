@@ -25,7 +25,10 @@ vector maths over (view x point) chunks, and only the surviving pairs are ray-ca
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+import os
+from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from contextlib import nullcontext
 from dataclasses import dataclass
 
 import numpy as np
@@ -75,6 +78,27 @@ class MeasurabilityResult:
     point_indices: np.ndarray  # (nnz,) int32
     uncertainties: np.ndarray  # (nnz,) float64, mm
     trajectory_distances: np.ndarray  # (nnz,) float64, mm
+
+    @classmethod
+    def concatenate(cls, results: Sequence[MeasurabilityResult]) -> MeasurabilityResult:
+        """One result whose viewpoints are those of ``results`` in order (all over the same samples)."""
+        if not results:
+            raise ValueError("concatenate needs at least one result")
+        n_points = results[0].n_points
+        if any(r.n_points != n_points for r in results):
+            raise ValueError("results to concatenate must be over the same sample points")
+        indptr, offset = [np.zeros(1, dtype=np.int64)], 0
+        for result in results:
+            indptr.append(result.indptr[1:] + offset)
+            offset += result.nnz
+        return cls(
+            n_points,
+            sum(r.n_views for r in results),
+            np.concatenate(indptr),
+            np.concatenate([r.point_indices for r in results]),
+            np.concatenate([r.uncertainties for r in results]),
+            np.concatenate([r.trajectory_distances for r in results]),
+        )
 
     @property
     def nnz(self) -> int:
@@ -182,7 +206,7 @@ class _RayCaster:
             )
             # embreex reports 0 for an occluded ray and -1 for a free one
             return np.asarray(hit) != -1
-        tri, ray, loc = self.mesh.ray.intersects_id(origins, directions, multiple_hits=False, return_locations=True)
+        _, ray, loc = self.mesh.ray.intersects_id(origins, directions, multiple_hits=False, return_locations=True)
         result = np.zeros(count, dtype=bool)
         if len(ray):
             hit_distance = np.einsum("ij,ij->i", loc - origins[ray], directions[ray])
@@ -441,6 +465,8 @@ class SensorModel:
         maximum_deflection: float = 500.0,
         *,
         chunk_elements: int = DEFAULT_CHUNK_ELEMENTS,
+        workers: int | None = None,
+        progress: Callable[[int, int], None] | None = None,
     ) -> MeasurabilityResult:
         """Metrological evaluation of many viewpoints against the processing context.
 
@@ -448,13 +474,21 @@ class SensorModel:
         translation in mm). ``uncertainty_threshold`` and ``maximum_deflection`` in mm as in
         :meth:`process_viewpoint_metrologically`. ``chunk_elements`` bounds the size of the dense work arrays
         (views per chunk = chunk_elements // points), so memory grows with the result, not with V x P.
+        ``workers``: threads evaluating chunks concurrently (default: the CPU count, at most 4); the result
+        does not depend on it. ``progress(done_views, total_views)`` is called after each chunk, in order.
         """
+        if workers is None:
+            workers = min(4, os.cpu_count() or 1)
         ctx = self._require_context()
         poses = np.asarray(anchor_poses, dtype=float)
         if poses.ndim != 3 or poses.shape[1:] != (4, 4):
             raise ValueError(f"anchor_poses must have shape (V, 4, 4), got {poses.shape}")
         if not np.all(np.isfinite(poses)):
             raise ValueError("anchor_poses must be finite")
+        rotations = poses[:, :3, :3]
+        gram = np.einsum("vji,vjk->vik", rotations, rotations)
+        if poses.shape[0] and (np.abs(gram - np.eye(3)).max() > 1e-6 or np.linalg.det(rotations).min() < 0.0):
+            raise ValueError("anchor_poses must be rigid: rotation blocks orthonormal with det +1")
         threshold = float(uncertainty_threshold)
         deflection = float(maximum_deflection)
         if not threshold > 0.0:
@@ -475,34 +509,46 @@ class SensorModel:
         # float32 copies for the dense prefilter; the centring keeps their rounding at the part's scale
         pts32 = np.ascontiguousarray((ctx.points - ctx.center).T, dtype=np.float32)
         nrm32 = np.ascontiguousarray(ctx.normals.T, dtype=np.float32)
-        span = float(np.abs(ctx.points - ctx.center).max()) + deflection + self.maximum_standoff
+        span = (
+            float(np.abs(ctx.points - ctx.center).max())
+            + float(np.abs(poses[:, :3, 3] - ctx.center).max())
+            + deflection
+            + self.maximum_standoff
+        )
         # margins make the float32 prefilter a superset of the exact float64 tests
         pos_margin = np.float32(1e-5 * span + 1e-3)
         ang_margin = np.float32(1e-5)
 
         per_chunk = max(1, int(chunk_elements) // n_points)
-        view_chunks, point_chunks, u_chunks, t0_chunks = [], [], [], []
-        for start in range(0, n_views, per_chunk):
-            stop = min(n_views, start + per_chunk)
-            chunk = poses[start:stop]
-            vi, pi = self._prefilter(chunk, ctx, pts32, nrm32, deflection, pos_margin, ang_margin)
-            view_data = np.concatenate([chunk[:, :3, :3].transpose(0, 2, 1).reshape(-1, 9), chunk[:, :3, 3]], axis=1)
-            keep, u, t0 = self._evaluate_pairs(np.ascontiguousarray(view_data.T), ctx, vi, pi, threshold, deflection)
-            view_chunks.append((vi[keep] + start).astype(np.int32))
-            point_chunks.append(pi[keep].astype(np.int32))
-            u_chunks.append(u)
-            t0_chunks.append(t0)
 
-        views = np.concatenate(view_chunks)
+        def process(start: int):
+            chunk = poses[start : start + per_chunk]
+            vi, pi = self._prefilter(chunk, ctx, pts32, nrm32, deflection, pos_margin, ang_margin)
+            view_data = np.concatenate([chunk[:, :3, :3].transpose(0, 2, 1).reshape(-1, 9), chunk[:, :3, 3]], 1)
+            keep, u, t0 = self._evaluate_pairs(np.ascontiguousarray(view_data.T), ctx, vi, pi, threshold, deflection)
+            counts = np.bincount(vi[keep], minlength=chunk.shape[0])
+            return counts, pi[keep].astype(np.int32), u, t0
+
+        starts = range(0, n_views, per_chunk)
+        workers = max(1, min(int(workers), len(starts)))
+        parts = []
+        with ThreadPoolExecutor(workers) if workers > 1 else nullcontext() as pool:
+            # numpy and Embree release the GIL for the bulk of a chunk, so threads overlap usefully
+            results = map(process, starts) if pool is None else pool.map(process, starts)
+            for start, part in zip(starts, results, strict=True):
+                parts.append(part)
+                if progress is not None:
+                    progress(min(start + per_chunk, n_views), n_views)
+        counts, points, uncertainties, distances = zip(*parts, strict=True)
         indptr = np.zeros(n_views + 1, dtype=np.int64)
-        np.cumsum(np.bincount(views, minlength=n_views), out=indptr[1:])
+        np.cumsum(np.concatenate(counts), out=indptr[1:])
         return MeasurabilityResult(
             n_points,
             n_views,
             indptr,
-            np.concatenate(point_chunks),
-            np.concatenate(u_chunks),
-            np.concatenate(t0_chunks),
+            np.concatenate(points),
+            np.concatenate(uncertainties),
+            np.concatenate(distances),
         )
 
     def _prefilter(self, poses, ctx, pts32, nrm32, deflection, pos_margin, ang_margin):

@@ -35,6 +35,7 @@ All solvers return a :class:`SetCoverResult`; :func:`solve_set_cover` is the ent
 from __future__ import annotations
 
 import heapq
+import itertools
 import math
 import time
 from dataclasses import dataclass, field
@@ -46,13 +47,10 @@ SOLVER_TYPES = ("greedy", "IP_basic", "IP_uncertainty", "IP_time")
 BACKENDS = ("highs", "cbc")
 DEFAULT_TIME_LIMIT_S = 60.0
 
-# Reductions run a few rounds at most: each round is cheap, and after two or three nothing changes on
-# realistic data.
+# Reductions run a few rounds at most: after two or three nothing changes on realistic data.
 _MAX_REDUCTION_ROUNDS = 10
-# Bound on the candidate pairs the dominance search examines per call (each costs one bitset comparison of
-# ceil(n / 64) words); beyond it the search stops and the remaining columns are simply kept.
-_DOMINANCE_PAIR_BUDGET = 30_000_000
-_PAIR_CHUNK = 2_000_000
+# Share of the time limit the reductions may use; the rest is left to the solver.
+_REDUCTION_TIME_SHARE = 0.5
 
 
 class SetCoverError(ValueError):
@@ -138,15 +136,6 @@ class _Columns:
         csr = csc.tocsr()
         csr.sort_indices()
         return _Columns(csr.indptr, csr.indices, self.n_cols)
-
-    def submatrix(self, rows: np.ndarray, cols: np.ndarray) -> _Columns:
-        """Columns ``cols`` restricted to rows ``rows`` (both index arrays), renumbered 0.."""
-        csc = sparse.csc_array(
-            (np.ones(self.indices.size, dtype=bool), self.indices, self.indptr), shape=(self.n_rows, self.n_cols)
-        )
-        sub = sparse.csc_array(csc[:, cols][rows, :])
-        sub.sort_indices()
-        return _Columns(sub.indptr, sub.indices, rows.size)
 
 
 def _measurable_columns(matrix) -> tuple[_Columns, np.ndarray | None]:
@@ -366,115 +355,236 @@ def _make_irredundant(cols: _Columns, picks: list[int], costs: np.ndarray | None
 # Reductions
 
 
-def _bitsets(cols: _Columns, which: np.ndarray) -> np.ndarray:
-    """Rows of ``which`` columns packed into uint64 words, one row of words per column."""
+def _restrict(cols: _Columns, row_keep: np.ndarray, which: np.ndarray) -> _Columns:
+    """Columns ``which`` restricted to the rows where the mask ``row_keep`` holds, rows renumbered."""
+    part = cols.take(which)
+    if row_keep.all():
+        return part
+    keep = row_keep[part.indices]
+    col_of_entry = np.repeat(np.arange(which.size), part.sizes())
+    counts = np.bincount(col_of_entry[keep], minlength=which.size)
+    indptr = np.zeros(which.size + 1, dtype=np.int64)
+    np.cumsum(counts, out=indptr[1:])
+    row_map = (np.cumsum(row_keep) - 1).astype(np.int32)
+    return _Columns(indptr, row_map[part.indices[keep]], int(np.count_nonzero(row_keep)))
+
+
+def _duplicates(cols: _Columns, order: np.ndarray) -> np.ndarray:
+    """Mask of the (non-empty) columns identical to a column that comes earlier in ``order``."""
+    n = cols.n_cols
+    dup = np.zeros(n, dtype=bool)
+    if n < 2:
+        return dup
+    # Sums of random weights over sorted indices: identical sets give bit-identical sums. Candidates are
+    # then compared exactly, so a collision only costs a missed merge, never a wrong one.
+    rng = np.random.default_rng(12345)
+    starts = cols.indptr[:-1]
+    h1 = np.add.reduceat(rng.random(cols.n_rows)[cols.indices], starts)
+    h2 = np.add.reduceat(rng.random(cols.n_rows)[cols.indices], starts)
+    sizes = cols.sizes()
+    position = np.empty(n, dtype=np.int64)
+    position[order] = np.arange(n)
+    srt = np.lexsort((position, h2, h1, sizes))
+    same = (sizes[srt[1:]] == sizes[srt[:-1]]) & (h1[srt[1:]] == h1[srt[:-1]]) & (h2[srt[1:]] == h2[srt[:-1]])
+    if not same.any():
+        return dup
+    head_pos = np.maximum.accumulate(np.where(np.concatenate([[True], ~same]), np.arange(n), 0))
+    cand = srt[1:][same]
+    head = srt[head_pos[1:][same]]
+    a, b = cols.take(cand), cols.take(head)
+    equal = np.logical_and.reduceat(a.indices == b.indices, a.indptr[:-1])
+    dup[cand[equal]] = True
+    return dup
+
+
+def _dominated_columns(
+    cols: _Columns, costs: np.ndarray, deadline: float, probe_rows: int = 8, max_pool_bytes: int = 256 << 20
+) -> tuple[np.ndarray, bool]:
+    """Mask of columns whose rows are a subset of another column's that costs no more.
+
+    Columns are visited by decreasing size (then cost, then index), so every strict superset of a column is
+    visited before it, and only columns found undominated (the *pool*) need to be searched: a superset
+    that is itself dominated has an undominated dominator of its own, which also dominates (subset and cost
+    are transitive). Equal-sized columns cannot strictly contain one another, so each size level is checked
+    against the pool as a whole, vectorised. For every pool row a bitset over the pool says which pool
+    columns hold it; ANDing the bitsets of a column's few rarest rows leaves a handful of candidates, which
+    are then checked row by row. Identical columns must have been merged already (they are never flagged
+    here). Returns the mask and whether the search finished before ``deadline``.
+    """
+    n, m = cols.n_cols, cols.n_rows
+    dominated = np.zeros(n, dtype=bool)
+    if n < 2:
+        return dominated, True
+    sizes = cols.sizes()
+    order = np.lexsort((np.arange(n), costs, -sizes))
+    sorted_sizes = sizes[order]
+    level_starts = np.flatnonzero(np.concatenate([[True], sorted_sizes[1:] != sorted_sizes[:-1]]))
+    level_bounds = [*level_starts.tolist(), n]
+    max_words = max(1, min(-(-n // 64), max_pool_bytes // (8 * max(m, 1))))
+    pool_bits = np.zeros((m, min(max_words, 16)), dtype=np.uint64)
+    pool = np.empty(min(n, 64 * max_words), dtype=np.int64)
+    n_pool = 0
+    pool_degree = np.zeros(m, dtype=np.int64)
+    complete = True
+    for lo, hi in itertools.pairwise(level_bounds):
+        if time.perf_counter() > deadline:
+            complete = False
+            break
+        level = order[lo:hi]
+        size = int(sizes[level[0]])
+        n_words = -(-n_pool // 64)
+        step = max(1, min(4_000_000 // max(n_words, 1), 4_000_000 // size))
+        for b0 in range(0, level.size if n_pool else 0, step):
+            block = level[b0 : b0 + step]
+            rows2d = cols.take(block).indices.reshape(block.size, size)
+            degree2d = pool_degree[rows2d]
+            possible = degree2d.min(axis=1) > 0  # a row no pool column holds: nothing can dominate
+            if not possible.any():
+                continue
+            block, rows2d, degree2d = block[possible], rows2d[possible], degree2d[possible]
+            t = min(size, probe_rows)
+            if t < size:
+                probe = np.take_along_axis(rows2d, np.argpartition(degree2d, t - 1, axis=1)[:, :t], axis=1)
+            else:
+                probe = rows2d
+            acc = pool_bits[probe[:, 0], :n_words]
+            for i in range(1, t):
+                acc = acc & pool_bits[probe[:, i], :n_words]
+            dominated[block[_dominated_in_block(acc, pool, block, rows2d, costs, pool_bits, t < size)]] = True
+        kept = level[~dominated[level]]
+        room = pool.size - n_pool
+        if kept.size > room:
+            complete = False  # pool memory cap: later columns are only checked against this pool
+            kept = kept[:room]
+        if kept.size == 0:
+            continue
+        idx = n_pool + np.arange(kept.size, dtype=np.int64)
+        need = -(-(n_pool + kept.size) // 64)
+        if need > pool_bits.shape[1]:
+            grown = np.zeros((m, min(max_words, max(need, 2 * pool_bits.shape[1]))), dtype=np.uint64)
+            grown[:, : pool_bits.shape[1]] = pool_bits
+            pool_bits = grown
+        rows = cols.take(kept).indices
+        k = np.repeat(idx, size)
+        np.bitwise_or.at(pool_bits, (rows, k >> 6), np.left_shift(np.uint64(1), (k & 63).astype(np.uint64)))
+        pool_degree += np.bincount(rows, minlength=m)
+        pool[n_pool : n_pool + kept.size] = kept
+        n_pool += kept.size
+    return dominated, complete
+
+
+def _rows_held(pool_bits: np.ndarray, rows2d: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """For pairs (rows2d[i], pool column k[i]): does the pool column hold every one of the rows?"""
+    word, shift = k >> 6, (k & 63).astype(np.uint64)
+    ok = np.empty(k.size, dtype=bool)
+    chunk = max(1, 4_000_000 // max(rows2d.shape[1], 1))
+    for c0 in range(0, k.size, chunk):
+        sl = slice(c0, c0 + chunk)
+        held = pool_bits[rows2d[sl], word[sl, None]] >> shift[sl, None]
+        ok[sl] = np.all(held & np.uint64(1), axis=1)
+    return ok
+
+
+def _dominated_in_block(
+    acc: np.ndarray,
+    pool: np.ndarray,
+    block: np.ndarray,
+    rows2d: np.ndarray,
+    costs: np.ndarray,
+    pool_bits: np.ndarray,
+    verify: bool,
+) -> np.ndarray:
+    """Positions in ``block`` with a verified dominator among their candidates (set bits of ``acc``).
+
+    One dominator per column is enough and most candidates that survive the probe rows are genuine, so the
+    lowest candidate of each column is tried first, for a few rounds; only the columns still open after
+    that have all their remaining candidates expanded and checked.
+    """
+    found = np.zeros(block.size, dtype=bool)
+    open_rows = np.nonzero(acc.any(axis=1))[0]
+    for _ in range(3):
+        if open_rows.size == 0:
+            return found
+        sub = acc[open_rows]
+        w = np.argmax(sub != 0, axis=1)
+        word = sub[np.arange(open_rows.size), w]
+        lowest = word & (~word + np.uint64(1))
+        bit = np.log2(lowest.astype(np.float64)).astype(np.int64)  # exact: a power of two
+        k = w.astype(np.int64) * 64 + bit
+        ok = costs[pool[k]] <= costs[block[open_rows]]
+        if verify and ok.any():
+            ok[ok] = _rows_held(pool_bits, rows2d[open_rows[ok]], k[ok])
+        found[open_rows[ok]] = True
+        acc[open_rows, w] &= ~lowest
+        open_rows = open_rows[~ok]
+        open_rows = open_rows[acc[open_rows].any(axis=1)]
+    if open_rows.size == 0:
+        return found
+    ai, wi = np.nonzero(acc[open_rows])
+    bits = np.unpackbits(acc[open_rows[ai], wi].view(np.uint8).reshape(-1, 8), axis=1, bitorder="little")
+    hit, bit = np.nonzero(bits)
+    a_pos = open_rows[ai[hit]]
+    k = wi[hit].astype(np.int64) * 64 + bit
+    ok = costs[pool[k]] <= costs[block[a_pos]]
+    a_pos, k = a_pos[ok], k[ok]
+    if verify and a_pos.size:
+        a_pos = a_pos[_rows_held(pool_bits, rows2d[a_pos], k)]
+    found[a_pos] = True
+    return found
+
+
+def _bitsets(cols: _Columns) -> np.ndarray:
+    """Each column's rows packed into uint64 words, one row of words per column."""
     n_words = max(1, -(-cols.n_rows // 64))
-    out = np.zeros((which.size, n_words * 8), dtype=np.uint8)
+    out = np.zeros((cols.n_cols, n_words * 8), dtype=np.uint8)
     step = max(1, 8_000_000 // max(cols.n_rows, 1))
-    csc = sparse.csc_array(
-        (np.ones(cols.indices.size, dtype=bool), cols.indices, cols.indptr), shape=(cols.n_rows, cols.n_cols)
-    )
-    for start in range(0, which.size, step):
-        block = csc[:, which[start : start + step]].T.toarray()
-        packed = np.packbits(block, axis=1, bitorder="little")
-        out[start : start + step, : packed.shape[1]] = packed
+    for start in range(0, cols.n_cols, step):
+        which = np.arange(start, min(start + step, cols.n_cols))
+        part = cols.take(which)
+        dense = np.zeros((which.size, cols.n_rows), dtype=bool)
+        dense[np.repeat(np.arange(which.size), part.sizes()), part.indices] = True
+        out[start : start + which.size, : -(-cols.n_rows // 8)] = np.packbits(dense, axis=1, bitorder="little")
     return out.view(np.uint64)
 
 
-def _duplicate_groups(cols: _Columns, alive: np.ndarray) -> np.ndarray:
-    """For each alive column the representative of its identical-set group (itself if unique), else -1.
+def _implied_rows(rows: _Columns, candidates: np.ndarray, deadline: float) -> tuple[np.ndarray, bool]:
+    """Mask of rows (as sets of views) whose views include all views of another candidate row.
 
-    The representative is the first column of the group in ``alive``'s order.
+    Any cover of the smaller row also covers the larger one, so the larger is implied and can go. The rows
+    that include row a all hold a's rarest view, so they are sought among that view's rows only; identical
+    rows must have been merged already (equal sizes are skipped).
     """
-    rep = np.full(cols.n_cols, -1, dtype=np.int64)
-    if alive.size == 0:
-        return rep
-    rng = np.random.default_rng(12345)
-    w1, w2 = rng.random(cols.n_rows), rng.random(cols.n_rows)
-    part = cols.take(alive)
-    sizes = part.sizes()
-    # Sums of random weights over sorted indices: identical sets give bit-identical sums; the exact check
-    # below guards against (astronomically unlikely) collisions. Empty sets are not passed in.
-    h1 = np.add.reduceat(w1[part.indices], part.indptr[:-1])
-    h2 = np.add.reduceat(w2[part.indices], part.indptr[:-1])
-    order = np.lexsort((np.arange(alive.size), h2, h1, sizes))
-    key = np.column_stack([sizes[order], h1[order], h2[order]])
-    new_group = np.ones(order.size, dtype=bool)
-    new_group[1:] = np.any(key[1:] != key[:-1], axis=1)
-    group_first = np.maximum.accumulate(np.where(new_group, np.arange(order.size), 0))
-    rep[alive[order]] = alive[order[group_first]]
-    for pos in np.nonzero(~new_group)[0]:
-        j, r = alive[order[pos]], rep[alive[order[pos]]]
-        if not np.array_equal(cols.col(j), cols.col(r)):
-            rep[j] = j  # hash collision: keep it as its own group
-    return rep
-
-
-def _subset_pairs(
-    cols: _Columns, alive: np.ndarray, pair_filter, budget: int = _DOMINANCE_PAIR_BUDGET
-) -> tuple[np.ndarray, np.ndarray, bool]:
-    """Pairs (a, b) of alive columns, a != b, with rows(a) a subset of rows(b) and ``pair_filter(a, b)``.
-
-    Any superset of a contains a's rarest row, so b is only sought among the columns holding that row; a
-    bitset test of the second-rarest row prunes most candidates before the full bitset comparison. Returns
-    the pairs and whether the search finished within ``budget`` candidate pairs.
-    """
-    empty = np.zeros(0, dtype=np.int64)
-    if alive.size < 2:
-        return empty, empty, True
-    sub = cols.take(alive)
-    rows_t = sub.transpose()  # row -> positions in ``alive``
-    degree = rows_t.sizes()
+    implied = np.zeros(rows.n_cols, dtype=bool)
+    if candidates.size < 2:
+        return implied, True
+    sub = rows.take(candidates)
+    by_col = sub.transpose()  # column -> candidate positions
+    degree = by_col.sizes()
     sizes = sub.sizes()
-    if np.any(sizes == 0):
-        raise AssertionError("empty columns must be removed before the dominance search")
-    seg_id = np.repeat(np.arange(alive.size), sizes)
-    order = np.lexsort((degree[sub.indices], seg_id))
-    rarest = sub.indices[order[sub.indptr[:-1]]]
-    second = np.where(sizes > 1, sub.indices[order[np.minimum(sub.indptr[:-1] + 1, sub.indptr[1:] - 1)]], -1)
-    bits = _bitsets(sub, np.arange(alive.size))
-    # Cheapest searches first, so that a budget cut still removes as much as it can.
+    seg = np.repeat(np.arange(candidates.size), sizes)
+    ordered = np.lexsort((degree[sub.indices], seg))
+    rarest = sub.indices[ordered[sub.indptr[:-1]]]
+    bits = _bitsets(sub)
     work = degree[rarest]
-    by_work = np.argsort(work, kind="stable")
-    cum = np.cumsum(work[by_work])
-    n_done = int(np.searchsorted(cum, budget, side="right"))
-    complete = n_done == alive.size
-    out_a, out_b = [], []
-    start = 0
-    while start < n_done:
-        done_before = int(cum[start - 1]) if start else 0
-        stop = int(np.searchsorted(cum, done_before + _PAIR_CHUNK, side="right"))
-        stop = min(max(stop, start + 1), n_done)
-        group = by_work[start:stop]
-        start = stop
+    complete = True
+    for start in range(0, candidates.size, 256):
+        if time.perf_counter() > deadline:
+            complete = False
+            break
+        group = np.arange(start, min(start + 256, candidates.size))
         counts = work[group]
         offsets = np.zeros(group.size, dtype=np.int64)
         np.cumsum(counts[:-1], out=offsets[1:])
-        pos = np.repeat(rows_t.indptr[rarest[group]] - offsets, counts) + np.arange(int(counts.sum()))
-        b = rows_t.indices[pos].astype(np.int64)
+        pos = np.repeat(by_col.indptr[rarest[group]] - offsets, counts) + np.arange(int(counts.sum()))
+        b = by_col.indices[pos].astype(np.int64)
         a = np.repeat(group, counts)
-        # Equal sizes mean equal sets; then only the higher index counts as the subset, so one of a group of
-        # identical sets always survives.
-        m = (sizes[b] > sizes[a]) | ((sizes[b] == sizes[a]) & (b < a))
-        a, b = a[m], b[m]
-        s2 = second[a]
-        s2c = np.maximum(s2, 0)
-        has2 = (s2 < 0) | ((bits[b, s2c >> 6] >> (s2c & 63).astype(np.uint64)) & np.uint64(1)).astype(bool)
-        a, b = a[has2], b[has2]
-        if a.size == 0:
-            continue
-        m = pair_filter(alive[a], alive[b])
-        a, b = a[m], b[m]
-        if a.size == 0:
-            continue
+        keep = sizes[b] > sizes[a]  # equal sizes would be identical rows
+        a, b = a[keep], b[keep]
         ok = np.ones(a.size, dtype=bool)
-        for w in range(bits.shape[1]):  # word by word: no (pairs x words) temporary
+        for w in range(bits.shape[1]):
             ok &= (bits[a, w] & ~bits[b, w]) == 0
-        out_a.append(alive[a[ok]])
-        out_b.append(alive[b[ok]])
-    if not out_a:
-        return empty, empty, complete
-    return np.concatenate(out_a), np.concatenate(out_b), complete
+        implied[candidates[b[ok]]] = True
+    return implied, complete
 
 
 @dataclass
@@ -482,99 +592,86 @@ class _Reduction:
     forced: list[int]
     cols_alive: np.ndarray
     rows_alive: np.ndarray
+    matrix: _Columns  # rows_alive x cols_alive, renumbered
     stats: dict
 
 
-def _reduce(cols: _Columns, costs: np.ndarray, tie: np.ndarray) -> _Reduction:
-    """Apply the optimality-preserving reductions; the rest is the programme to solve."""
+def _reduce(cols: _Columns, costs: np.ndarray, tie: np.ndarray, deadline: float) -> _Reduction:
+    """Apply the optimality-preserving reductions until nothing changes (or ``deadline`` passes)."""
     stats = {
         "duplicate_cols": 0,
         "dominated_cols": 0,
         "forced_cols": 0,
         "duplicate_rows": 0,
-        "dominated_rows": 0,
-        "dominance_complete": True,
+        "implied_rows": 0,
+        "reductions_complete": True,
         "rounds": 0,
     }
-    row_alive = np.zeros(cols.n_rows, dtype=bool)
-    row_alive[cols.indices] = True  # uncoverable rows are never alive
-    col_alive = cols.sizes() > 0
+    row_ids = np.nonzero(np.bincount(cols.indices, minlength=cols.n_rows) > 0)[0]
+    col_ids = np.nonzero(cols.sizes() > 0)[0]
+    row_keep = np.zeros(cols.n_rows, dtype=bool)
+    row_keep[row_ids] = True
+    cur = _restrict(cols, row_keep, col_ids)
     forced: list[int] = []
-    # Cheapest first, then lower worst uncertainty, then index: the order in which duplicates are kept.
-    preference = np.lexsort((np.arange(cols.n_cols), tie, costs))
-    rank = np.empty(cols.n_cols, dtype=np.int64)
-    rank[preference] = np.arange(cols.n_cols)
+
+    def drop_empty_columns():
+        nonlocal cur, col_ids
+        nonempty = cur.sizes() > 0
+        if not nonempty.all():
+            cur, col_ids = cur.take(np.nonzero(nonempty)[0]), col_ids[nonempty]
 
     for _ in range(_MAX_REDUCTION_ROUNDS):
+        if cur.n_rows == 0:
+            break
+        if time.perf_counter() > deadline:
+            stats["reductions_complete"] = False
+            break
         stats["rounds"] += 1
         changed = False
-        rows = np.nonzero(row_alive)[0]
-        cur_cols = np.nonzero(col_alive)[0]
-        sub = cols.submatrix(rows, cur_cols)
-        empty = sub.sizes() == 0
-        if empty.any():
-            col_alive[cur_cols[empty]] = False
-            keep = ~empty
-            cur_cols = cur_cols[keep]
-            sub = cols.submatrix(rows, cur_cols)
-        # Duplicates: keep the preferred column of each group.
-        local_order = np.argsort(rank[cur_cols], kind="stable")
-        rep = _duplicate_groups(sub, local_order)
-        dup = rep[local_order] != local_order
-        if dup.any():
-            col_alive[cur_cols[local_order[dup]]] = False
-            stats["duplicate_cols"] += int(dup.sum())
+        # Duplicate columns: keep the cheapest, then the lowest worst uncertainty, then the lowest index.
+        c = costs[col_ids]
+        keep = ~_duplicates(cur, np.lexsort((col_ids, tie[col_ids], c)))
+        stats["duplicate_cols"] += int(np.count_nonzero(~keep))
+        survivors = np.nonzero(keep)[0]
+        dominated, complete = _dominated_columns(cur.take(survivors), c[survivors], deadline)
+        stats["reductions_complete"] &= complete
+        keep[survivors[dominated]] = False
+        stats["dominated_cols"] += int(np.count_nonzero(dominated))
+        if not keep.all():
             changed = True
-            keep = ~np.isin(np.arange(cur_cols.size), local_order[dup])
-            cur_cols = cur_cols[keep]
-            sub = cols.submatrix(rows, cur_cols)
-        # Dominated columns: a strict subset of a column that costs no more.
-        local_costs = costs[cur_cols]
-        a, _b, complete = _subset_pairs(sub, np.arange(sub.n_cols), lambda a, b, c=local_costs: c[b] <= c[a])
-        stats["dominance_complete"] &= complete
-        if a.size:
-            dominated = np.unique(a)
-            col_alive[cur_cols[dominated]] = False
-            stats["dominated_cols"] += int(dominated.size)
-            changed = True
-            keep = np.ones(cur_cols.size, dtype=bool)
-            keep[dominated] = False
-            cur_cols = cur_cols[keep]
-            sub = cols.submatrix(rows, cur_cols)
-        # Forced: the only remaining view of some point.
-        rows_t = sub.transpose()
-        deg = rows_t.sizes()
-        single = np.nonzero(deg == 1)[0]
-        if single.size:
-            must = np.unique(rows_t.indices[rows_t.indptr[single]])
-            for j in cur_cols[must]:
-                forced.append(int(j))
-                col_alive[j] = False
-                row_alive[cols.col(j)] = False
+            cur, col_ids = cur.take(np.nonzero(keep)[0]), col_ids[keep]
+        # Forced columns: the only view left for some point.
+        rows_t = cur.transpose()
+        single = rows_t.sizes() == 1
+        if single.any():
+            must = np.unique(rows_t.indices[rows_t.indptr[:-1][single]])
+            forced.extend(col_ids[must].tolist())
             stats["forced_cols"] += int(must.size)
+            uncovered = np.ones(cur.n_rows, dtype=bool)
+            uncovered[cur.take(must).indices] = False
+            col_keep = np.ones(cur.n_cols, dtype=bool)
+            col_keep[must] = False
+            cur, row_ids, col_ids = (
+                _restrict(cur, uncovered, np.nonzero(col_keep)[0]),
+                row_ids[uncovered],
+                col_ids[col_keep],
+            )
+            drop_empty_columns()
+            continue  # the rows changed: redo the column reductions first
+        # Rows: identical rows, then rows implied by a row with fewer views.
+        drop = _duplicates(rows_t, np.arange(rows_t.n_cols))
+        stats["duplicate_rows"] += int(np.count_nonzero(drop))
+        implied, complete = _implied_rows(rows_t, np.nonzero(~drop)[0], deadline)
+        stats["reductions_complete"] &= complete
+        stats["implied_rows"] += int(np.count_nonzero(implied))
+        drop |= implied
+        if drop.any():
             changed = True
-            continue  # rows changed: rebuild before the row reductions
-        # Rows: duplicate rows, then rows implied by another (their views are a superset of its views).
-        row_order = np.arange(rows_t.n_cols)
-        rrep = _duplicate_groups(rows_t, row_order)
-        rdup = rrep != row_order
-        if rdup.any():
-            row_alive[rows[rdup]] = False
-            stats["duplicate_rows"] += int(rdup.sum())
-            changed = True
-        remaining = np.nonzero(~rdup)[0]
-        _, rb, complete = _subset_pairs(
-            rows_t, remaining, lambda a, b: np.ones(a.size, dtype=bool), budget=_DOMINANCE_PAIR_BUDGET // 4
-        )
-        stats["dominance_complete"] &= complete
-        if rb.size:
-            implied = np.unique(rb)
-            row_alive[rows[implied]] = False
-            stats["dominated_rows"] += int(implied.size)
-            changed = True
+            cur, row_ids = _restrict(cur, ~drop, np.arange(cur.n_cols)), row_ids[~drop]
+            drop_empty_columns()
         if not changed:
             break
-    return _Reduction(forced, np.nonzero(col_alive)[0], np.nonzero(row_alive)[0], stats)
+    return _Reduction(forced, col_ids, row_ids, cur, stats)
 
 
 # --------------------------------------------------------------------------------------------------------
@@ -778,9 +875,10 @@ def solve_set_cover(
     scale = float(raw_costs.max()) if raw_costs.max() > 0 else 1.0  # normalised -> raw cost units
     t_red = time.perf_counter()
     if reduce:
-        red = _reduce(cols, costs, tie)
+        red = _reduce(cols, costs, tie, t_start + _REDUCTION_TIME_SHARE * time_limit_s)
     else:
-        red = _Reduction([], np.nonzero(cols.sizes() > 0)[0], np.nonzero(row_degree > 0)[0], {})
+        col_ids, row_keep = np.nonzero(cols.sizes() > 0)[0], row_degree > 0
+        red = _Reduction([], col_ids, np.nonzero(row_keep)[0], _restrict(cols, row_keep, col_ids), {})
     stats.update(red.stats)
     stats["reduce_time_s"] = time.perf_counter() - t_red
     stats["reduced_shape"] = (int(red.rows_alive.size), int(red.cols_alive.size))
@@ -790,7 +888,7 @@ def solve_set_cover(
         picks = _make_irredundant(cols, forced, costs)
         return finish(picks, 0.0, True, float(raw_costs[picks].sum()), "optimal (solved by reductions)")
 
-    sub = cols.submatrix(red.rows_alive, red.cols_alive)
+    sub = red.matrix
     sub_costs = costs[red.cols_alive]
     greedy_local = None
     if warm_start:

@@ -254,6 +254,8 @@ class SceneObject:
     mesh: Path | None = None
     mesh_scale: float = 1.0
     color_rgba: tuple[float, float, float, float] = (0.6, 0.6, 0.6, 1.0)
+    #: optional group name, so a set of obstacles can be switched off together (e.g. ``wbk_mirrors``)
+    group: str | None = None
 
 
 @dataclass(frozen=True)
@@ -278,6 +280,12 @@ class Scene:
 
     def object_names(self) -> list[str]:
         return [o.name for o in self.objects]
+
+    def without_group(self, group: str) -> Scene:
+        """The same scene without the objects of ``group``."""
+        from dataclasses import replace
+
+        return replace(self, objects=tuple(o for o in self.objects if o.group != group))
 
 
 def _resolve_path(value: object, where: str, relative_to: Path) -> Path:
@@ -366,6 +374,7 @@ def load_scene(path: str | Path | None = None) -> Scene:
                 type=kind,
                 pose=_pose_of(entry, here),
                 color_rgba=_color(entry.get("color_rgba"), f"{here}.color_rgba", (0.6, 0.6, 0.6, 1.0)),
+                group=None if entry.get("group") is None else str(entry["group"]),
                 **kwargs,
             )
         )
