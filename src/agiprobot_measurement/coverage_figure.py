@@ -23,6 +23,7 @@ from matplotlib.cm import ScalarMappable
 from matplotlib.colors import LinearSegmentedColormap, Normalize
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
+from matplotlib.ticker import MaxNLocator
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
 #: Low uncertainty -> high uncertainty (green -> teal -> blue), as in the documentation's figure.
@@ -80,8 +81,8 @@ def _equal_limits(ax, lo: np.ndarray, hi: np.ndarray) -> None:
     """Limits around the data with one scale on all three axes (the part keeps its shape)."""
     centre = 0.5 * (lo + hi)
     half = 0.5 * np.maximum(hi - lo, 1e-6)
-    # a flat dimension (a plate) would otherwise collapse the box: keep at least a tenth of the largest extent
-    half = np.maximum(half, 0.1 * half.max()) * 1.05
+    # a flat dimension (a plate) would otherwise collapse the box: keep at least a quarter of the largest extent
+    half = np.maximum(half, 0.25 * half.max()) * 1.05
     ax.set_xlim(centre[0] - half[0], centre[0] + half[0])
     ax.set_ylim(centre[1] - half[1], centre[1] + half[1])
     ax.set_zlim(centre[2] - half[2], centre[2] + half[2])
@@ -95,7 +96,9 @@ def _summary(uncertainties: np.ndarray, measured: np.ndarray, n_lines: int) -> s
     text = f"{n} samples: {int(measured.sum())} measured ({100.0 * measured.mean():.1f} %), "
     text += f"{int((~measured).sum())} not measurable; {n_lines} scan lines"
     if measured.any():
-        text += f"; uncertainty mean {uncertainties[measured].mean():.4f} mm, max {uncertainties[measured].max():.4f} mm"
+        text += (
+            f"; uncertainty mean {uncertainties[measured].mean():.4f} mm, max {uncertainties[measured].max():.4f} mm"
+        )
     return text
 
 
@@ -149,39 +152,41 @@ def plot_coverage(
     colors[~measured] = (0.843, 0.098, 0.110, 1.0)
     triangles = _mesh_triangles(mesh)
 
-    extent = [points] + [np.vstack(line) for line in lines]
-    if triangles is not None:
-        extent.append(triangles.reshape(-1, 3))
-    everything = np.vstack(extent) if any(len(e) for e in extent) else np.zeros((1, 3))
-    lo, hi = everything.min(axis=0), everything.max(axis=0)
-    size = float(np.max(hi - lo)) or 1.0
+    part_extent = [points] if triangles is None else [points, triangles.reshape(-1, 3)]
+    line_extent = [np.vstack(line) for line in lines]
     # points shrink as they get denser so that the surface stays readable at 10,000 samples
     marker_size = float(np.clip(15000.0 / max(len(points), 1), 2.0, 24.0))
+    # the scan lines float a standoff (about 180 mm) above the surface, which makes the part small in a picture
+    # that shows them: one overview with the lines, then the part alone from each of ``views``
+    panels = [(*DEFAULT_VIEWS[0], True)] if lines else []
+    panels += [(elevation, azimuth, False) for elevation, azimuth in views]
 
-    fig = Figure(figsize=(6.2 * len(views) + 1.2, 6.4), dpi=dpi)
+    fig = Figure(figsize=(5.4 * len(panels) + 1.2, 6.0), dpi=dpi)
     FigureCanvasAgg(fig)
     fig.suptitle(title, fontsize=13)
-    fig.text(0.5, 0.92, _summary(uncertainties, measured, len(lines)), ha="center", fontsize=9, color="#333333")
-    width = 0.88 / len(views)
-    for panel, (elevation, azimuth) in enumerate(views):
-        ax = fig.add_axes((0.01 + panel * width, 0.07, width, 0.82), projection="3d")
+    fig.text(0.5, 0.915, _summary(uncertainties, measured, len(lines)), ha="center", fontsize=9, color="#333333")
+    width = 0.87 / len(panels)
+    # measured first, red last: the points that need attention are drawn on top
+    order = np.argsort(measured, kind="stable")[::-1]
+    for panel, (elevation, azimuth, with_lines) in enumerate(panels):
+        ax = fig.add_axes((0.005 + panel * width, 0.08, width, 0.8), projection="3d")
         if triangles is not None:
-            ax.add_collection3d(
-                Poly3DCollection(triangles, facecolor=(0.8, 0.8, 0.83, 0.12), edgecolor="none")
-            )
-        # measured first, red last: the points that need attention are drawn on top
-        order = np.argsort(measured)[::-1]
+            ax.add_collection3d(Poly3DCollection(triangles, facecolor=(0.8, 0.8, 0.83, 0.12), edgecolor="none"))
         if len(points):
             ax.scatter(
                 points[order, 0],
                 points[order, 1],
                 points[order, 2],
                 c=colors[order],
-                s=marker_size,
+                s=marker_size * (0.4 if with_lines else 1.0),
                 depthshade=False,
                 linewidths=0,
             )
-        for k, (start, end) in enumerate(lines):
+        extent = part_extent + (line_extent if with_lines else [])
+        extent = [e for e in extent if len(e)] or [np.zeros((1, 3))]
+        lo, hi = np.vstack(extent).min(axis=0), np.vstack(extent).max(axis=0)
+        size = float(np.max(hi - lo)) or 1.0
+        for k, (start, end) in enumerate(lines if with_lines else ()):
             color = SCAN_LINE_COLORS[k % len(SCAN_LINE_COLORS)]
             ax.plot(*np.vstack([start, end]).T, color=color, linewidth=3.0, solid_capstyle="round")
             ax.plot(*start[:, None], marker="o", markersize=6, color=color, markeredgecolor="black")
@@ -194,8 +199,12 @@ def plot_coverage(
         ax.set_ylabel("y [mm]", fontsize=8)
         ax.set_zlabel("z [mm]", fontsize=8)
         ax.tick_params(labelsize=7)
+        for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
+            axis.set_major_locator(MaxNLocator(5))
+        label = "plan: scan lines in execution order" if with_lines else f"part (azimuth {azimuth:.0f}°)"
+        ax.text2D(0.5, 0.97, label, transform=ax.transAxes, ha="center", fontsize=9)
 
-    cax = fig.add_axes((0.91, 0.2, 0.015, 0.56))
+    cax = fig.add_axes((0.905, 0.2, 0.012, 0.56))
     colorbar = fig.colorbar(ScalarMappable(norm=norm, cmap=UNCERTAINTY_CMAP), cax=cax)
     colorbar.set_label("predicted uncertainty [mm]")
     handles = [
@@ -204,7 +213,7 @@ def plot_coverage(
         Line2D([], [], linestyle="", marker="o", color=UNCERTAINTY_CMAP(1.0), label="high uncertainty"),
         Line2D([], [], color=SCAN_LINE_COLORS[0], linewidth=3, marker="o", label="scan line (o = start)"),
     ]
-    fig.legend(handles=handles, loc="lower center", ncol=4, fontsize=9, frameon=False, bbox_to_anchor=(0.46, 0.0))
+    fig.legend(handles=handles, loc="lower center", ncol=4, fontsize=9, frameon=False, bbox_to_anchor=(0.45, 0.0))
 
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".png", dir=path.parent)
     try:

@@ -12,6 +12,7 @@ no collision with the paddings of ``config/collision.yaml``).
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from dataclasses import dataclass, field
@@ -24,6 +25,7 @@ from ompl import util as ou
 from agiprobot_measurement.collision import CollisionChecker
 
 DEFAULT_PLANNER = "RRTConnect"
+_COARSE_STRIDE = 8  # the motion validator's first pass checks every 8th state
 
 
 def _planner_classes() -> dict[str, type]:
@@ -80,31 +82,57 @@ def interpolate_path(path: np.ndarray, max_step_rad: float) -> np.ndarray:
     if not max_step_rad > 0:
         raise ValueError(f"max_step_rad must be positive, got {max_step_rad}")
     pieces = [path[:1]]
-    for a, b in zip(path[:-1], path[1:], strict=True):
+    for a, b in itertools.pairwise(path):
         steps = max(1, math.ceil(float(np.max(np.abs(b - a))) / max_step_rad - 1e-9))
         fractions = np.arange(1, steps + 1)[:, None] / steps
         pieces.append(a + fractions * (b - a))
     return np.concatenate(pieces)
 
 
-class _BatchMotionValidator(ob.MotionValidator):
-    """OMPL motion validator that checks a whole straight-line motion with one batch call to the checker.
+def _state_array(state, dof: int) -> np.ndarray:
+    return np.array([state[i] for i in range(dof)])
 
-    OMPL assumes the first state valid (as its DiscreteMotionValidator does) and needs the rest checked.
+
+def _validity_function(checker: CollisionChecker, dof: int):
+    # a closure over the checker only: a reference back to the MotionPlanner would make a cycle through
+    # OMPL's C++ objects that Python's garbage collector cannot see
+    def valid(state) -> bool:
+        return checker.is_state_valid(_state_array(state, dof))
+
+    return valid
+
+
+class _BatchMotionValidator(ob.MotionValidator):
+    """OMPL motion validator that checks a straight-line motion with batch calls to the checker.
+
+    OMPL assumes the first state valid (as its DiscreteMotionValidator does) and needs the rest checked, at
+    most ``resolution_rad`` apart in every joint.
     """
 
-    def __init__(self, si: ob.SpaceInformation, planner: MotionPlanner):
+    def __init__(self, si: ob.SpaceInformation, checker: CollisionChecker, dof: int, resolution_rad: float):
         super().__init__(si)
-        self._planner = planner
+        self.checker, self.dof, self.resolution_rad = checker, dof, resolution_rad
+        self.motion_checks = 0
+        self.states_checked = 0
 
-    def checkMotion(self, s1, s2) -> bool:  # noqa: N802 - OMPL's name
-        p = self._planner
-        p.motion_checks += 1
-        a, b = p._to_array(s1), p._to_array(s2)
-        steps = max(1, math.ceil(float(np.max(np.abs(b - a))) / p.resolution_rad - 1e-9))
+    def checkMotion(self, s1, s2) -> bool:
+        self.motion_checks += 1
+        a, b = _state_array(s1, self.dof), _state_array(s2, self.dof)
+        steps = max(1, math.ceil(float(np.max(np.abs(b - a))) / self.resolution_rad - 1e-9))
         states = a + (np.arange(1, steps + 1)[:, None] / steps) * (b - a)
-        p.states_checked += steps
-        return bool(p.checker.check_states(states).all())
+        if steps <= 2 * _COARSE_STRIDE:
+            self.states_checked += steps
+            return bool(self.checker.check_states(states).all())
+        # coarse to fine: most rejected motions (planner extensions, shortcut attempts) fail on the coarse
+        # pass, which costs a fraction of the full one
+        coarse = np.zeros(steps, dtype=bool)
+        coarse[_COARSE_STRIDE - 1 :: _COARSE_STRIDE] = True
+        coarse[-1] = True
+        for group in (coarse, ~coarse):
+            self.states_checked += int(group.sum())
+            if not self.checker.check_states(states[group]).all():
+                return False
+        return True
 
 
 class MotionPlanner:
@@ -113,7 +141,8 @@ class MotionPlanner:
 
     ``planner``: an OMPL geometric planner name (see :func:`available_planners`). ``resolution_rad``: largest
     joint step between checked states of a motion. ``time_budget_s``: the whole call's limit; it is shared
-    by at most ``max_attempts`` fresh planner runs. ``simplify_time_s``: limit for PathSimplifier.
+    by at most ``max_attempts`` fresh planner runs. ``simplify``: shorten the solution with PathSimplifier's
+    shortcuts (``"full"``: also its B-spline smoothing) for at most ``simplify_time_s``.
     ``try_direct``: take the straight line when it is free (no OMPL call). Optimizing planners (RRTstar,
     BITstar, ...) use the whole time of an attempt. ``seed``: OMPL's global seed, which takes effect only
     before OMPL first draws random numbers in this process.
@@ -126,14 +155,16 @@ class MotionPlanner:
         resolution_rad: float = math.radians(1.0),
         time_budget_s: float = 5.0,
         max_attempts: int = 3,
-        simplify: bool = True,
-        simplify_time_s: float = 0.5,
+        simplify: bool | str = True,
+        simplify_time_s: float = 0.1,
         try_direct: bool = True,
         range_rad: float | None = None,
         seed: int | None = None,
         log_level=ou.LOG_WARN,
     ):
         _planner_class(planner)
+        if simplify not in (True, False, "full"):
+            raise ValueError(f"simplify must be True, False or 'full', got {simplify!r}")
         if not resolution_rad > 0:
             raise ValueError(f"resolution_rad must be positive, got {resolution_rad}")
         if not time_budget_s > 0:
@@ -154,8 +185,6 @@ class MotionPlanner:
         if seed is not None:
             ou.RNG.setSeed(int(seed))
         ou.setLogLevel(log_level)
-        self.motion_checks = 0
-        self.states_checked = 0
         self.space = ob.RealVectorStateSpace(self.dof)
         bounds = ob.RealVectorBounds(self.dof)
         for i, name in enumerate(self.model.joint_names):
@@ -164,23 +193,20 @@ class MotionPlanner:
             self.space.setDimensionName(i, name)
         self.space.setBounds(bounds)
         self.si = ob.SpaceInformation(self.space)
-        self.si.setStateValidityChecker(self._state_valid)
-        self._motion_validator = _BatchMotionValidator(self.si, self)
+        self.si.setStateValidityChecker(_validity_function(checker, self.dof))
+        self._motion_validator = _BatchMotionValidator(self.si, checker, self.dof, self.resolution_rad)
         self.si.setMotionValidator(self._motion_validator)
         self.si.setup()
 
     # ---------------------------------------------------------------------------------------- helpers
     def _to_array(self, state) -> np.ndarray:
-        return np.array([state[i] for i in range(self.dof)])
+        return _state_array(state, self.dof)
 
     def _to_state(self, q: np.ndarray):
         state = self.si.allocState()
         for i, value in enumerate(q):
             state[i] = float(value)
         return state
-
-    def _state_valid(self, state) -> bool:
-        return self.checker.is_state_valid(self._to_array(state))
 
     def _check_input(self, q, what: str) -> np.ndarray:
         q = np.asarray(q, dtype=float)
@@ -201,10 +227,27 @@ class MotionPlanner:
     def _path_array(self, path) -> np.ndarray:
         return np.array([self._to_array(path.getState(i)) for i in range(path.getStateCount())])
 
+    def _simplify(self, path, until: float) -> None:
+        """Shorten ``path`` in place until the clock reaches ``until`` (perf_counter seconds) or nothing helps.
+
+        Vertex reduction and partial shortcuts (as in PathSimplifier.simplify, without its B-spline smoothing,
+        which multiplies the vertices and costs several times the planning time here). ``simplify="full"``
+        then also runs OMPL's whole simplify in the time left.
+        """
+        simplifier = og.PathSimplifier(self.si)
+        simplifier.reduceVertices(path)
+        while time.perf_counter() < until:
+            shortened = simplifier.partialShortcutPath(path)
+            reduced = simplifier.reduceVertices(path)
+            if not (shortened or reduced):
+                break
+        simplifier.collapseCloseVertices(path)
+        left = until - time.perf_counter()
+        if self.simplify == "full" and left > 0.0:
+            simplifier.simplify(path, left, False)
+
     # ------------------------------------------------------------------------------------------- plan
-    def plan(
-        self, start, goal, planner: str | None = None, time_budget_s: float | None = None
-    ) -> PlanningResult:
+    def plan(self, start, goal, planner: str | None = None, time_budget_s: float | None = None) -> PlanningResult:
         """Plan from ``start`` to ``goal`` (joint values, rad). Raises ValueError on malformed input
         (wrong joint count, NaN, unknown planner); every planning failure is a result with a reason."""
         started = time.perf_counter()
@@ -216,12 +259,16 @@ class MotionPlanner:
         if not budget > 0:
             raise ValueError(f"time_budget_s must be positive, got {budget}")
         deadline = started + budget
-        checks_before, states_before = self.motion_checks, self.states_checked
+        validator = self._motion_validator
+        checks_before, states_before = validator.motion_checks, validator.states_checked
+
+        timing = {"solve_s": 0.0, "simplify_s": 0.0}
 
         def result(success, path, reason, attempts=0, used=name):
             stats = {
-                "motion_checks": self.motion_checks - checks_before,
-                "states_checked": self.states_checked - states_before,
+                "motion_checks": validator.motion_checks - checks_before,
+                "states_checked": validator.states_checked - states_before,
+                **timing,
             }
             path = np.asarray(path, dtype=float).reshape(-1, self.dof)
             return PlanningResult(success, path, reason, time.perf_counter() - started, used, attempts, stats)
@@ -251,7 +298,9 @@ class MotionPlanner:
             pdef.clearSolutionPaths()
             ompl_planner.setProblemDefinition(pdef)
             ompl_planner.setup()
+            solve_started = time.perf_counter()
             status = ompl_planner.solve(attempt_time)
+            timing["solve_s"] += time.perf_counter() - solve_started
             if not pdef.hasExactSolution():
                 reasons.append(f"attempt {attempts}: {status.asString()} after {attempt_time:.2f} s")
                 ompl_planner.clear()
@@ -260,9 +309,10 @@ class MotionPlanner:
             raw = self._path_array(solution)
             path = raw
             if self.simplify and len(raw) > 2:
-                simplify_time = min(self.simplify_time_s, max(0.0, deadline - time.perf_counter()))
-                og.PathSimplifier(self.si).simplify(solution, simplify_time)
+                simplify_started = time.perf_counter()
+                self._simplify(solution, min(simplify_started + self.simplify_time_s, deadline))
                 path = self._path_array(solution)
+                timing["simplify_s"] = time.perf_counter() - simplify_started
             ompl_planner.clear()
             for candidate in (path, raw):
                 candidate = candidate.copy()

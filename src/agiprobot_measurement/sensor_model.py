@@ -539,17 +539,15 @@ class SensorModel:
                 parts.append(part)
                 if progress is not None:
                     progress(min(start + per_chunk, n_views), n_views)
-        counts, points, uncertainties, distances = zip(*parts, strict=True)
         indptr = np.zeros(n_views + 1, dtype=np.int64)
-        np.cumsum(np.concatenate(counts), out=indptr[1:])
-        return MeasurabilityResult(
-            n_points,
-            n_views,
-            indptr,
-            np.concatenate(points),
-            np.concatenate(uncertainties),
-            np.concatenate(distances),
-        )
+        np.cumsum(np.concatenate([part[0] for part in parts]), out=indptr[1:])
+        # one column of the chunk results at a time, each freed once merged: the peak stays near the result
+        merged = []
+        for column in (1, 2, 3):
+            merged.append(np.concatenate([part[column] for part in parts]))
+            for index, part in enumerate(parts):
+                parts[index] = tuple(None if c == column else value for c, value in enumerate(part))
+        return MeasurabilityResult(n_points, n_views, indptr, *merged)
 
     def _prefilter(self, poses, ctx, pts32, nrm32, deflection, pos_margin, ang_margin):
         """Candidate (view, point) pairs of a chunk: a float32 superset of the frustum and psi limits.

@@ -398,7 +398,7 @@ def _duplicates(cols: _Columns, order: np.ndarray) -> np.ndarray:
 
 
 def _dominated_columns(
-    cols: _Columns, costs: np.ndarray, deadline: float, probe_rows: int = 8, max_pool_bytes: int = 256 << 20
+    cols: _Columns, costs: np.ndarray, deadline: float, probe_rows: int = 16, max_pool_bytes: int = 256 << 20
 ) -> tuple[np.ndarray, bool]:
     """Mask of columns whose rows are a subset of another column's that costs no more.
 
@@ -425,6 +425,13 @@ def _dominated_columns(
     pool = np.empty(min(n, 64 * max_words), dtype=np.int64)
     n_pool = 0
     pool_degree = np.zeros(m, dtype=np.int64)
+    # Cost mask: pool columns are filed in cost buckets; ANDing with the bitset of the pool columns in the
+    # candidate's bucket or a cheaper one keeps the lowest-candidate rounds from trying expensive columns.
+    # Same-bucket candidates still get the exact cost test.
+    n_buckets = 1 if np.all(costs == costs[0]) else 64
+    edges = np.quantile(costs, np.linspace(0.0, 1.0, n_buckets + 1)[1:-1]) if n_buckets > 1 else np.zeros(0)
+    bucket = np.searchsorted(edges, costs, side="left")
+    cheap_bits = np.zeros((n_buckets, pool_bits.shape[1]), dtype=np.uint64)
     complete = True
     for lo, hi in itertools.pairwise(level_bounds):
         if time.perf_counter() > deadline:
@@ -450,6 +457,8 @@ def _dominated_columns(
             acc = pool_bits[probe[:, 0], :n_words]
             for i in range(1, t):
                 acc = acc & pool_bits[probe[:, i], :n_words]
+            if n_buckets > 1:
+                acc &= cheap_bits[bucket[block], :n_words]
             dominated[block[_dominated_in_block(acc, pool, block, rows2d, costs, pool_bits, t < size)]] = True
         kept = level[~dominated[level]]
         room = pool.size - n_pool
@@ -464,24 +473,41 @@ def _dominated_columns(
             grown = np.zeros((m, min(max_words, max(need, 2 * pool_bits.shape[1]))), dtype=np.uint64)
             grown[:, : pool_bits.shape[1]] = pool_bits
             pool_bits = grown
+            grown = np.zeros((n_buckets, pool_bits.shape[1]), dtype=np.uint64)
+            grown[:, : cheap_bits.shape[1]] = cheap_bits
+            cheap_bits = grown
         rows = cols.take(kept).indices
         k = np.repeat(idx, size)
         np.bitwise_or.at(pool_bits, (rows, k >> 6), np.left_shift(np.uint64(1), (k & 63).astype(np.uint64)))
         pool_degree += np.bincount(rows, minlength=m)
+        if n_buckets > 1:
+            # Each new column joins its own bucket's mask and every more expensive one's.
+            w0 = n_pool // 64
+            new_bits = np.zeros((n_buckets, -(-(n_pool + kept.size) // 64) - w0), dtype=np.uint64)
+            np.bitwise_or.at(
+                new_bits, (bucket[kept], (idx >> 6) - w0), np.left_shift(np.uint64(1), (idx & 63).astype(np.uint64))
+            )
+            cheap_bits[:, w0 : w0 + new_bits.shape[1]] |= np.bitwise_or.accumulate(new_bits, axis=0)
         pool[n_pool : n_pool + kept.size] = kept
         n_pool += kept.size
     return dominated, complete
 
 
 def _rows_held(pool_bits: np.ndarray, rows2d: np.ndarray, k: np.ndarray) -> np.ndarray:
-    """For pairs (rows2d[i], pool column k[i]): does the pool column hold every one of the rows?"""
+    """For pairs (rows2d[i], pool column k[i]): does the pool column hold every one of the rows?
+
+    Rows are checked 16 at a time and failed pairs dropped in between: a non-superset usually misses many
+    rows, so it rarely costs more than the first slice.
+    """
     word, shift = k >> 6, (k & 63).astype(np.uint64)
-    ok = np.empty(k.size, dtype=bool)
-    chunk = max(1, 4_000_000 // max(rows2d.shape[1], 1))
-    for c0 in range(0, k.size, chunk):
-        sl = slice(c0, c0 + chunk)
-        held = pool_bits[rows2d[sl], word[sl, None]] >> shift[sl, None]
-        ok[sl] = np.all(held & np.uint64(1), axis=1)
+    live = np.arange(k.size)
+    for j0 in range(0, rows2d.shape[1], 16):
+        if live.size == 0:
+            break
+        held = pool_bits[rows2d[live, j0 : j0 + 16], word[live, None]] >> shift[live, None]
+        live = live[np.all(held & np.uint64(1), axis=1)]
+    ok = np.zeros(k.size, dtype=bool)
+    ok[live] = True
     return ok
 
 
@@ -496,21 +522,21 @@ def _dominated_in_block(
 ) -> np.ndarray:
     """Positions in ``block`` with a verified dominator among their candidates (set bits of ``acc``).
 
-    One dominator per column is enough and most candidates that survive the probe rows are genuine, so the
-    lowest candidate of each column is tried first, for a few rounds; only the columns still open after
-    that have all their remaining candidates expanded and checked.
+    One dominator per column is enough and most candidates that survive the probe rows and the cost mask
+    are genuine, so each column's lowest candidate is tried first, for a few rounds (a check costs one
+    gather per row); only the columns still open after that have all their remaining candidates expanded
+    and checked.
     """
     found = np.zeros(block.size, dtype=bool)
     open_rows = np.nonzero(acc.any(axis=1))[0]
-    for _ in range(3):
+    for _ in range(4):
         if open_rows.size == 0:
             return found
         sub = acc[open_rows]
         w = np.argmax(sub != 0, axis=1)
         word = sub[np.arange(open_rows.size), w]
         lowest = word & (~word + np.uint64(1))
-        bit = np.log2(lowest.astype(np.float64)).astype(np.int64)  # exact: a power of two
-        k = w.astype(np.int64) * 64 + bit
+        k = w.astype(np.int64) * 64 + np.log2(lowest.astype(np.float64)).astype(np.int64)  # exact: 2**n
         ok = costs[pool[k]] <= costs[block[open_rows]]
         if verify and ok.any():
             ok[ok] = _rows_held(pool_bits, rows2d[open_rows[ok]], k[ok])

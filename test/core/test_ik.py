@@ -184,18 +184,17 @@ def test_nearest_representative_reports_joints_without_a_value_in_limits():
 
 
 def test_scanner_offset_and_robot_mounting_come_from_configuration(tmp_path, station):
-    from agiprobot_measurement.station import CONFIG_DIR
+    import yaml
 
-    scanner = (CONFIG_DIR / "laser_scanner.yaml").read_text()
-    scanner = scanner.replace("xyz_m: [0.0, 0.0, 0.15]", "xyz_m: [0.03, -0.02, 0.2]")
-    scanner = scanner.replace("rpy_rad: [0.0, 0.0, 0.0]", "rpy_rad: [0.3, -0.2, 1.0]")
-    scene = (CONFIG_DIR / "scene.yaml").read_text()
-    scene = scene.replace("base_xyz_m: [0.0, 0.0, 0.9]", "base_xyz_m: [0.1, 0.2, 0.9]")
-    scene = scene.replace("base_rpy_rad: [0.0, 0.0, 0.0]", "base_rpy_rad: [0.0, 0.0, 0.7]")
-    assert scanner != (CONFIG_DIR / "laser_scanner.yaml").read_text()
-    assert scene != (CONFIG_DIR / "scene.yaml").read_text()
-    (tmp_path / "laser_scanner.yaml").write_text(scanner)
-    (tmp_path / "scene.yaml").write_text(scene)
+    from agiprobot_measurement.station import CONFIG_DIR, PACKAGE_ROOT
+
+    scanner = yaml.safe_load((CONFIG_DIR / "laser_scanner.yaml").read_text())
+    scanner["mount"] = {"xyz_m": [0.03, -0.02, 0.2], "rpy_rad": [0.3, -0.2, 1.0]}
+    scene = yaml.safe_load((CONFIG_DIR / "scene.yaml").read_text())
+    scene["robot"] = {"base_xyz_m": [0.1, 0.2, 0.9], "base_rpy_rad": [0.0, 0.0, 0.7]}
+    scene["part"]["mesh"] = str(PACKAGE_ROOT / scene["part"]["mesh"])
+    (tmp_path / "laser_scanner.yaml").write_text(yaml.safe_dump(scanner))
+    (tmp_path / "scene.yaml").write_text(yaml.safe_dump(scene))
     moved = Station.load(scanner=tmp_path / "laser_scanner.yaml", scene=tmp_path / "scene.yaml")
     solver = ik_for_station(moved)
     assert isinstance(solver, URAnalyticIK)

@@ -1,0 +1,460 @@
+#!/usr/bin/env python3
+"""Plan a measurement of a part from the command line (no roscore needed).
+
+Runs the TrajectoryManager pipeline (sampling, metrology, mechanics, set cover, connection) with a progress
+bar per stage and prints a summary. Writes the execution plan only with -o, the coverage picture only with
+--report and a summary file only with --summary.
+
+examples:
+  plan_measurement.py parts/objectA_wuerfel.stl -o cube_plan.yaml --report cube.png
+  plan_measurement.py parts/featuretype.STL --units inch --tilt full --solver greedy --transform 0 0 0 0 0 90
+
+exit status: 0 planned; 2 bad input or nothing plannable (one 'error: ...' line); 1 internal error;
+130 interrupted (nothing written).
+"""
+
+from __future__ import annotations
+
+import argparse
+import difflib
+import logging
+import math
+import os
+import sys
+import tempfile
+import time
+import warnings
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+try:
+    import agiprobot_measurement  # noqa: F401
+except ImportError:  # run from a checkout without the catkin environment
+    sys.path.insert(0, str(ROOT / "src"))
+
+import numpy as np  # noqa: E402
+
+# Only light modules here: bad input is reported before trimesh, FCL and OMPL are loaded (about 1 s).
+from agiprobot_measurement.set_cover import SOLVER_TYPES  # noqa: E402
+from agiprobot_measurement.station import UNIT_SCALES_TO_M, pose_matrix  # noqa: E402
+from agiprobot_measurement.viewpoint import TILT_MODES  # noqa: E402
+
+EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
+STAGE_ORDER = ("sampling", "metrology", "mechanics", "set cover", "connection")
+LOG = logging.getLogger("plan_measurement")
+
+
+class UsageError(Exception):
+    """Bad command-line input: reported as one 'error: ...' line, exit status 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    # argparse prints the whole usage and 'prog: error:'; one plain line is easier to read and to grep
+    def error(self, message):
+        raise UsageError(f"{message} (see --help)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog="plan_measurement.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("part", help="mesh file of the part (STL, OBJ, PLY, STEP, ...)")
+    parser.add_argument("--units", default="mm", help=f"length unit of the file: {', '.join(UNIT_SCALES_TO_M)}")
+    parser.add_argument("--density", type=float, default=0.03, help="samples per mm^2 (default 0.03)")
+    parser.add_argument("--orientations", type=int, default=12, help="orientations around the boresight (12)")
+    parser.add_argument("--tilt", default="none", help=f"viewpoint tilt mode: {', '.join(TILT_MODES)} (none)")
+    parser.add_argument("--solver", default="IP_basic", help=f"set cover solver: {', '.join(SOLVER_TYPES)}")
+    parser.add_argument("--threshold", type=float, default=0.1, help="uncertainty threshold in mm (0.1)")
+    parser.add_argument("--time-limit", type=float, default=60.0, help="time limit of one IP solve in s (60)")
+    parser.add_argument(
+        "--transform",
+        nargs=6,
+        type=float,
+        metavar=("X", "Y", "Z", "ROLL", "PITCH", "YAW"),
+        help="placement of the part relative to the scene's part pose: mm and degrees (URDF roll-pitch-yaw)",
+    )
+    parser.add_argument("--scene", help="scene file (default: config/scene.yaml)")
+    parser.add_argument("--no-mirrors", action="store_true", help="leave out the scene's wbk_mirrors obstacles")
+    parser.add_argument("--scan-speed", type=float, default=50.0, help="tip speed while measuring in mm/s (50)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of sampling and planning (0)")
+    parser.add_argument("-o", "--output", help="write the execution plan here (.yaml is appended if missing)")
+    parser.add_argument("--report", help="write a coverage picture here (.png)")
+    parser.add_argument("--summary", help="write the summary here (.yaml/.yml: YAML, else text)")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress output")
+    parser.add_argument("--debug", action="store_true", help="show tracebacks of internal errors")
+    return parser
+
+
+def _choice(value: str, valid, what: str) -> str:
+    if value in valid:
+        return value
+    hint = difflib.get_close_matches(value, list(valid), n=1)
+    suggestion = f"; did you mean {hint[0]!r}?" if hint else ""
+    raise UsageError(f"unknown {what} {value!r}; valid: {', '.join(valid)}{suggestion}")
+
+
+def _positive(value: float, what: str) -> float:
+    if not (math.isfinite(value) and value > 0):
+        raise UsageError(f"{what} must be a positive number, got {value}")
+    return value
+
+
+def _output(path: str | None, what: str, suffixes: tuple[str, ...] = ()) -> Path | None:
+    if path is None:
+        return None
+    target = Path(path)
+    if target.is_dir():
+        raise UsageError(f"{what} {target} is a directory")
+    directory = target.parent
+    if not directory.is_dir():
+        raise UsageError(f"output directory does not exist: {directory} (for {what} {target})")
+    if not os.access(directory, os.W_OK):
+        raise UsageError(f"output directory is not writable: {directory} (for {what} {target})")
+    if suffixes and target.suffix.lower() not in suffixes:
+        raise UsageError(f"{what} {target} must end in {' or '.join(suffixes)}")
+    return target
+
+
+def validate(args: argparse.Namespace) -> np.ndarray:
+    """Check every argument before any work starts; returns the part transform (4x4, mm)."""
+    part = Path(args.part)
+    if not part.exists():
+        raise UsageError(f"part file not found: {part}")
+    if not part.is_file():
+        raise UsageError(f"part is not a file: {part}")
+    _choice(args.units, tuple(UNIT_SCALES_TO_M), "unit")
+    _choice(args.tilt, TILT_MODES, "tilt mode")
+    _choice(args.solver, SOLVER_TYPES, "solver")
+    _positive(args.density, "--density (points/mm^2)")
+    _positive(args.threshold, "--threshold (mm)")
+    _positive(args.scan_speed, "--scan-speed (mm/s)")
+    _positive(args.time_limit, "--time-limit (s)")
+    if args.orientations < 1:
+        raise UsageError(f"--orientations must be at least 1, got {args.orientations}")
+    if args.scene is not None and not Path(args.scene).is_file():
+        raise UsageError(f"scene file not found: {args.scene}")
+    args.output = _output(args.output, "plan")
+    args.report = _output(args.report, "report", (".png",))
+    args.summary = _output(args.summary, "summary")
+    if args.transform is None:
+        return np.eye(4)
+    values = np.array(args.transform, dtype=float)
+    if not np.all(np.isfinite(values)):
+        raise UsageError(
+            f"--transform needs 6 finite numbers (x y z in mm, roll pitch yaw in deg), got {args.transform}"
+        )
+    return pose_matrix(values[:3], np.deg2rad(values[3:]))
+
+
+class StageProgress:
+    """The TrajectoryManager progress callback: one tqdm bar per stage on a terminal, plain lines otherwise.
+
+    Set cover and mechanics alternate (each round verifies the views it picked), so every stage keeps its own
+    bar at a fixed line instead of one bar replacing the other.
+    """
+
+    def __init__(self, enabled: bool, terminal: bool):
+        self.enabled = enabled
+        self.terminal = terminal
+        self.bars: dict = {}
+        self.t0 = time.perf_counter()
+
+    def __call__(self, stage: str, fraction: float, message: str) -> None:
+        if not self.enabled:
+            return
+        if not self.terminal:
+            if fraction >= 1.0:
+                print(f"[{time.perf_counter() - self.t0:7.1f} s] {stage}: {message}", file=sys.stderr, flush=True)
+            return
+        bar = self.bars.get(stage)
+        if bar is None:
+            from tqdm import tqdm
+
+            bar = tqdm(
+                total=1000,
+                desc=f"{stage:<10}",
+                position=len(self.bars),
+                leave=True,
+                file=sys.stderr,
+                bar_format="{desc} {percentage:3.0f}%|{bar:30}| {elapsed} {postfix}",
+                dynamic_ncols=True,
+            )
+            self.bars[stage] = bar
+        bar.n = round(1000 * fraction)
+        bar.set_postfix_str(message, refresh=False)
+        bar.refresh()
+
+    def write(self, text: str) -> None:
+        if self.bars:
+            from tqdm import tqdm
+
+            tqdm.write(text, file=sys.stderr)
+        else:
+            print(text, file=sys.stderr, flush=True)
+
+    def close(self) -> None:
+        for bar in self.bars.values():
+            bar.close()
+        self.bars.clear()
+
+
+class _ProgressLogHandler(logging.Handler):
+    # log lines printed straight to stderr would tear the progress bars apart
+    def __init__(self, progress: StageProgress):
+        super().__init__(logging.WARNING)
+        self.progress = progress
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.progress.write(f"{record.levelname.lower()}: {record.getMessage()}")
+
+
+def _timed_mechanics(manager) -> dict:
+    """Accumulate the time of the lazy mechanical verification, which runs inside solve_scp."""
+    spent = {"mechanics": 0.0, "verified": 0}
+    verify = getattr(manager, "_verify_mechanics", None)
+    if verify is None:
+        return spent
+
+    def timed(*args, **kwargs):
+        start = time.perf_counter()
+        try:
+            return verify(*args, **kwargs)
+        finally:
+            spent["mechanics"] += time.perf_counter() - start
+            spent["verified"] += 1
+
+    manager._verify_mechanics = timed
+    return spent
+
+
+def stage_times(manager, mechanics_s: float) -> dict[str, float]:
+    t = manager.timings_s
+    set_cover_and_mechanics = t.get("set_cover_and_mechanics", 0.0)
+    return {
+        "sampling": t.get("sampling", 0.0),
+        "metrology": t.get("anchor_reachability", 0.0) + t.get("metrology", 0.0) + t.get("viewpoint_objects", 0.0),
+        "mechanics": mechanics_s,
+        "set cover": max(0.0, set_cover_and_mechanics - mechanics_s),
+        "connection": t.get("connection", 0.0),
+    }
+
+
+def summarise(args, manager, report, times: dict, total_s: float, outputs: dict) -> tuple[list, dict]:
+    """(rows for the table, a plain mapping for --summary YAML)."""
+    result = manager.last_set_cover
+    if report.solver_gap is None:
+        gap_text = "none (greedy gives no bound)"
+    elif result is not None and result.proven_optimal:
+        gap_text = "0 % (proven optimal)"
+    else:
+        gap_text = f"{100.0 * report.solver_gap:.2f} % (time limit {args.time_limit:g} s)"
+    samples = report.n_samples
+    unconnected = f", {report.unconnected_views} could not be connected" if report.unconnected_views else ""
+    rows = [
+        ("part", f"{args.part} ({args.units})"),
+        ("samples", f"{samples} ({args.density:g} points/mm^2)"),
+        ("candidates", f"{report.n_candidates} ({args.orientations} orientations, tilt {args.tilt})"),
+        ("valid viewpoints", f"{report.n_valid_candidates}"),
+        ("views chosen", f"{report.n_views} ({args.solver}{unconnected})"),
+        (
+            "coverage of coverable",
+            f"{100.0 * report.coverage_of_coverable:.1f} % ({report.n_covered} of {report.n_coverable})",
+        ),
+        ("coverage of all samples", f"{100.0 * report.coverage_of_samples:.1f} % ({report.n_covered} of {samples})"),
+        (
+            "est. execution time",
+            f"{report.estimated_execution_time_s:.1f} s (measuring {report.measurement_time_s:.1f} s, "
+            f"connecting {report.connection_time_s:.1f} s)",
+        ),
+        (
+            "predicted uncertainty",
+            f"mean {report.mean_uncertainty_mm:.4f} mm, max {report.max_uncertainty_mm:.4f} mm "
+            f"(threshold {args.threshold:g} mm)",
+        ),
+        ("solver gap", gap_text),
+    ]
+    for stage in STAGE_ORDER:
+        rows.append((f"time: {stage}", f"{times[stage]:.2f} s"))
+    rows.append(("time: total", f"{total_s:.2f} s"))
+    for what, path in outputs.items():
+        rows.append((f"output: {what}", str(path)))
+    data = {
+        "part": str(args.part),
+        "units": args.units,
+        "parameters": {
+            "density_points_per_mm2": args.density,
+            "orientations": args.orientations,
+            "tilt": args.tilt,
+            "solver": args.solver,
+            "threshold_mm": args.threshold,
+            "scan_speed_mm_s": args.scan_speed,
+            "seed": args.seed,
+            "transform_mm_deg": None if args.transform is None else [float(v) for v in args.transform],
+            "mirrors": not args.no_mirrors,
+        },
+        "samples": samples,
+        "candidates": report.n_candidates,
+        "valid_viewpoints": report.n_valid_candidates,
+        "views": report.n_views,
+        "unconnected_views": report.unconnected_views,
+        "coverable": report.n_coverable,
+        "covered": report.n_covered,
+        "coverage_of_coverable": round(report.coverage_of_coverable, 6),
+        "coverage_of_samples": round(report.coverage_of_samples, 6),
+        "estimated_execution_time_s": round(report.estimated_execution_time_s, 3),
+        "mean_uncertainty_mm": _finite_or_none(report.mean_uncertainty_mm),
+        "max_uncertainty_mm": _finite_or_none(report.max_uncertainty_mm),
+        "solver_gap": report.solver_gap,
+        "proven_optimal": bool(result is not None and result.proven_optimal),
+        "time_s": {**{k: round(v, 3) for k, v in times.items()}, "total": round(total_s, 3)},
+        "outputs": {k: str(v) for k, v in outputs.items()},
+    }
+    return rows, data
+
+
+def _finite_or_none(value: float):
+    return round(float(value), 6) if math.isfinite(value) else None
+
+
+def format_table(rows: list[tuple[str, str]]) -> str:
+    width = max(len(label) for label, _ in rows)
+    rule = "-" * (width + 2 + max(len(value) for _, value in rows))
+    return "\n".join([rule, *(f"{label:<{width}}  {value}" for label, value in rows), rule])
+
+
+def write_text_atomically(path: Path, text: str) -> None:
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as handle:
+            handle.write(text)
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def run(args: argparse.Namespace, transform: np.ndarray, progress: StageProgress) -> int:
+    from agiprobot_measurement.part_loading import PartWarning
+    from agiprobot_measurement.station import Station
+    from agiprobot_measurement.trajectory_manager import PlanningError, TrajectoryManager
+
+    # the part loader both warns and logs its doubts: show them once, as 'warning: ...' lines (log handler)
+    warnings.simplefilter("ignore", PartWarning)
+
+    t0 = time.perf_counter()
+    station = Station.load(scene=args.scene)
+    manager = TrajectoryManager(station, scan_speed_mm_s=args.scan_speed, progress=progress, seed=args.seed)
+    mechanics = _timed_mechanics(manager)
+    manager.load_target_mesh(args.part, transform=transform, add_wbk_mirrors=not args.no_mirrors, units=args.units)
+    _, views = manager.generate_samples_and_viewpoints(args.density, args.threshold, args.orientations, args.tilt)
+    chosen = manager.solve_scp(views, args.solver, time_limit_s=args.time_limit)
+    ordered = manager.connect_viewpoints(chosen)
+    total_s = time.perf_counter() - t0
+    manager.timings_s["total"] = total_s
+    progress.close()
+    report = manager.coverage_report()
+    outputs = {}
+    if args.output is not None:
+        if not ordered:
+            raise PlanningError("no view could be connected: there is no plan to write")
+        segments = manager.convert_viewpointlist_to_execution_plan(ordered)
+        manager.store_execution_plan(args.output, segments)
+        outputs["plan"] = manager.last_plan_path
+    if args.report is not None:
+        from agiprobot_measurement.coverage_figure import plot_coverage
+
+        title = (
+            f"{Path(args.part).name}: {report.n_views} views ({args.solver}), "
+            f"{100.0 * report.coverage_of_samples:.1f} % of samples covered, "
+            f"est. {report.estimated_execution_time_s:.0f} s"
+        )
+        outputs["report"] = plot_coverage(
+            args.report,
+            manager.samples.points,
+            manager.point_uncertainties(),
+            manager.scan_lines_mm(),
+            manager.sensor_model.get_min_uncertainty(),
+            manager.sensor_model.get_max_uncertainty(),
+            title=title,
+            mesh=manager.target_mesh,
+        )
+    if args.summary is not None:
+        outputs["summary"] = args.summary
+    rows, data = summarise(args, manager, report, stage_times(manager, mechanics["mechanics"]), total_s, outputs)
+    table = format_table(rows)
+    if args.summary is not None:
+        if args.summary.suffix.lower() in (".yaml", ".yml"):
+            import yaml
+
+            write_text_atomically(args.summary, yaml.safe_dump(data, sort_keys=False))
+        else:
+            write_text_atomically(args.summary, table + "\n")
+    print(table, flush=True)
+    return EXIT_OK
+
+
+def main(argv=None) -> int:
+    progress = None
+    debug = False
+    try:
+        args = build_parser().parse_args(argv)
+        debug = args.debug
+        transform = validate(args)
+        terminal = sys.stderr.isatty()
+        progress = StageProgress(enabled=not args.quiet, terminal=terminal)
+        logging.getLogger("agiprobot_measurement").addHandler(_ProgressLogHandler(progress))
+        logging.getLogger("agiprobot_measurement").propagate = False
+        return run(args, transform, progress)
+    except UsageError as exc:
+        _fail(progress, f"error: {exc}")
+        return EXIT_USAGE
+    except ValueError as exc:
+        # the package's input errors are ValueErrors: PartLoadError, ConfigError, PlanError, SetCoverError
+        _fail(progress, f"error: {exc}")
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        _fail(progress, "interrupted: nothing more written")
+        return EXIT_INTERRUPTED
+    except RuntimeError as exc:
+        # the module is loaded lazily (OMPL, FCL: slow imports); an error raised before it was loaded is not one
+        # of its exceptions
+        manager_module = sys.modules.get("agiprobot_measurement.trajectory_manager")
+        if manager_module is not None and isinstance(exc, manager_module.PlanningCancelled):
+            _fail(progress, "interrupted: nothing more written")
+            return EXIT_INTERRUPTED
+        if manager_module is not None and isinstance(exc, manager_module.PlanningError):
+            _fail(progress, f"error: planning failed: {exc}")
+            return EXIT_USAGE
+        return _internal(progress, exc, debug)
+    except OSError as exc:
+        _fail(progress, f"error: {exc}")
+        return EXIT_USAGE
+    except Exception as exc:
+        return _internal(progress, exc, debug)
+
+
+def _fail(progress: StageProgress | None, line: str) -> None:
+    if progress is not None:
+        progress.close()
+    print(line, file=sys.stderr, flush=True)
+
+
+def _internal(progress, exc: BaseException, debug: bool) -> int:
+    if debug:
+        import traceback
+
+        if progress is not None:
+            progress.close()
+        traceback.print_exc()
+    _fail(progress, f"error: internal error: {type(exc).__name__}: {exc} (run with --debug for the traceback)")
+    return EXIT_INTERNAL
+
+
+if __name__ == "__main__":
+    code = main()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    # The OMPL bindings (nanobind) report 'leaked instances' at interpreter shutdown; that noise would bury
+    # the summary and the error line, and nothing is left to clean up here.
+    os._exit(code)

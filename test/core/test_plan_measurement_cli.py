@@ -1,0 +1,109 @@
+"""scripts/plan_measurement.py as a user runs it: a subprocess, its exit status, its output and its files."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+import yaml
+
+from agiprobot_measurement.plan_io import load_execution_plan
+from agiprobot_measurement.station import PACKAGE_ROOT
+
+SCRIPT = PACKAGE_ROOT / "scripts" / "plan_measurement.py"
+CUBE = PACKAGE_ROOT / "parts" / "objectA_wuerfel.stl"
+FAST = ["--density", "0.005", "--orientations", "4", "--tilt", "none", "--solver", "greedy"]
+
+
+def run_cli(args, cwd, timeout=120):
+    return subprocess.run(
+        [sys.executable, str(SCRIPT), *map(str, args)],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        check=False,
+    )
+
+
+@pytest.mark.parametrize(
+    ("args", "expected"),
+    [
+        (["missing.stl"], "part file not found: missing.stl"),
+        ([CUBE, "--units", "furlong"], "unknown unit 'furlong'"),
+        ([CUBE, "--solver", "IP_uncert"], "did you mean 'IP_uncertainty'"),
+        ([CUBE, "--tilt", "sideways"], "unknown tilt mode 'sideways'"),
+        ([CUBE, "--density", "0"], "--density"),
+        ([CUBE, "--threshold", "nan"], "--threshold"),
+        ([CUBE, "--transform", "0", "0", "nan", "0", "0", "0"], "--transform"),
+        ([CUBE, "--orientations", "many"], "invalid int value: 'many'"),
+        ([CUBE, "-o", "no_such_dir/plan.yaml"], "output directory does not exist: no_such_dir"),
+        ([CUBE, "--report", "no_such_dir/report.png"], "output directory does not exist: no_such_dir"),
+        ([CUBE, "--report", "report.jpg"], "must end in .png"),
+        ([CUBE, "--scene", "no_scene.yaml"], "scene file not found: no_scene.yaml"),
+    ],
+)
+def test_bad_input_gives_one_error_line_and_exit_status_2(tmp_path, args, expected):
+    result = run_cli(args, tmp_path)
+    assert result.returncode == 2, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith("error: ") and expected in lines[0], lines[0]
+    assert "Traceback" not in result.stdout + result.stderr
+    assert not any(tmp_path.iterdir()), "nothing may be written on bad input"
+
+
+def test_unreadable_part_is_reported_without_traceback(tmp_path):
+    broken = tmp_path / "broken.stl"
+    broken.write_text("solid nothing\nendsolid nothing\n")
+    result = run_cli([broken, *FAST], tmp_path)
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines()[-1].startswith("error: ")
+    assert "broken.stl" in result.stderr and "Traceback" not in result.stderr
+
+
+def test_plans_the_cube_and_writes_only_what_was_asked(tmp_path):
+    result = run_cli(
+        [CUBE, *FAST, "-o", "cube_plan", "--report", "cube.png", "--summary", "summary.yaml", "--seed", "1"], tmp_path
+    )
+    assert result.returncode == 0, result.stderr
+    assert "Traceback" not in result.stderr
+    # the plan gets its .yaml suffix once; nothing but the requested files is left behind
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cube.png", "cube_plan.yaml", "summary.yaml"]
+    plan = load_execution_plan(tmp_path / "cube_plan.yaml")
+    assert len(plan.measurements()) >= 5 and len(plan.connections()) == len(plan.measurements())
+    assert (tmp_path / "cube.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    summary = yaml.safe_load((tmp_path / "summary.yaml").read_text())
+    assert summary["views"] == len(plan.measurements())
+    assert summary["samples"] == 250 and summary["candidates"] == 1000
+    assert 0.9 <= summary["coverage_of_samples"] <= 1.0
+    assert summary["estimated_execution_time_s"] > 0
+    assert set(summary["time_s"]) >= {"sampling", "metrology", "mechanics", "set cover", "connection", "total"}
+    for label in ("samples", "valid viewpoints", "views chosen", "coverage of coverable", "est. execution time"):
+        assert label in result.stdout
+    assert "cube_plan.yaml" in result.stdout
+
+
+@pytest.mark.skipif(os.name != "posix", reason="needs SIGINT")
+def test_ctrl_c_exits_cleanly(tmp_path):
+    # a larger problem, so that planning is still running when the signal arrives
+    process = subprocess.Popen(
+        [sys.executable, str(SCRIPT), CUBE, "--density", "0.03", "--tilt", "full", "-o", "plan.yaml"],
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 60
+    line = ""
+    while "sampling:" not in line and time.monotonic() < deadline:
+        line = process.stderr.readline()
+        if not line and process.poll() is not None:
+            break
+    process.send_signal(signal.SIGINT)
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 130, stderr
+    assert "interrupted" in stderr and "Traceback" not in stderr
+    assert not any(tmp_path.iterdir()), "an interrupted run writes no plan"
