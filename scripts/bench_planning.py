@@ -4,7 +4,7 @@
 The cube ``parts/objectA_wuerfel.stl`` (mm) at 0.03 points/mm^2 (1,500 samples, bottom removed), planned with
 TrajectoryManager: sampling, metrology, mechanics (lazy, inside the set cover), set cover, connection.
 Default rows: 12 orientations with tilt none (IP_basic and greedy) and tilt full (greedy, and IP_basic with
-a time limit); ``--orientations 3 6 12`` adds the original's other rows. Every configuration runs once, in a
+a time limit); ``--all`` adds the original's rows with 3 and 6 orientations. Every configuration runs once, in a
 fresh process, so the peak memory (ru_maxrss) of each row is its own.
 
 The original's numbers are those of /work/shared/reference/measurement_planning.md ("What the original
@@ -115,14 +115,23 @@ def run_one(orientations: int, tilt: str, solver: str, time_limit_s: float, seed
 
 
 def configurations(args) -> list[tuple[int, str, str, float]]:
+    """(orientations, tilt, solver, IP time limit) per row, in the order they run."""
+
+    def limit(tilt: str, solver: str) -> float:
+        return args.full_time_limit if tilt == "full" and solver != "greedy" else args.time_limit
+
     if args.quick:
-        return [(12, "none", "IP_basic", args.time_limit), (12, "none", "greedy", args.time_limit)]
+        pairs = [(12, "none")]
+    elif args.orientations or args.tilt:
+        pairs = [(o, t) for t in (args.tilt or ["none", "full"]) for o in (args.orientations or [12])]
+    else:
+        pairs = [(3, "none"), (6, "none")] if args.all else []
+        pairs += [(12, "none"), (12, "full")]
     rows = []
-    for tilt in args.tilt:
-        for orientations in args.orientations:
-            for solver in args.solvers:
-                limit = args.full_time_limit if tilt == "full" and solver != "greedy" else args.time_limit
-                rows.append((orientations, tilt, solver, limit))
+    for orientations, tilt in pairs:
+        # with tilt full the greedy row runs first: it is the one expected to meet the time target
+        solvers = sorted(args.solvers, key=lambda s: s != "greedy") if tilt == "full" else args.solvers
+        rows += [(orientations, tilt, solver, limit(tilt, solver)) for solver in solvers]
     return rows
 
 
@@ -232,15 +241,20 @@ def target_lines(results: list[dict]) -> list[str]:
                 f"{check(r['set_cover_s'] <= TARGET_GREEDY_S)} {name}: set cover {r['set_cover_s']:.2f} s "
                 f"<= {TARGET_GREEDY_S:.0f} s (all {r['rounds']} rounds; last solve {r['last_solve_s']:.2f} s)"
             )
-        lines.append(f"{check(r['peak_mb'] <= TARGET_PEAK_MB)} {name}: peak memory {r['peak_mb']:,.0f} MB <= 4 GB")
+        lines.append(
+            f"{check(r['peak_mb'] <= TARGET_PEAK_MB)} {name}: peak memory {r['peak_mb']:,.0f} MB <= {TARGET_PEAK_MB:,.0f} MB"
+        )
     return lines
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help="only 12 orientations, tilt none (IP_basic, greedy)")
-    parser.add_argument("--orientations", type=int, nargs="+", default=[12], help="orientations (default 12)")
-    parser.add_argument("--tilt", nargs="+", default=["none", "full"], choices=("none", "limited", "full"))
+    parser.add_argument("--all", action="store_true", help="also the original's rows with 3 and 6 orientations")
+    parser.add_argument("--orientations", type=int, nargs="+", help="run these orientations (default 12)")
+    parser.add_argument(
+        "--tilt", nargs="+", choices=("none", "limited", "full"), help="run these tilt modes (default none full)"
+    )
     parser.add_argument("--solvers", nargs="+", default=["IP_basic", "greedy"], help="set cover solvers")
     parser.add_argument("--time-limit", type=float, default=60.0, help="IP time limit per solve, s (60)")
     parser.add_argument("--full-time-limit", type=float, default=30.0, help="IP time limit with tilt full, s (30)")

@@ -41,7 +41,7 @@ from agiprobot_measurement.viewpoint import TILT_MODES  # noqa: E402
 
 EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 STAGE_ORDER = ("sampling", "metrology", "mechanics", "set cover", "connection")
-LOG = logging.getLogger("plan_measurement")
+BAR_FORMAT = "{desc} {percentage:3.0f}%|{bar:30}| "
 
 
 class UsageError(Exception):
@@ -157,14 +157,16 @@ class StageProgress:
         self.enabled = enabled
         self.terminal = terminal
         self.bars: dict = {}
+        self.first: dict[str, float] = {}
         self.t0 = time.perf_counter()
 
     def __call__(self, stage: str, fraction: float, message: str) -> None:
         if not self.enabled:
             return
+        now = time.perf_counter()
         if not self.terminal:
             if fraction >= 1.0:
-                print(f"[{time.perf_counter() - self.t0:7.1f} s] {stage}: {message}", file=sys.stderr, flush=True)
+                print(f"[{now - self.t0:7.1f} s] {stage}: {message}", file=sys.stderr, flush=True)
             return
         bar = self.bars.get(stage)
         if bar is None:
@@ -176,12 +178,17 @@ class StageProgress:
                 position=len(self.bars),
                 leave=True,
                 file=sys.stderr,
-                bar_format="{desc} {percentage:3.0f}%|{bar:30}| {elapsed} {postfix}",
+                # tqdm's own elapsed time runs on until the bar is closed, i.e. the end of planning: each bar
+                # shows the time from the stage's first to its latest report instead
+                bar_format=BAR_FORMAT,
                 dynamic_ncols=True,
             )
             self.bars[stage] = bar
+            self.first[stage] = now
         bar.n = round(1000 * fraction)
-        bar.set_postfix_str(message, refresh=False)
+        # tqdm puts ', ' before a postfix; the status is written into the format instead (braces escaped)
+        status = f"{now - self.first[stage]:6.1f} s  {message}".replace("{", "{{").replace("}", "}}")
+        bar.bar_format = BAR_FORMAT + status
         bar.refresh()
 
     def write(self, text: str) -> None:
@@ -307,7 +314,7 @@ def summarise(args, manager, report, times: dict, total_s: float, outputs: dict)
         "solver_gap": report.solver_gap,
         "proven_optimal": bool(result is not None and result.proven_optimal),
         "time_s": {**{k: round(v, 3) for k, v in times.items()}, "total": round(total_s, 3)},
-        "outputs": {k: str(v) for k, v in outputs.items()},
+        "outputs": {k: str(v) if isinstance(v, Path) else None for k, v in outputs.items()},
     }
     return rows, data
 
@@ -381,6 +388,8 @@ def run(args: argparse.Namespace, transform: np.ndarray, progress: StageProgress
         )
     if args.summary is not None:
         outputs["summary"] = args.summary
+    if args.output is None:
+        outputs["plan"] = "not written (give -o FILE)"
     rows, data = summarise(args, manager, report, stage_times(manager, mechanics["mechanics"]), total_s, outputs)
     table = format_table(rows)
     if args.summary is not None:
@@ -411,43 +420,43 @@ def main(argv=None) -> int:
         return EXIT_USAGE
     except ValueError as exc:
         # the package's input errors are ValueErrors: PartLoadError, ConfigError, PlanError, SetCoverError
-        _fail(progress, f"error: {exc}")
+        _fail(progress, f"error: {exc}", debug)
         return EXIT_USAGE
     except KeyboardInterrupt:
-        _fail(progress, "interrupted: nothing more written")
+        _fail(progress, "interrupted: nothing more written", debug)
         return EXIT_INTERRUPTED
     except RuntimeError as exc:
         # the module is loaded lazily (OMPL, FCL: slow imports); an error raised before it was loaded is not one
         # of its exceptions
         manager_module = sys.modules.get("agiprobot_measurement.trajectory_manager")
         if manager_module is not None and isinstance(exc, manager_module.PlanningCancelled):
-            _fail(progress, "interrupted: nothing more written")
+            _fail(progress, "interrupted: nothing more written", debug)
             return EXIT_INTERRUPTED
         if manager_module is not None and isinstance(exc, manager_module.PlanningError):
-            _fail(progress, f"error: planning failed: {exc}")
+            _fail(progress, f"error: planning failed: {exc}", debug)
             return EXIT_USAGE
         return _internal(progress, exc, debug)
     except OSError as exc:
-        _fail(progress, f"error: {exc}")
+        _fail(progress, f"error: {exc}", debug)
         return EXIT_USAGE
     except Exception as exc:
         return _internal(progress, exc, debug)
 
 
-def _fail(progress: StageProgress | None, line: str) -> None:
+def _fail(progress: StageProgress | None, line: str, debug: bool = False) -> None:
+    """Close the bars, then one line (after the traceback of the exception being handled, with --debug)."""
     if progress is not None:
         progress.close()
+    if debug:
+        import traceback
+
+        traceback.print_exc()
     print(line, file=sys.stderr, flush=True)
 
 
 def _internal(progress, exc: BaseException, debug: bool) -> int:
-    if debug:
-        import traceback
-
-        if progress is not None:
-            progress.close()
-        traceback.print_exc()
-    _fail(progress, f"error: internal error: {type(exc).__name__}: {exc} (run with --debug for the traceback)")
+    hint = "" if debug else " (run with --debug for the traceback)"
+    _fail(progress, f"error: internal error: {type(exc).__name__}: {exc}{hint}", debug)
     return EXIT_INTERNAL
 
 

@@ -8,10 +8,12 @@ time). Which pairs are checked is decided by an allowed-collision matrix read fr
 
 Units: metres, radians; poses are 4x4 homogeneous matrices in the planning frame (``world``).
 
-Speed: a batch of states is posed with one vectorised FK, and a numpy broad phase (bounding capsules of the robot
-shapes against oriented boxes of the obstacles, capsule-capsule distances between robot shapes) leaves only the
-few near pairs to FCL's narrow phase. That is what makes thousands of full-robot checks per second possible in
-Python; FCL's own broad-phase managers would call back into Python for every candidate pair.
+Speed: a batch of states is posed with one vectorised FK, and a numpy broad phase leaves only the few near pairs
+to FCL's narrow phase: robot shapes against obstacles by bounding spheres against the obstacles' oriented boxes,
+then separating axes with the shapes' exact support; robot shapes against each other by bounding spheres, then
+capsule (segment) distances. That makes tens of thousands of full-robot checks per second possible in Python
+(prefer :meth:`CollisionChecker.check_states` over many single calls); FCL's own broad-phase managers would call
+back into Python for every candidate pair. A checker is not thread-safe (it moves its FCL objects).
 """
 
 from __future__ import annotations
@@ -323,13 +325,11 @@ class CollisionChecker:
                 self.shapes.append(self._make_shape(link, element, anchor, link_offset @ geometry.origin, geometry))
         self.robot_links: list[str] = list(dict.fromkeys(shape.link for shape in self.shapes))
         self._validate_allowed()
-        self._shape_link = np.array([self.robot_links.index(s.link) for s in self.shapes])
         self._shape_anchor = np.array([s.anchor for s in self.shapes])
         self._shape_offset = np.array([s.offset for s in self.shapes])
         self._shape_axis = np.array([s.axis for s in self.shapes], dtype=int)
         self._axis_select = np.eye(3)[self._shape_axis].reshape(-1, 3)
         self._world_half = np.array([s.world.half_length for s in self.shapes])
-        self._world_radius = np.array([s.world.radius for s in self.shapes])
         self._own_half = np.array([s.own.half_length for s in self.shapes])
         self._own_radius = np.array([s.own.radius for s in self.shapes])
         self._world_extents = np.array([s.world.extents for s in self.shapes]).reshape(-1, 3)
@@ -399,7 +399,11 @@ class CollisionChecker:
         self._add(name, "sphere", pose, fcl.Sphere(radius_m), np.zeros(3), np.full(3, radius_m), False)
 
     def add_mesh(self, name: str, vertices_m: np.ndarray, faces: np.ndarray, pose: np.ndarray) -> None:
-        """Add (or replace) a triangle-mesh obstacle: vertices in metres in the object frame, placed at ``pose``."""
+        """Add (or replace) a triangle-mesh obstacle: vertices in metres in the object frame, placed at ``pose``.
+
+        A closed (watertight) mesh is solid: a robot shape wholly inside it collides. An open mesh is only its
+        surface, as FCL sees it.
+        """
         import trimesh
 
         vertices = np.asarray(vertices_m, dtype=float)
@@ -411,7 +415,8 @@ class CollisionChecker:
         lo, hi = vertices.min(axis=0), vertices.max(axis=0)
         mesh = trimesh.Trimesh(vertices, faces, process=False)
         closed = mesh if mesh.is_watertight else None
-        self._add(name, "mesh", pose, _bvh(vertices, faces), (lo + hi) / 2.0, (hi - lo) / 2.0, False, closed)
+        half = np.maximum((hi - lo) / 2.0, 1e-9)  # a flat mesh has a flat bounding box
+        self._add(name, "mesh", pose, _bvh(vertices, faces), (lo + hi) / 2.0, half, False, closed)
 
     def add_trimesh(self, name: str, mesh, pose: np.ndarray, scale_to_m: float = 1.0) -> None:
         """Add a ``trimesh.Trimesh`` obstacle; ``scale_to_m`` converts its units to metres."""
@@ -432,7 +437,7 @@ class CollisionChecker:
 
     def set_part(
         self,
-        mesh=None,
+        mesh,
         faces: np.ndarray | None = None,
         pose: np.ndarray | None = None,
         name: str = "part",
@@ -445,10 +450,12 @@ class CollisionChecker:
             vertices, faces = np.asarray(mesh.vertices), np.asarray(mesh.faces)
         else:
             vertices = np.asarray(mesh)
-        if self.part_name is not None and self.part_name in self._objects:
-            del self._objects[self.part_name]
+        previous = self.part_name
+        self.add_mesh(name, vertices * scale_to_m, faces, pose)  # raises before anything changed
+        if previous is not None and previous != name and previous in self._objects:
+            del self._objects[previous]
+            self._rebuild()
         self.part_name = name
-        self.add_mesh(name, vertices * scale_to_m, faces, pose)
 
     def set_part_placement(self, part: PartPlacement) -> None:
         """Load the part of a scene file (mesh file, unit, pose)."""
@@ -558,7 +565,11 @@ class CollisionChecker:
         return self.model._check_q(np.atleast_2d(np.asarray(q, dtype=float)))
 
     def is_state_valid(self, q: np.ndarray) -> bool:
-        """True when the joint state (rad) is within the joint limits and collision-free (with padding)."""
+        """True when the joint state (rad) is within the joint limits and collision-free (with padding).
+
+        About 0.2 ms per call, mostly numpy overhead: for many states use :meth:`check_states` (tens of
+        microseconds per state, less in large batches).
+        """
         q = np.asarray(q, dtype=float)
         if q.ndim != 1:
             raise ValueError(f"expected one joint state of {self.model.dof} values, got shape {q.shape}")

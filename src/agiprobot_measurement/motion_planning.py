@@ -13,6 +13,7 @@ no collision with the paddings of ``config/collision.yaml``).
 from __future__ import annotations
 
 import itertools
+import logging
 import math
 import time
 from dataclasses import dataclass, field
@@ -23,6 +24,8 @@ from ompl import geometric as og
 from ompl import util as ou
 
 from agiprobot_measurement.collision import CollisionChecker
+
+LOG = logging.getLogger(__name__)
 
 DEFAULT_PLANNER = "RRTConnect"
 _COARSE_STRIDE = 8  # the motion validator's first pass checks every 8th state
@@ -42,6 +45,18 @@ PLANNERS: dict[str, type] = _planner_classes()
 
 def available_planners() -> list[str]:
     return sorted(PLANNERS)
+
+
+_ompl_seed: list[int] = []  # the seed given to OMPL in this process, if any
+
+
+def _seed_ompl(seed: int) -> None:
+    """Seed OMPL's global RNG once: later calls cannot take effect (OMPL logs an error), so they are skipped."""
+    if not _ompl_seed:
+        ou.RNG.setSeed(seed)
+        _ompl_seed.append(seed)
+    elif _ompl_seed[0] != seed:
+        LOG.info("OMPL is already seeded with %d in this process; seed %d is ignored", _ompl_seed[0], seed)
 
 
 def _planner_class(name: str) -> type:
@@ -144,8 +159,8 @@ class MotionPlanner:
     by at most ``max_attempts`` fresh planner runs. ``simplify``: shorten the solution with PathSimplifier's
     shortcuts (``"full"``: also its B-spline smoothing) for at most ``simplify_time_s``.
     ``try_direct``: take the straight line when it is free (no OMPL call). Optimizing planners (RRTstar,
-    BITstar, ...) use the whole time of an attempt. ``seed``: OMPL's global seed, which takes effect only
-    before OMPL first draws random numbers in this process.
+    BITstar, ...) use the whole time of an attempt. ``seed``: OMPL's global seed; it takes effect only
+    for the first planner of a process (OMPL seeds once), later seeds are ignored.
     """
 
     def __init__(
@@ -183,7 +198,7 @@ class MotionPlanner:
         self.try_direct = try_direct
         self.range_rad = range_rad
         if seed is not None:
-            ou.RNG.setSeed(int(seed))
+            _seed_ompl(int(seed))
         ou.setLogLevel(log_level)
         self.space = ob.RealVectorStateSpace(self.dof)
         bounds = ob.RealVectorBounds(self.dof)
