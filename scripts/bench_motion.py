@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Benchmark the motion core: closed-form IK, KDL IK, Cartesian lines (more benchmarks can be registered).
+"""Benchmark the motion core: closed-form IK, KDL IK, collision checks, RRTConnect, Cartesian lines.
 
 Usage (after ``source scripts/env.sh``)::
 
@@ -101,12 +101,21 @@ def bench_cartesian(ctx: Context, args) -> list[Row]:
     start_pose = np.eye(4)
     start_pose[:3, :3] = np.diag([1.0, -1.0, -1.0])  # boresight (z) pointing down
     start_pose[:3, 3] = LINE_START_XYZ_M
-    start_q = ctx.ik.solve(start_pose, LINE_SEED_Q)
-    if start_q is None:
-        raise SystemExit("bench_motion: the Cartesian line's start pose is unreachable in this station")
     end_pose = start_pose.copy()
     end_pose[:3, 3] += LINE_DIRECTION * args.line_mm * 1e-3
     checker, note = _load_collision_checker(ctx) if not args.no_collision else (None, "collision off")
+    # the start: the IK branch nearest the seed whose whole line is executable (collision-free where checked)
+    solutions, valid = ctx.ik.solve_all(start_pose[None], LINE_SEED_Q[None])
+    branches = solutions[0][valid[0]]
+    branches = branches[np.argsort(np.abs(branches - LINE_SEED_Q).max(axis=1))]
+    start_q = None
+    for q in branches:
+        trial = compute_cartesian_path(ctx.ik, q, end_pose, step_mm=args.step_mm, validity_checker=checker)
+        if trial.fraction >= 1.0:
+            start_q = q
+            break
+    if start_q is None:
+        raise SystemExit("bench_motion: no IK branch executes the benchmark's Cartesian line in this station")
     rows = []
     for label, validity in (("IK only", None), (note, checker)):
         if label != "IK only" and validity is None:
@@ -130,10 +139,49 @@ def bench_cartesian(ctx: Context, args) -> list[Row]:
     return rows
 
 
-# Register further benchmarks (collision checks/s, RRTConnect plans) here: name -> function(ctx, args).
+def bench_collision_rate(ctx: Context, args) -> list[Row]:
+    from bench_collision_planning import bench_collision
+
+    from agiprobot_measurement.collision import CollisionChecker
+
+    checker = CollisionChecker.from_station(ctx.station, model=ctx.model)
+    result = bench_collision(checker, args.collision_states, args.seed)
+    note = f"scene + cube part, {100 * result['valid_fraction_random']:.0f} % of random states valid"
+    return [
+        Row(
+            "collision check",
+            f"states/s (batch of {args.collision_states} random)",
+            result["batch_random_states_per_s"],
+            "1/s",
+            note,
+        ),
+        Row("collision check", "states/s (batch of valid states)", result["batch_valid_states_per_s"], "1/s"),
+        Row("collision check", "single is_state_valid", result["single_valid_state_us"], "us"),
+    ]
+
+
+def bench_rrtconnect(ctx: Context, args) -> list[Row]:
+    from bench_collision_planning import bench_planning
+
+    from agiprobot_measurement.collision import CollisionChecker
+    from agiprobot_measurement.motion_planning import MotionPlanner
+
+    checker = CollisionChecker.from_station(ctx.station, model=ctx.model)
+    planner = MotionPlanner(checker, planner="RRTConnect", try_direct=False, seed=args.seed + 1)
+    result = bench_planning(planner, args.pairs, args.seed + 1)
+    note = f"{args.pairs} random valid pairs, always OMPL (no straight-line shortcut)"
+    return [
+        Row("RRTConnect", "median planning time", result["median_s"] * 1e3, "ms", note),
+        Row("RRTConnect", "90th percentile", result["p90_s"] * 1e3, "ms"),
+        Row("RRTConnect", "success rate", 100.0 * result["success_rate"], "%"),
+    ]
+
+
 BENCHMARKS = {
     "ik_closed_form": bench_ik_closed_form,
     "ik_kdl": bench_ik_kdl,
+    "collision": bench_collision_rate,
+    "rrtconnect": bench_rrtconnect,
     "cartesian": bench_cartesian,
 }
 
@@ -163,6 +211,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--line-mm", type=float, default=200.0, help="Cartesian line length, mm (default 200)")
     parser.add_argument("--step-mm", type=float, default=2.0, help="Cartesian step, mm (default 2)")
     parser.add_argument("--no-collision", action="store_true", help="Cartesian benchmark without collision check")
+    parser.add_argument("--collision-states", type=int, default=20000, help="states per collision batch")
+    parser.add_argument("--pairs", type=int, default=100, help="random valid state pairs for RRTConnect")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     args = parser.parse_args(argv)
 
