@@ -82,7 +82,7 @@ def test_documented_api_names_and_defaults():
 
 
 def test_cube_plan_covers_every_coverable_point(cube_plan):
-    manager, points, views, chosen, ordered = cube_plan
+    manager, points, _views, chosen, ordered = cube_plan
     report = manager.coverage_report()
     assert report.n_samples == len(points) > 0
     assert report.n_views == len(ordered) == len(chosen)
@@ -211,7 +211,7 @@ def test_bad_input(tmp_path, shared_dir):
     manager = TrajectoryManager()
     with pytest.raises(PlanningError, match="no part loaded"):
         manager.generate_samples_and_viewpoints(0.01, 0.1, 4, "none")
-    with pytest.raises(PartLoadError, match="nope.stl"):
+    with pytest.raises(PartLoadError, match=r"nope\.stl"):
         manager.load_target_mesh(str(tmp_path / "nope.stl"))
     garbage = tmp_path / "garbage.stl"
     garbage.write_bytes(b"\x00\x01 not a mesh at all")
