@@ -242,7 +242,7 @@ def target_lines(results: list[dict]) -> list[str]:
                 f"<= {TARGET_GREEDY_S:.0f} s (all {r['rounds']} rounds; last solve {r['last_solve_s']:.2f} s)"
             )
         lines.append(
-            f"{check(r['peak_mb'] <= TARGET_PEAK_MB)} {name}: peak memory {r['peak_mb']:,.0f} MB <= {TARGET_PEAK_MB:,.0f} MB"
+            f"{check(r['peak_mb'] <= TARGET_PEAK_MB)} {name}: peak memory {r['peak_mb']:,.1f} MB <= {TARGET_PEAK_MB:,.0f} MB"
         )
     return lines
 

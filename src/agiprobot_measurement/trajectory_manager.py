@@ -621,15 +621,13 @@ class TrajectoryManager:
         views = list(provided_viewpoints)
         if not views:
             raise PlanningError("solve_scp needs at least one viewpoint")
-        n_points = len(self.sampled_surface_points) or 1 + max(
-            max(v.get_measurable_surface_point_indices(), default=0) for v in views
-        )
+        n_points = len(self.sampled_surface_points) or 1 + max(int(v.measurable_indices.max(initial=0)) for v in views)
         t0 = time.perf_counter()
         verified_count = 0
         result = None
         for round_index in range(max_rounds):
             alive = [
-                v for v in views if getattr(v, "mechanics_valid", True) and v.get_measurable_surface_point_indices()
+                v for v in views if getattr(v, "mechanics_valid", True) and v.measurable_indices.size
             ]
             if not alive:
                 raise PlanningError("no viewpoint is executable: every candidate failed the mechanical checks")
@@ -663,12 +661,11 @@ class TrajectoryManager:
 
     @staticmethod
     def _coverage_matrix(views: list[ViewPoint], n_points: int) -> scipy.sparse.csc_matrix:
-        indices = [np.asarray(v.get_measurable_surface_point_indices(), dtype=np.int64) for v in views]
-        values = [np.asarray(v.get_measurable_surface_point_uncertainties(), dtype=float) for v in views]
+        indices = [v.measurable_indices for v in views]
         indptr = np.zeros(len(views) + 1, dtype=np.int64)
         np.cumsum([len(i) for i in indices], out=indptr[1:])
-        data = np.concatenate(values) if values else np.zeros(0)
         rows = np.concatenate(indices) if indices else np.zeros(0, dtype=np.int64)
+        data = np.concatenate([v.measurable_uncertainties for v in views]) if views else np.zeros(0)
         return scipy.sparse.csc_matrix((np.maximum(data, 1e-12), rows, indptr), shape=(n_points, len(views)))
 
     # ----------------------------------------------------------------------------------- connection
@@ -898,11 +895,10 @@ class TrajectoryManager:
         coverable = np.zeros(n, dtype=bool)
         for view in self.last_viewpoints:
             if getattr(view, "mechanics_valid", True):
-                coverable[view.get_measurable_surface_point_indices()] = True
+                coverable[view.measurable_indices] = True
         best_u = np.full(n, np.inf)
         for view in chosen:
-            idx = np.asarray(view.get_measurable_surface_point_indices(), dtype=np.int64)
-            np.minimum.at(best_u, idx, np.asarray(view.get_measurable_surface_point_uncertainties()))
+            np.minimum.at(best_u, view.measurable_indices, view.measurable_uncertainties)
         covered = np.isfinite(best_u)
         coverable |= covered
         measure = sum(v.get_trajectory_for_measurement().duration for v in chosen if v.get_trajectory_for_measurement())
@@ -931,8 +927,7 @@ class TrajectoryManager:
         chosen = list(views) if views is not None else (self.last_ordered or [])
         best_u = np.full(len(self.samples), np.inf)
         for view in chosen:
-            idx = np.asarray(view.get_measurable_surface_point_indices(), dtype=np.int64)
-            np.minimum.at(best_u, idx, np.asarray(view.get_measurable_surface_point_uncertainties()))
+            np.minimum.at(best_u, view.measurable_indices, view.measurable_uncertainties)
         return best_u
 
     def scan_lines_mm(self, views: Iterable[ViewPoint] | None = None) -> list[tuple[np.ndarray, np.ndarray]]:

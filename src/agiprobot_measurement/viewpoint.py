@@ -311,6 +311,20 @@ class ViewPoint:
         self._uncertainties = values
         self._trajectory_distances = distances
 
+    @property
+    def measurable_indices(self) -> np.ndarray:
+        """The measurable surface-point indices as a read-only int64 array (no list copy: for batch work)."""
+        view = self._measurable_indices.view()
+        view.flags.writeable = False
+        return view
+
+    @property
+    def measurable_uncertainties(self) -> np.ndarray:
+        """The uncertainties (mm) of :attr:`measurable_indices`, read-only."""
+        view = self._uncertainties.view()
+        view.flags.writeable = False
+        return view
+
     def get_measurable_surface_point_indices(self) -> list[int]:
         return self._measurable_indices.tolist()
 
