@@ -2,21 +2,23 @@
 
 Input is a measurability matrix ``M`` (points x candidate views, any scipy.sparse format or a dense array):
 an entry is *measurable* when it is non-zero and not NaN. Boolean matrices only say which point a view
-measures; numeric matrices also give the point's uncertainty (in the sensor model's units). Points that no
-view measures are *uncoverable*: they are reported (:attr:`SetCoverResult.uncoverable`), not an infeasibility.
+measures; numeric matrices also give the point's uncertainty (in the sensor model's units; negative or
+infinite values are an error, and an uncertainty of exactly 0 needs a boolean matrix plus ``uncertainties``).
+Points that no view measures are *uncoverable*: they are reported (:attr:`SetCoverResult.uncoverable`), not an
+infeasibility.
 
 Solvers (``solver_type``, the names the original documents):
 
 ``greedy``
     Each step takes the view that measures the most not-yet-covered points; ties go to the view whose worst
     (maximum) uncertainty is lowest (Gronle et al. 2016, ch. 4.4), then to the lower index. A lazy priority
-    queue keeps the work per step small: gains only ever shrink, so a popped entry whose recomputed gain is
-    unchanged is the true best.
+    queue (heapq over gain buckets) re-evaluates only views whose stale gain reaches the top; nothing is
+    re-sorted per step. The selection is then made irredundant.
 ``IP_basic``
     Minimum number of views (Scott 2009): ``min sum v_j  s.t.  M v >= 1, v binary``.
 ``IP_uncertainty``
-    Cost of a view = its worst uncertainty divided by the worst over all views (so costs lie in (0, 1] and the
-    solver's tolerances mean the same on every part).
+    Cost of a view = its worst uncertainty divided by the worst over all views (so costs lie in [0, 1] and the
+    solver's tolerances mean the same whatever the units); the reported objective is in the original units.
 ``IP_time``
     Cost of a view = its trajectory duration (``durations_s``), normalised the same way.
 

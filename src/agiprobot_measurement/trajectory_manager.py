@@ -294,6 +294,9 @@ class TrajectoryManager:
             add_wbk_mirrors=bool(add_wbk_mirrors),
             remove_downside=bool(remove_downside),
             remove_threshold_angle_deg=float(remove_threshold_angle_deg),
+            # file coordinates -> world mm (scale included), so a stored plan names its part's placement
+            part_transform_mm=(part.transform @ np.diag([part.scale_to_mm] * 3 + [1.0])).reshape(-1).tolist(),
+            seed=self.seed,
         )
         return True
 

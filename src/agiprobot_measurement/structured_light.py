@@ -1,0 +1,690 @@
+"""A simulated structured-light 3D scanner (PhoXi 3D Scanner S / M / L): what one frame of the scene looks like.
+
+Everything here is ROS-free; the node ``nodes/phoxi_camera`` only feeds in the scene and the robot's link poses
+and turns a :class:`Frame` into messages.
+
+Geometry
+    The camera frame is the scanner's sensor frame (``PhoXi3Dscanner_sensor``): an optical frame, x right,
+    y down, z forward, metres. The projector sits ``baseline`` to the right of the camera (+x) and is turned
+    about the camera's y axis so that both optical axes cross at the sweet spot. Pixel (u, v) looks along
+    ``((u - cx) / fx, (v - cy) / fy, 1)`` (pinhole, square pixels, no distortion); ``fx`` makes the image as wide
+    as the maker's scanning area at the sweet spot. Low resolution is 2x2 binning of high resolution.
+
+Validity of a pixel
+    The camera ray hits the scene (one triangle mesh: scene objects, the part and the robot's links), the depth
+    lies within the scanning range, the point lies inside the projector's field of view, faces the projector and
+    no surface occludes the segment from the projector to it (the shadows the baseline produces), and its
+    estimated inaccuracy does not exceed the ``confidence`` setting (mm; <= 0 keeps every point).
+
+Noise model (seeded by ``ScanSettings.seed`` and the frame index)
+    Depth noise is Gaussian along the camera ray (the point stays on its pixel's ray) with standard deviation::
+
+        sigma_z = temporal_noise * (z / sweet_spot)^2 / sqrt(max(cos(theta_p), min_cos_incidence) * gain)
+        gain    = (albedo / reference_albedo) * scan_multiplier * shutter_multiplier * exposure / reference_exposure
+
+    z is the depth along the camera axis, theta_p the angle between the surface normal and the direction to the
+    projector. The square law is triangulation's (a fixed disparity error costs z^2 / (f * baseline) in depth);
+    the square root is shot noise (less light on a tilted or dark surface, more with longer or repeated exposure).
+    The confidence map is this sigma_z in mm, so it follows the noise point by point.
+
+Texture
+    Lambertian shading of the projector light: ``full_scale * exposure_gain * albedo * (cos(theta_p) *
+    (sweet_spot / r_p)^2 [lit] + ambient * cos(theta_c))``, clipped at the camera's saturation; pixels whose
+    ray hits nothing are 0. ``rgb_texture`` is the driver's 8-bit view of it (min-max normalised, histogram
+    equalised, grey to RGB). Normals are the hit triangles' normals, turned towards the camera.
+
+Units: metres for poses and points, mm for depth, range, noise and the confidence map (as the driver uses them).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from agiprobot_measurement.station import (
+    CONFIG_DIR,
+    ConfigError,
+    Scene,
+    _positive,
+    _require,
+    _vector,
+    read_yaml,
+)
+
+PHOXI_MODELS_FILE = CONFIG_DIR / "phoxi_models.yaml"
+
+RESOLUTION_LOW = 0
+RESOLUTION_HIGH = 1
+#: PhoXi ``single_pattern_exposure`` index -> exposure of one pattern (ms), as PhoXi Control offers them
+SINGLE_PATTERN_EXPOSURES_MS = (
+    10.24,
+    14.336,
+    20.48,
+    24.576,
+    30.72,
+    34.816,
+    40.96,
+    49.152,
+    75.776,
+    79.872,
+    90.112,
+    100.352,
+)
+#: shutter multiplier PhoXi Control fixes while ambient light suppression is on
+AMBIENT_SUPPRESSION_SHUTTER_MULTIPLIER = 2
+DEFAULT_ALBEDO = 0.6
+ROBOT_ALBEDO = 0.55
+
+
+# ----------------------------------------------------------------------------------------------- models
+@dataclass(frozen=True)
+class NoiseModel:
+    """Constants of the noise and texture model (see the module docstring)."""
+
+    min_cos_incidence: float = 0.05
+    reference_albedo: float = 0.8
+    reference_exposure_ms: float = 20.48
+    texture_full_scale: float = 1000.0
+    texture_saturation: float = 4095.0
+    ambient_fraction: float = 0.05
+    camera_only_ambient_fraction: float = 0.6
+    shadow_epsilon_m: float = 0.001
+
+
+@dataclass(frozen=True)
+class CameraIntrinsics:
+    """Pinhole intrinsics in pixels of one resolution (no distortion)."""
+
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+
+    def matrix(self) -> np.ndarray:
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    def pixel_rays(self) -> np.ndarray:
+        """(H * W, 3) float32 ray of every pixel, row-major, scaled to z = 1 (so ray * depth = point)."""
+        return _pixel_rays(self.width, self.height, self.fx, self.fy, self.cx, self.cy)
+
+    def project(self, points_m: np.ndarray) -> np.ndarray:
+        """Pixel coordinates (N, 2) (u, v) of camera-frame points (N, 3)."""
+        points_m = np.asarray(points_m, dtype=float)
+        return np.stack(
+            [
+                self.fx * points_m[:, 0] / points_m[:, 2] + self.cx,
+                self.fy * points_m[:, 1] / points_m[:, 2] + self.cy,
+            ],
+            axis=1,
+        )
+
+
+@lru_cache(maxsize=4)
+def _pixel_rays(width: int, height: int, fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
+    u = (np.arange(width, dtype=np.float64) - cx) / fx
+    v = (np.arange(height, dtype=np.float64) - cy) / fy
+    rays = np.empty((height, width, 3), dtype=np.float32)
+    rays[:, :, 0] = u[None, :]
+    rays[:, :, 1] = v[:, None]
+    rays[:, :, 2] = 1.0
+    rays = rays.reshape(-1, 3)
+    rays.setflags(write=False)
+    return rays
+
+
+@dataclass(frozen=True)
+class ScannerModel:
+    """One PhoXi model: the maker's figures (mm, deg) and the simulator's noise constants."""
+
+    name: str
+    scanning_range_mm: tuple[float, float]
+    sweet_spot_mm: float
+    scan_area_mm: tuple[float, float]
+    baseline_mm: float
+    projector_fov_deg: tuple[float, float]
+    temporal_noise_mm: float
+    resolutions: dict = field(default_factory=lambda: {RESOLUTION_HIGH: (2064, 1544), RESOLUTION_LOW: (1032, 772)})
+    noise: NoiseModel = field(default_factory=NoiseModel)
+
+    def intrinsics(self, resolution: int = RESOLUTION_HIGH) -> CameraIntrinsics:
+        if resolution not in self.resolutions:
+            raise ValueError(f"unknown resolution {resolution!r}: 1 = High, 0 = Low")
+        width, height = self.resolutions[resolution]
+        # the image spans the scanning area's width at the sweet spot; pixels are square
+        f = width * self.sweet_spot_mm / self.scan_area_mm[0]
+        return CameraIntrinsics(width, height, f, f, (width - 1) / 2.0, (height - 1) / 2.0)
+
+    def projector_pose(self) -> np.ndarray:
+        """Camera -> projector frame (4x4, metres): ``baseline`` along +x, z axis through the sweet spot."""
+        b = self.baseline_mm / 1000.0
+        d = self.sweet_spot_mm / 1000.0
+        z = np.array([-b, 0.0, d]) / math.hypot(b, d)
+        y = np.array([0.0, 1.0, 0.0])
+        pose = np.eye(4)
+        pose[:3, :3] = np.column_stack([np.cross(y, z), y, z])
+        pose[:3, 3] = [b, 0.0, 0.0]
+        return pose
+
+    def supported_resolutions(self) -> list[tuple[int, int]]:
+        return [self.resolutions[k] for k in sorted(self.resolutions, reverse=True)]
+
+
+def load_scanner_models(path: str | Path | None = None) -> dict[str, ScannerModel]:
+    """Read ``config/phoxi_models.yaml`` (or ``path``); errors name the file and the bad key."""
+    path = Path(path) if path else PHOXI_MODELS_FILE
+    data = read_yaml(path)
+    where = str(path)
+    resolutions = _require(data, "resolutions", where)
+    res = {}
+    for key, code in (("high", RESOLUTION_HIGH), ("low", RESOLUTION_LOW)):
+        size = _vector(_require(resolutions, key, f"{where}: resolutions"), 2, f"{where}: resolutions.{key}")
+        if np.any(size < 1) or np.any(size != np.round(size)):
+            raise ConfigError(f"{where}: resolutions.{key} must be two positive integers")
+        res[code] = (int(size[0]), int(size[1]))
+    noise_entry = data.get("noise_model") or {}
+    if not isinstance(noise_entry, dict):
+        raise ConfigError(f"{where}: noise_model must be a mapping")
+    unknown = set(noise_entry) - set(NoiseModel.__dataclass_fields__)
+    if unknown:
+        raise ConfigError(f"{where}: noise_model: unknown key(s) {sorted(unknown)}")
+    noise = NoiseModel(**{k: _positive(v, f"{where}: noise_model.{k}") for k, v in noise_entry.items()})
+    models_entry = _require(data, "models", where)
+    if not isinstance(models_entry, dict) or not models_entry:
+        raise ConfigError(f"{where}: models must be a non-empty mapping of name -> figures")
+    models = {}
+    for name, entry in models_entry.items():
+        here = f"{where}: models.{name}"
+        rng = _vector(_require(entry, "scanning_range_mm", here), 2, f"{here}.scanning_range_mm")
+        sweet = _positive(_require(entry, "sweet_spot_mm", here), f"{here}.sweet_spot_mm")
+        if not 0 < rng[0] < sweet < rng[1]:
+            raise ConfigError(f"{here}: need 0 < scanning_range_mm[0] < sweet_spot_mm < scanning_range_mm[1]")
+        area = _vector(_require(entry, "scan_area_mm", here), 2, f"{here}.scan_area_mm")
+        fov = _vector(_require(entry, "projector_fov_deg", here), 2, f"{here}.projector_fov_deg")
+        if np.any(area <= 0) or np.any(fov <= 0) or np.any(fov >= 180):
+            raise ConfigError(f"{here}: scan_area_mm must be positive and projector_fov_deg within (0, 180)")
+        models[str(name)] = ScannerModel(
+            name=str(name),
+            scanning_range_mm=(float(rng[0]), float(rng[1])),
+            sweet_spot_mm=sweet,
+            scan_area_mm=(float(area[0]), float(area[1])),
+            baseline_mm=_positive(_require(entry, "baseline_mm", here), f"{here}.baseline_mm"),
+            projector_fov_deg=(float(fov[0]), float(fov[1])),
+            temporal_noise_mm=_positive(_require(entry, "temporal_noise_mm", here), f"{here}.temporal_noise_mm"),
+            resolutions=res,
+            noise=noise,
+        )
+    return models
+
+
+def load_scanner_model(name: str, path: str | Path | None = None) -> ScannerModel:
+    models = load_scanner_models(path)
+    if name not in models:
+        raise ConfigError(f"unknown PhoXi model {name!r}; models in {path or PHOXI_MODELS_FILE}: {', '.join(models)}")
+    return models[name]
+
+
+# -------------------------------------------------------------------------------------------- geometry
+@dataclass(frozen=True)
+class SceneGeometry:
+    """Triangles of the scene in one frame (metres) with an outward unit normal, albedo and owner per face."""
+
+    triangles: np.ndarray  # (F, 3, 3)
+    normals: np.ndarray  # (F, 3)
+    albedo: np.ndarray  # (F,)
+    owner: np.ndarray  # (F,) index into names
+    names: tuple[str, ...]
+
+    @classmethod
+    def empty(cls) -> SceneGeometry:
+        return cls(np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros(0, dtype=np.int32), ())
+
+    @classmethod
+    def from_trimesh(cls, mesh, name: str, albedo: float) -> SceneGeometry:
+        triangles = np.asarray(mesh.triangles, dtype=float)
+        normals = np.asarray(mesh.face_normals, dtype=float)
+        n = len(triangles)
+        return cls(triangles, normals, np.full(n, float(albedo)), np.zeros(n, dtype=np.int32), (name,))
+
+    def __len__(self) -> int:
+        return len(self.triangles)
+
+    def transformed(self, pose: np.ndarray) -> SceneGeometry:
+        rotation, translation = pose[:3, :3], pose[:3, 3]
+        return SceneGeometry(
+            self.triangles @ rotation.T + translation, self.normals @ rotation.T, self.albedo, self.owner, self.names
+        )
+
+    @staticmethod
+    def concatenate(parts: list[SceneGeometry]) -> SceneGeometry:
+        parts = [p for p in parts if len(p)]
+        if not parts:
+            return SceneGeometry.empty()
+        names, owners, offset = [], [], 0
+        for part in parts:
+            owners.append(part.owner + offset)
+            names.extend(part.names)
+            offset += len(part.names)
+        return SceneGeometry(
+            np.concatenate([p.triangles for p in parts]),
+            np.concatenate([p.normals for p in parts]),
+            np.concatenate([p.albedo for p in parts]),
+            np.concatenate(owners).astype(np.int32),
+            tuple(names),
+        )
+
+    def owner_names(self, faces: np.ndarray) -> np.ndarray:
+        """Owner name per face index (-1 -> '')."""
+        lookup = np.array([*self.names, ""], dtype=object)
+        faces = np.asarray(faces)
+        return lookup[np.where(faces >= 0, self.owner[np.clip(faces, 0, None)], len(self.names))]
+
+
+def primitive_mesh(kind: str, size=None, radius: float | None = None, length: float | None = None, sections: int = 48):
+    """A box (size), cylinder (radius, length along z) or sphere centred at the origin, as URDF and the scene define them."""
+    import trimesh
+
+    if kind == "box":
+        return trimesh.creation.box(extents=np.asarray(size, dtype=float))
+    if kind == "cylinder":
+        return trimesh.creation.cylinder(radius=float(radius), height=float(length), sections=sections)
+    if kind == "sphere":
+        return trimesh.creation.icosphere(subdivisions=3, radius=float(radius))
+    raise ConfigError(f"unsupported primitive {kind!r} (box, cylinder, sphere)")
+
+
+def albedo_of(color_rgba) -> float:
+    """Diffuse albedo from a display colour: its luminance (Rec. 709), kept within [0.05, 1]."""
+    r, g, b = (float(c) for c in color_rgba[:3])
+    return float(np.clip(0.2126 * r + 0.7152 * g + 0.0722 * b, 0.05, 1.0))
+
+
+def _load_mesh(path: Path, scale: float):
+    import trimesh
+
+    mesh = trimesh.load(str(path), force="mesh")
+    mesh.apply_scale(scale)
+    return mesh
+
+
+def scene_geometry(scene: Scene, exclude_groups: tuple[str, ...] = ()) -> SceneGeometry:
+    """The scene file's objects and the part as triangles in the scene frame (albedo from their colours)."""
+    parts = []
+    for obj in scene.objects:
+        if obj.group is not None and obj.group in exclude_groups:
+            continue
+        if obj.type == "mesh":
+            mesh = _load_mesh(obj.mesh, obj.mesh_scale)
+        else:
+            mesh = primitive_mesh(obj.type, obj.size_m, obj.radius_m, obj.length_m)
+        parts.append(SceneGeometry.from_trimesh(mesh, obj.name, albedo_of(obj.color_rgba)).transformed(obj.pose))
+    if scene.part is not None:
+        mesh = _load_mesh(scene.part.mesh, scene.part.scale_to_m)
+        parts.append(
+            SceneGeometry.from_trimesh(mesh, scene.part.name, albedo_of(scene.part.color_rgba)).transformed(
+                scene.part.pose
+            )
+        )
+    return SceneGeometry.concatenate(parts)
+
+
+class RobotGeometry:
+    """The robot's link shapes from its URDF (visual elements by default) in link frames, posed per frame.
+
+    ``mesh_resolver`` maps a URDF mesh filename (``package://...``, ``file://...``) to a local path; meshes it
+    cannot resolve are left out and listed in :attr:`skipped`.
+    """
+
+    def __init__(self, urdf, elements: str = "visual", albedo: float = ROBOT_ALBEDO, mesh_resolver=None):
+        table = urdf.visual if elements == "visual" else urdf.collision
+        self.links: dict[str, SceneGeometry] = {}
+        self.skipped: list[str] = []
+        for link, geometries in table.items():
+            parts = []
+            for geometry in geometries:
+                if geometry.type == "mesh":
+                    path = _resolve_mesh(geometry.mesh, mesh_resolver)
+                    if path is None:
+                        self.skipped.append(f"{link}: {geometry.mesh}")
+                        continue
+                    mesh = _load_mesh(path, 1.0)
+                    mesh.apply_scale(np.asarray(geometry.scale, dtype=float))
+                else:
+                    mesh = primitive_mesh(geometry.type, geometry.size, geometry.radius, geometry.length)
+                parts.append(SceneGeometry.from_trimesh(mesh, link, albedo).transformed(geometry.origin))
+            if parts:
+                merged = SceneGeometry.concatenate(parts)
+                self.links[link] = SceneGeometry(
+                    merged.triangles, merged.normals, merged.albedo, np.zeros(len(merged), np.int32), (link,)
+                )
+
+    @property
+    def link_names(self) -> list[str]:
+        return list(self.links)
+
+    def posed(self, link_poses: dict) -> SceneGeometry:
+        """Triangles of the links whose pose (4x4, scene frame) is given; other links are left out."""
+        return SceneGeometry.concatenate(
+            [
+                geometry.transformed(np.asarray(link_poses[link]))
+                for link, geometry in self.links.items()
+                if link in link_poses
+            ]
+        )
+
+
+def _resolve_mesh(filename: str | None, resolver) -> Path | None:
+    if not filename:
+        return None
+    if resolver is not None:
+        resolved = resolver(filename)
+        return Path(resolved) if resolved else None
+    if filename.startswith("file://"):
+        filename = filename[len("file://") :]
+    path = Path(filename)
+    return path if path.is_absolute() and path.is_file() else None
+
+
+# ------------------------------------------------------------------------------------------ ray casting
+class RayCaster:
+    """Embree (embreex, the backend of ``trimesh.ray.ray_pyembree``) over one triangle soup; all rays at once.
+
+    embreex is called directly because it returns the hit distance with the triangle, which trimesh's wrapper
+    would recompute per ray. Directions need not be unit: distances are in units of the direction's length.
+    """
+
+    def __init__(self, geometry: SceneGeometry):
+        from embreex import mesh_construction, rtcore_scene
+
+        self.size = len(geometry)
+        self.scene = rtcore_scene.EmbreeScene()
+        if self.size:
+            mesh_construction.TriangleMesh(self.scene, np.ascontiguousarray(geometry.triangles, dtype=np.float32))
+
+    def first_hit(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(distance (N,) float32, face index (N,) int32, -1 where the ray hits nothing)."""
+        n = len(directions)
+        if self.size == 0 or n == 0:
+            return np.full(n, np.inf, dtype=np.float32), np.full(n, -1, dtype=np.int32)
+        result = self.scene.run(
+            np.ascontiguousarray(origins, dtype=np.float32),
+            np.ascontiguousarray(directions, dtype=np.float32),
+            output=1,
+        )
+        return result["tfar"], result["primID"]
+
+    def occluded(self, origins: np.ndarray, directions: np.ndarray, t_max: np.ndarray) -> np.ndarray:
+        """Whether something lies on each ray between 0 and ``t_max`` (N,) bool."""
+        n = len(directions)
+        if self.size == 0 or n == 0:
+            return np.zeros(n, dtype=bool)
+        result = self.scene.run(
+            np.ascontiguousarray(origins, dtype=np.float32),
+            np.ascontiguousarray(directions, dtype=np.float32),
+            dists=np.ascontiguousarray(t_max, dtype=np.float32),
+            query="OCCLUDED",
+        )
+        return result == 0  # embreex: 0 = occluded, -1 = free
+
+
+# --------------------------------------------------------------------------------------------- capture
+@dataclass(frozen=True)
+class ScanSettings:
+    """The capturing settings the simulation uses (names and ranges of the driver's parameters)."""
+
+    resolution: int = RESOLUTION_HIGH
+    scan_multiplier: int = 1
+    shutter_multiplier: int = 1
+    single_pattern_exposure: int = 2
+    confidence: float = 3.0  # max estimated inaccuracy (mm) of a kept point; <= 0 keeps all
+    ambient_light_suppression: bool = False
+    camera_only_mode: bool = False
+    noise: bool = True
+    seed: int = 0
+
+    def exposure_ms(self) -> float:
+        if not 0 <= self.single_pattern_exposure < len(SINGLE_PATTERN_EXPOSURES_MS):
+            raise ValueError(f"single_pattern_exposure must be an index 0..{len(SINGLE_PATTERN_EXPOSURES_MS) - 1}")
+        return SINGLE_PATTERN_EXPOSURES_MS[self.single_pattern_exposure]
+
+    def effective_shutter_multiplier(self) -> int:
+        return AMBIENT_SUPPRESSION_SHUTTER_MULTIPLIER if self.ambient_light_suppression else self.shutter_multiplier
+
+
+@dataclass
+class Frame:
+    """One captured frame, organised H x W, in the camera frame. Invalid pixels have depth 0 (and zero normal).
+
+    ``depth_mm`` is the depth along the camera's z axis (mm), ``normals`` unit normals (camera frame),
+    ``confidence`` the estimated inaccuracy sigma_z (mm), ``texture`` the intensity (camera counts).
+    """
+
+    index: int
+    intrinsics: CameraIntrinsics
+    depth_mm: np.ndarray  # (H, W) float32
+    normals: np.ndarray  # (H, W, 3) float32
+    confidence: np.ndarray  # (H, W) float32
+    texture: np.ndarray  # (H, W) float32
+    camera_pose: np.ndarray  # world <- camera (4x4) the frame was taken from
+    model: str = ""
+    stats: dict = field(default_factory=dict)
+
+    @property
+    def width(self) -> int:
+        return self.intrinsics.width
+
+    @property
+    def height(self) -> int:
+        return self.intrinsics.height
+
+    @property
+    def valid(self) -> np.ndarray:
+        return self.depth_mm > 0.0
+
+    def points_m(self) -> np.ndarray:
+        """(H, W, 3) float32 camera-frame points in metres, zeros where invalid (exactly depth_mm / 1000 in z)."""
+        rays = self.intrinsics.pixel_rays().reshape(self.height, self.width, 3)
+        return rays * (self.depth_mm / np.float32(1000.0))[:, :, None]
+
+    def rgb_texture(self) -> np.ndarray:
+        return rgb_texture(self.texture)
+
+
+def depth_sigma_mm(model: ScannerModel, settings: ScanSettings, depth_mm, cos_projector, albedo) -> np.ndarray:
+    """The noise model's sigma_z (mm) for depths (mm), cosines of the projector incidence and albedos."""
+    noise = model.noise
+    depth_mm = np.asarray(depth_mm)
+    dtype = np.result_type(depth_mm.dtype, np.float32)
+    exposure = settings.scan_multiplier * settings.effective_shutter_multiplier() * settings.exposure_ms()
+    gain = np.asarray(albedo, dtype=dtype) * dtype.type(
+        exposure / (noise.reference_albedo * noise.reference_exposure_ms)
+    )
+    cos_p = np.maximum(np.asarray(cos_projector, dtype=dtype), dtype.type(noise.min_cos_incidence))
+    ratio = depth_mm.astype(dtype, copy=False) / dtype.type(model.sweet_spot_mm)
+    return dtype.type(model.temporal_noise_mm) * ratio * ratio / np.sqrt(cos_p * gain)
+
+
+class StructuredLightScanner:
+    """Renders frames of one :class:`ScannerModel`; :meth:`capture` takes the scene as one triangle soup."""
+
+    def __init__(self, model: ScannerModel):
+        self.model = model
+        self.projector = model.projector_pose()
+        half_h, half_v = (math.radians(a) / 2.0 for a in model.projector_fov_deg)
+        self._tan_projector = (math.tan(half_h), math.tan(half_v))
+
+    def capture(
+        self,
+        geometry: SceneGeometry,
+        camera_pose: np.ndarray,
+        settings: ScanSettings | None = None,
+        frame_index: int = 0,
+        caster: RayCaster | None = None,
+    ) -> Frame:
+        """One frame of ``geometry`` (scene frame) seen from ``camera_pose`` (scene <- camera, 4x4, metres)."""
+        settings = settings or ScanSettings()
+        model, noise = self.model, self.model.noise
+        intrinsics = model.intrinsics(settings.resolution)
+        exposure_gain = settings.effective_shutter_multiplier() * settings.exposure_ms() / noise.reference_exposure_ms
+        caster = caster or RayCaster(geometry)
+        pose = np.asarray(camera_pose, dtype=float)
+        rotation = pose[:3, :3]
+        origin = pose[:3, 3]
+
+        # Whole-image arrays with masks rather than index lists: scattering millions of rows back into the image
+        # costs more than computing a few unused pixels.
+        rays = intrinsics.pixel_rays()
+        n_pixels = len(rays)
+        rotation32 = rotation.astype(np.float32)
+        directions = _rotate(rays, rotation32)
+        origins = np.empty_like(directions)
+        origins[:] = origin.astype(np.float32)
+        distance, faces = caster.first_hit(origins, directions)
+        hit = faces >= 0
+        face = np.where(hit, faces, 0)
+        depth = np.where(hit, distance, np.float32(0.0))  # rays have z = 1: the distance along them is the depth (m)
+        point = rays * depth[:, None]
+
+        normal = _rotate(geometry.normals.astype(np.float32)[face], rotation32.T)  # camera frame
+        cos_camera = -np.einsum("ij,ij->i", normal, rays) / np.sqrt(np.einsum("ij,ij->i", rays, rays))
+        back = cos_camera < 0.0  # thin or open surfaces seen from behind: their other side
+        normal[back] *= -1.0
+        np.abs(cos_camera, out=cos_camera)
+
+        proj_rotation = self.projector[:3, :3].astype(np.float32)
+        proj_origin = self.projector[:3, 3].astype(np.float32)
+        to_projector = proj_origin - point
+        projector_distance = np.sqrt(np.einsum("ij,ij->i", to_projector, to_projector))
+        cos_projector = np.einsum("ij,ij->i", normal, to_projector) / projector_distance
+        in_projector = _rotate(to_projector, -proj_rotation.T)
+        tan_h, tan_v = self._tan_projector
+        candidate = (
+            hit
+            & (cos_projector > 0.0)
+            & (in_projector[:, 2] > 0.0)
+            & (np.abs(in_projector[:, 0]) <= tan_h * in_projector[:, 2])
+            & (np.abs(in_projector[:, 1]) <= tan_v * in_projector[:, 2])
+        )
+        # shadow rays from the projector to every point; non-candidates get a negative length, which Embree skips
+        projector_world = (pose @ np.append(self.projector[:3, 3], 1.0))[:3].astype(np.float32)
+        shadow_dirs = directions * depth[:, None]
+        shadow_dirs += origins
+        shadow_dirs -= projector_world
+        origins[:] = projector_world
+        t_max = np.where(candidate, 1.0 - noise.shadow_epsilon_m / projector_distance, np.float32(-1.0))
+        lit = candidate & ~caster.occluded(origins, shadow_dirs, t_max)
+
+        albedo = geometry.albedo.astype(np.float32)[face]
+        depth_mm = depth * np.float32(1000.0)
+        sigma = depth_sigma_mm(model, settings, depth_mm, cos_projector, albedo)
+        low, high = model.scanning_range_mm
+        valid = lit & (depth_mm >= low) & (depth_mm <= high)
+        if settings.confidence > 0.0:
+            valid &= sigma <= settings.confidence
+        if settings.camera_only_mode:
+            valid[:] = False
+
+        ambient = noise.camera_only_ambient_fraction if settings.camera_only_mode else noise.ambient_fraction
+        light = np.float32(ambient) * cos_camera
+        if not settings.camera_only_mode:
+            ratio = np.float32(model.sweet_spot_mm / 1000.0) / projector_distance
+            light += np.where(lit, cos_projector * ratio * ratio, np.float32(0.0))
+        texture = np.float32(noise.texture_full_scale * exposure_gain) * albedo * light
+        np.minimum(texture, np.float32(noise.texture_saturation), out=texture)
+        texture[~hit] = 0.0
+
+        measured = np.where(valid, depth_mm, np.float32(0.0))
+        keep = np.flatnonzero(valid)
+        if settings.noise and len(keep):
+            rng = np.random.default_rng([int(settings.seed), int(frame_index)])
+            measured[keep] += rng.standard_normal(len(keep), dtype=np.float32) * sigma[keep]
+        normal *= valid[:, None]
+        confidence = np.where(valid, sigma, np.float32(0.0))
+
+        h, w = intrinsics.height, intrinsics.width
+        return Frame(
+            index=int(frame_index),
+            intrinsics=intrinsics,
+            depth_mm=measured.reshape(h, w),
+            normals=normal.reshape(h, w, 3),
+            confidence=confidence.reshape(h, w),
+            texture=texture.reshape(h, w),
+            camera_pose=pose.copy(),
+            model=model.name,
+            stats={"pixels": n_pixels, "hits": int(hit.sum()), "lit": int(lit.sum()), "valid": len(keep)},
+        )
+
+
+def _rotate(vectors: np.ndarray, rotation: np.ndarray) -> np.ndarray:
+    """``vectors @ rotation.T`` for (N, 3) arrays, by einsum: BLAS matmul threads cost far more than they bring for
+    (N, 3) x (3, 3), especially when the other core is busy."""
+    return np.einsum("ij,kj->ik", vectors, rotation)
+
+
+# ---------------------------------------------------------------------------------------------- output
+def rgb_texture(texture: np.ndarray) -> np.ndarray:
+    """The driver's rgb_texture: min-max normalised to 0..255, 8 bit, histogram-equalised, grey to RGB."""
+    import cv2
+
+    grey = cv2.normalize(np.asarray(texture, dtype=np.float32), None, 0.0, 255.0, cv2.NORM_MINMAX)
+    grey = cv2.equalizeHist(grey.astype(np.uint8))
+    return cv2.cvtColor(grey, cv2.COLOR_GRAY2RGB)
+
+
+def transform_points(points: np.ndarray, normals: np.ndarray, valid: np.ndarray, transform: np.ndarray):
+    """Points and normals (H, W, 3) mapped by ``transform`` (4x4: p' = R p + t); invalid pixels stay zero."""
+    rotation = np.asarray(transform[:3, :3], dtype=np.float32)
+    translation = np.asarray(transform[:3, 3], dtype=np.float32)
+    points_out = np.einsum("...j,kj->...k", points, rotation) + translation
+    normals_out = np.einsum("...j,kj->...k", normals, rotation)
+    points_out[~valid] = 0.0
+    normals_out[~valid] = 0.0
+    return points_out, normals_out
+
+
+def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """Pose (4x4) of an optical frame at ``eye`` looking at ``target``: z forward, x right, y down (image rows)."""
+    eye, target, up = (np.asarray(v, dtype=float) for v in (eye, target, up))
+    z = target - eye
+    if np.linalg.norm(z) < 1e-9:
+        raise ValueError("look_at: eye and target coincide")
+    z /= np.linalg.norm(z)
+    x = np.cross(z, up)
+    if np.linalg.norm(x) < 1e-9:
+        raise ValueError("look_at: the viewing direction is parallel to 'up'")
+    x /= np.linalg.norm(x)
+    pose = np.eye(4)
+    pose[:3, :3] = np.column_stack([x, np.cross(z, x), z])
+    pose[:3, 3] = eye
+    return pose
+
+
+def matrix_to_rpy(rotation: np.ndarray) -> np.ndarray:
+    """URDF roll-pitch-yaw (fixed axes x, y, z) of a rotation matrix; inverse of ``station.rpy_to_matrix``."""
+    r = np.asarray(rotation, dtype=float)
+    pitch = math.atan2(-r[2, 0], math.hypot(r[0, 0], r[1, 0]))
+    if abs(math.cos(pitch)) < 1e-9:  # gimbal lock: put everything into yaw
+        return np.array([0.0, pitch, math.atan2(-r[0, 1], r[1, 1])])
+    return np.array([math.atan2(r[2, 1], r[2, 2]), pitch, math.atan2(r[1, 0], r[0, 0])])
+
+
+def keep_freed_memory() -> bool:
+    """Let glibc keep freed memory for reuse instead of handing large blocks back to the kernel.
+
+    A frame allocates and frees dozens of arrays of tens of MB. By default glibc maps each one afresh and the
+    kernel zero-fills every page on first touch, which costs about a third of a high-resolution frame. Call once
+    per process (the node and the benchmark do); returns False where it does not apply (no glibc).
+    """
+    import ctypes
+
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+    except OSError:
+        return False
+    m_trim_threshold, m_mmap_max = -1, -4
+    return bool(libc.mallopt(m_mmap_max, 0)) and bool(libc.mallopt(m_trim_threshold, 1 << 30))
