@@ -5,12 +5,16 @@ ENV := source $(ROOT)/scripts/env.sh
 OUT ?= $(ROOT)/demo_output
 GUI ?= 0
 
-.PHONY: setup demo test lint format pytest rostest bench clean
+.PHONY: setup demo demo-station test lint format pytest rostest bench clean
 
 setup:
 	@bash scripts/setup.sh
 
 demo: setup
+	@$(ENV) && python3 scripts/demo_measurement.py --output-dir "$(OUT)" --gui $(GUI)
+
+# the station alone: home -> up -> home through the controller, bag and snapshot
+demo-station: setup
 	@$(ENV) && python3 scripts/demo_station.py --output-dir "$(OUT)" --gui $(GUI)
 
 lint: setup

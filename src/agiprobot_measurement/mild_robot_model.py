@@ -204,6 +204,8 @@ class MildKinematics:
     pan_joint: str = "ptu_pan_joint"
     tilt_joint: str = "ptu_tilt_joint"
     frames: FrameNames = field(default_factory=FrameNames)
+    # speed limits: pan and tilt (rad/s), base rotation (rad/s) and base translation (m/s)
+    max_velocity: tuple[float, float, float, float] = (1.0, 1.0, 0.8, 0.5)
 
     @property
     def base_to_pan_m(self) -> np.ndarray:
@@ -240,6 +242,18 @@ def load_kinematics(path: str | Path | None = None, frames: FrameNames | str | P
         raise ConfigError(f"{where}: joint_names must be a mapping with 'pan' and 'tilt'")
     if not isinstance(frames, FrameNames):
         frames = load_frame_names(frames)
+    speeds = data.get("max_velocity", {}) or {}
+    if not isinstance(speeds, dict):
+        raise ConfigError(f"{where}: max_velocity must be a mapping")
+    max_velocity = tuple(
+        _number(speeds, key, f"{where}: max_velocity", default=default, strictly_positive=True)
+        for key, default in (
+            ("pan_rad_s", 1.0),
+            ("tilt_rad_s", 1.0),
+            ("base_angular_rad_s", 0.8),
+            ("base_linear_m_s", 0.5),
+        )
+    )
     return MildKinematics(
         base_to_ptu_base_m=vec("base_to_ptu_base_xyz_m"),
         ptu_base_to_pan_m=vec("ptu_base_to_pan_xyz_m"),
@@ -249,6 +263,7 @@ def load_kinematics(path: str | Path | None = None, frames: FrameNames | str | P
         pan_joint=str(joints.get("pan", "ptu_pan_joint")),
         tilt_joint=str(joints.get("tilt", "ptu_tilt_joint")),
         frames=frames,
+        max_velocity=max_velocity,
     )
 
 

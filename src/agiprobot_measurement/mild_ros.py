@@ -7,12 +7,17 @@ and radians throughout.
 from __future__ import annotations
 
 import numpy as np
-from geometry_msgs.msg import Point, Pose, Quaternion
+from geometry_msgs.msg import Point, Pose, Quaternion, TransformStamped
 from nav_msgs.msg import OccupancyGrid
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
-from agiprobot_measurement.mild_robot_model import RobotState, matrix_to_quaternion, yaw_quaternion
+from agiprobot_measurement.mild_robot_model import (
+    RobotState,
+    matrix_to_quaternion,
+    quaternion_to_matrix,
+    yaw_quaternion,
+)
 from agiprobot_measurement.msg import RobotStateMessage
 from agiprobot_measurement.occupancy_map import OccupancyMap
 
@@ -35,14 +40,20 @@ def matrix_to_pose(matrix: np.ndarray) -> Pose:
     return Pose(Point(*matrix[:3, 3]), Quaternion(*q))
 
 
-def pose_to_matrix(pose: Pose) -> np.ndarray:
-    from agiprobot_measurement.mild_robot_model import quaternion_to_matrix
-
-    q = np.array([pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w])
+def _matrix(translation, rotation) -> np.ndarray:
+    q = np.array([rotation.x, rotation.y, rotation.z, rotation.w])
     matrix = np.eye(4)
     matrix[:3, :3] = quaternion_to_matrix(q / np.linalg.norm(q))
-    matrix[:3, 3] = [pose.position.x, pose.position.y, pose.position.z]
+    matrix[:3, 3] = [translation.x, translation.y, translation.z]
     return matrix
+
+
+def pose_to_matrix(pose: Pose) -> np.ndarray:
+    return _matrix(pose.position, pose.orientation)
+
+
+def transform_to_matrix(transform: TransformStamped) -> np.ndarray:
+    return _matrix(transform.transform.translation, transform.transform.rotation)
 
 
 def yaw_of(q: Quaternion) -> float:
@@ -118,20 +129,23 @@ def ik_markers(model, solution, requested_position, frame_id: str, stamp, colour
     poses = model.frame_poses(solution.state)
     point = {name: pose[:3, 3] for name, pose in poses.items()}
     base = point[f.base_frame]
-    heading = base + 0.3 * poses[f.base_frame][:3, 0]
+    chain = [  # (namespace, from, to): arrows; a point alone: sphere
+        ("baseToPanVector", base, point[f.ptu_pan_frame]),
+        ("panBaseVector", point[f.ptu_pan_frame_rotated], None),
+        ("panToTiltVector", point[f.ptu_pan_frame_rotated], point[f.ptu_tilt_frame]),
+        ("tiltBaseVector", point[f.ptu_tilt_frame], None),
+        ("tiltToCamVector", point[f.ptu_tilt_frame], point[f.camera_mount_frame]),
+        ("camToActualViewCenterVector", point[f.camera_mount_frame], solution.achieved_view_centre_m),
+    ]
     markers += [
         sphere(frame_id, stamp, "basePose" + suffix, 0, base, colour, 0.08),
-        arrow(frame_id, stamp, "basePose" + suffix, 1, base, heading, colour, 0.03),
-        arrow(frame_id, stamp, "baseToPanVector" + suffix, 0, base, point[f.ptu_pan_frame], colour),
-        sphere(frame_id, stamp, "panBaseVector" + suffix, 0, point[f.ptu_pan_frame_rotated], colour),
-        arrow(frame_id, stamp, "panToTiltVector" + suffix, 0, point[f.ptu_pan_frame_rotated], point[f.ptu_tilt_frame],
-              colour),  # fmt: skip
-        sphere(frame_id, stamp, "tiltBaseVector" + suffix, 0, point[f.ptu_tilt_frame], colour),
-        arrow(frame_id, stamp, "tiltToCamVector" + suffix, 0, point[f.ptu_tilt_frame], point[f.camera_mount_frame],
-              colour),  # fmt: skip
-        arrow(frame_id, stamp, "camToActualViewCenterVector" + suffix, 0, point[f.camera_mount_frame],
-              solution.achieved_view_centre_m, colour, 0.03),  # fmt: skip
+        arrow(frame_id, stamp, "basePose" + suffix, 1, base, base + 0.3 * poses[f.base_frame][:3, 0], colour, 0.03),
     ]
+    for ns, a, b in chain:
+        if b is None:
+            markers.append(sphere(frame_id, stamp, ns + suffix, 0, a, colour))
+        else:
+            markers.append(arrow(frame_id, stamp, ns + suffix, 0, a, b, colour))
     if solution.samples is not None:
         for i, (_, x, y, rotation, rating) in enumerate(solution.samples):
             start = np.array([x, y, 0.02])

@@ -875,12 +875,14 @@ def solve_set_cover(
         uncertainties; default: the values of a numeric ``matrix``. Used for the greedy tie-break and as the
         cost of ``IP_uncertainty`` (required there).
     :param durations_s: per-view trajectory duration in s (required for ``IP_time``).
-    :param time_limit_s: wall-clock limit for the integer programme; when it is hit the best cover found is
-        returned with ``proven_optimal=False`` and its gap.
+    :param time_limit_s: wall-clock limit for an IP solve as a whole (reductions get at most half of it, then
+        the LP and HiGHS/CBC the rest); when it is hit the best cover found is returned with
+        ``proven_optimal=False`` and its gap. Not used by ``greedy``.
     :param mip_gap: relative gap at which the solver may stop (0 = prove optimality).
     :param backend: ``'highs'`` (highspy) or ``'cbc'`` (CBC through PuLP).
-    :param reduce: apply the reductions before the integer programme (off only for testing them).
-    :param warm_start: give the solver the greedy cover as a starting incumbent.
+    :param reduce: apply the reductions and the LP reduced-cost test before the integer programme (off only
+        to test them).
+    :param warm_start: give the solver the heuristic cover as its starting incumbent.
     :raises SetCoverError: (a ValueError) for an unknown solver or backend and for malformed inputs.
     """
     if solver_type not in SOLVER_TYPES:
@@ -1010,7 +1012,8 @@ def _lp_rounding(sub: _Columns, costs: np.ndarray, x: np.ndarray) -> list[int]:
 def _solve_reduced_ip(sub, costs, tie, integral, solve, deadline, mip_gap, warm_start, lp_fixing, stats):
     """Solve the reduced programme; returns (chosen local columns, lower bound, detail).
 
-    An incumbent comes from the better of Chvatal's greedy and an LP rounding. With the LP's reduced costs,
+    An incumbent comes from the best of Chvatal's greedy, an LP rounding and a small programme over the
+    columns of least reduced cost (the last two only with ``lp_fixing``). With the LP's reduced costs,
     a column whose every cover costs more than the incumbent (for counts: more than one less than it) is
     left out of the integer programme: the programme then still holds every strictly better cover and the
     incumbent, so its optimum is the optimum. Covers that use a left-out column cost at least the
@@ -1041,12 +1044,12 @@ def _solve_reduced_ip(sub, costs, tie, integral, solve, deadline, mip_gap, warm_
     if not math.isfinite(lp_bound):
         settled = False
     elif integral:
-        settled = math.ceil(lp_bound - 1e-6) >= ub - 1e-9
+        settled = math.ceil(lp_bound - 1e-6) >= ub * (1.0 - mip_gap) - 1e-9
     else:
-        settled = lp_bound >= ub * (1.0 - 1e-9) - 1e-12
+        settled = lp_bound >= ub * (1.0 - max(mip_gap, 1e-9)) - 1e-12
     if settled:
         stats["mip_shape"] = (0, 0)
-        return np.asarray(incumbent, dtype=np.int64), lp_bound, "LP bound meets the heuristic cover"
+        return np.asarray(incumbent, dtype=np.int64), lp_bound, "the LP bound meets the heuristic cover"
     keep = np.ones(sub.n_cols, dtype=bool)
     if lp is not None:
         threshold = ub - 1.0 + 1e-6 if integral else ub + 1e-9 * max(ub, 1.0)
