@@ -14,9 +14,10 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("bag")
     parser.add_argument("--radius-mm", type=float, default=1.0, help="a sample counts as measured within this")
+    parser.add_argument("--execution", type=int, default=-1, help="which recorded execution (0 = first, -1 = last)")
     args = parser.parse_args()
     try:
-        result = coverage_from_bag(args.bag, args.radius_mm)
+        result = coverage_from_bag(args.bag, args.radius_mm, args.execution)
     except (OSError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -83,6 +83,9 @@ class OffscreenRviz:
         read_fd, write_fd = os.pipe()
         self.xvfb = subprocess.Popen(
             [
+                "nice",
+                "-n",
+                "15",
                 "Xvfb",
                 "-displayfd",
                 str(write_fd),
@@ -104,7 +107,8 @@ class OffscreenRviz:
         self.display = f":{number}"
         env = dict(os.environ, DISPLAY=self.display)
         self.rviz = subprocess.Popen(
-            ["rviz", "-d", str(self.config), f"__name:=rviz_snapshot_{os.getpid()}"],
+            # niced: software rendering must not starve the nodes it is taking a picture of
+            ["nice", "-n", "15", "rviz", "-d", str(self.config), f"__name:=rviz_snapshot_{os.getpid()}"],
             env=env,
             stdout=(self.log_dir / "rviz.log").open("w"),
             stderr=subprocess.STDOUT,

@@ -39,6 +39,7 @@ Units: metres for poses and points, mm for depth, range, noise and the confidenc
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -509,14 +510,45 @@ def depth_sigma_mm(model: ScannerModel, settings: ScanSettings, depth_mm, cos_pr
     return dtype.type(model.temporal_noise_mm) * ratio * ratio / np.sqrt(cos_p * gain)
 
 
-class StructuredLightScanner:
-    """Renders frames of one :class:`ScannerModel`; :meth:`capture` takes the scene as one triangle soup."""
+#: pixels rendered per chunk: temporaries of a few MB stay in cache, and chunks spread over the CPU cores
+CHUNK_PIXELS = 1 << 17
 
-    def __init__(self, model: ScannerModel):
+
+@dataclass
+class _FrameJob:
+    """What every chunk of one frame shares: inputs (camera frame unless noted) and the output images."""
+
+    caster: RayCaster
+    settings: ScanSettings
+    frame_index: int
+    rays: np.ndarray  # (N, 3) float32, z = 1
+    inverse_ray_norms: np.ndarray  # (N,) float32
+    rotation: np.ndarray  # world <- camera, float32
+    origin: np.ndarray  # camera position (world), float32
+    projector_world: np.ndarray  # float32
+    normals: np.ndarray  # (F, 3) face normals in the camera frame, float32
+    albedo: np.ndarray  # (F,) float32
+    depth_mm: np.ndarray
+    normals_out: np.ndarray
+    confidence: np.ndarray
+    texture: np.ndarray
+
+
+class StructuredLightScanner:
+    """Renders frames of one :class:`ScannerModel`; :meth:`capture` takes the scene as one triangle soup.
+
+    The image is rendered in chunks of :data:`CHUNK_PIXELS` pixels on ``workers`` threads (Embree and numpy
+    release the GIL). The noise of a chunk is seeded by (seed, frame index, first pixel), so a frame does not
+    depend on the number of threads.
+    """
+
+    def __init__(self, model: ScannerModel, workers: int | None = None):
         self.model = model
         self.projector = model.projector_pose()
         half_h, half_v = (math.radians(a) / 2.0 for a in model.projector_fov_deg)
         self._tan_projector = (math.tan(half_h), math.tan(half_v))
+        self.workers = max(1, int(workers if workers is not None else min(4, os.cpu_count() or 1)))
+        self._pool = None
 
     def capture(
         self,
@@ -528,37 +560,74 @@ class StructuredLightScanner:
     ) -> Frame:
         """One frame of ``geometry`` (scene frame) seen from ``camera_pose`` (scene <- camera, 4x4, metres)."""
         settings = settings or ScanSettings()
-        model, noise = self.model, self.model.noise
-        intrinsics = model.intrinsics(settings.resolution)
-        exposure_gain = settings.effective_shutter_multiplier() * settings.exposure_ms() / noise.reference_exposure_ms
-        caster = caster or RayCaster(geometry)
+        settings.exposure_ms()  # refuses an exposure index out of range before any work
+        intrinsics = self.model.intrinsics(settings.resolution)
         pose = np.asarray(camera_pose, dtype=float)
         rotation = pose[:3, :3]
-        origin = pose[:3, 3]
-
-        # Whole-image arrays with masks rather than index lists: scattering millions of rows back into the image
-        # costs more than computing a few unused pixels.
         rays = intrinsics.pixel_rays()
-        n_pixels = len(rays)
-        rotation32 = rotation.astype(np.float32)
-        directions = _rotate(rays, rotation32)
+        n = len(rays)
+        job = _FrameJob(
+            caster=caster or RayCaster(geometry),
+            settings=settings,
+            frame_index=int(frame_index),
+            rays=rays,
+            inverse_ray_norms=_inverse_norms(
+                intrinsics.width, intrinsics.height, intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy
+            ),
+            rotation=rotation.astype(np.float32),
+            origin=pose[:3, 3].astype(np.float32),
+            projector_world=(pose @ np.append(self.projector[:3, 3], 1.0))[:3].astype(np.float32),
+            normals=(np.asarray(geometry.normals, dtype=float) @ rotation).astype(np.float32).reshape(-1, 3),
+            albedo=np.asarray(geometry.albedo, dtype=np.float32),
+            depth_mm=np.empty(n, dtype=np.float32),
+            normals_out=np.empty((n, 3), dtype=np.float32),
+            confidence=np.empty(n, dtype=np.float32),
+            texture=np.empty(n, dtype=np.float32),
+        )
+        chunks = [slice(start, min(start + CHUNK_PIXELS, n)) for start in range(0, n, CHUNK_PIXELS)]
+        if self.workers > 1 and len(chunks) > 1:
+            if self._pool is None:
+                from concurrent.futures import ThreadPoolExecutor
+
+                self._pool = ThreadPoolExecutor(self.workers, thread_name_prefix="structured_light")
+            counts = list(self._pool.map(lambda chunk: self._render_chunk(job, chunk), chunks))
+        else:
+            counts = [self._render_chunk(job, chunk) for chunk in chunks]
+        hits, lit, valid = (int(v) for v in np.sum(counts, axis=0))
+        h, w = intrinsics.height, intrinsics.width
+        return Frame(
+            index=int(frame_index),
+            intrinsics=intrinsics,
+            depth_mm=job.depth_mm.reshape(h, w),
+            normals=job.normals_out.reshape(h, w, 3),
+            confidence=job.confidence.reshape(h, w),
+            texture=job.texture.reshape(h, w),
+            camera_pose=pose.copy(),
+            model=self.model.name,
+            stats={"pixels": n, "hits": hits, "lit": lit, "valid": valid},
+        )
+
+    def _render_chunk(self, job: _FrameJob, chunk: slice) -> tuple[int, int, int]:
+        model, noise, settings = self.model, self.model.noise, job.settings
+        rays = job.rays[chunk]
+        directions = _rotate(rays, job.rotation)
         origins = np.empty_like(directions)
-        origins[:] = origin.astype(np.float32)
-        distance, faces = caster.first_hit(origins, directions)
+        origins[:] = job.origin
+        distance, faces = job.caster.first_hit(origins, directions)
         hit = faces >= 0
-        face = np.where(hit, faces, 0)
+        face = np.maximum(faces, 0)
         depth = np.where(hit, distance, np.float32(0.0))  # rays have z = 1: the distance along them is the depth (m)
         point = rays * depth[:, None]
 
-        normal = _rotate(geometry.normals.astype(np.float32)[face], rotation32.T)  # camera frame
-        cos_camera = -np.einsum("ij,ij->i", normal, rays) / np.sqrt(np.einsum("ij,ij->i", rays, rays))
-        back = cos_camera < 0.0  # thin or open surfaces seen from behind: their other side
-        normal[back] *= -1.0
-        np.abs(cos_camera, out=cos_camera)
+        normal = job.normals[face]
+        cos_camera = -np.einsum("ij,ij->i", normal, rays) * job.inverse_ray_norms[chunk]
+        # thin or open surfaces seen from behind show their other side
+        side = np.where(cos_camera < 0.0, np.float32(-1.0), np.float32(1.0))
+        normal *= side[:, None]
+        cos_camera *= side
 
         proj_rotation = self.projector[:3, :3].astype(np.float32)
-        proj_origin = self.projector[:3, 3].astype(np.float32)
-        to_projector = proj_origin - point
+        to_projector = self.projector[:3, 3].astype(np.float32) - point
         projector_distance = np.sqrt(np.einsum("ij,ij->i", to_projector, to_projector))
         cos_projector = np.einsum("ij,ij->i", normal, to_projector) / projector_distance
         in_projector = _rotate(to_projector, -proj_rotation.T)
@@ -571,15 +640,13 @@ class StructuredLightScanner:
             & (np.abs(in_projector[:, 1]) <= tan_v * in_projector[:, 2])
         )
         # shadow rays from the projector to every point; non-candidates get a negative length, which Embree skips
-        projector_world = (pose @ np.append(self.projector[:3, 3], 1.0))[:3].astype(np.float32)
         shadow_dirs = directions * depth[:, None]
-        shadow_dirs += origins
-        shadow_dirs -= projector_world
-        origins[:] = projector_world
+        shadow_dirs += job.origin - job.projector_world
+        origins[:] = job.projector_world
         t_max = np.where(candidate, 1.0 - noise.shadow_epsilon_m / projector_distance, np.float32(-1.0))
-        lit = candidate & ~caster.occluded(origins, shadow_dirs, t_max)
+        lit = candidate & ~job.caster.occluded(origins, shadow_dirs, t_max)
 
-        albedo = geometry.albedo.astype(np.float32)[face]
+        albedo = job.albedo[face]
         depth_mm = depth * np.float32(1000.0)
         sigma = depth_sigma_mm(model, settings, depth_mm, cos_projector, albedo)
         low, high = model.scanning_range_mm
@@ -594,30 +661,30 @@ class StructuredLightScanner:
         if not settings.camera_only_mode:
             ratio = np.float32(model.sweet_spot_mm / 1000.0) / projector_distance
             light += np.where(lit, cos_projector * ratio * ratio, np.float32(0.0))
+        exposure_gain = settings.effective_shutter_multiplier() * settings.exposure_ms() / noise.reference_exposure_ms
         texture = np.float32(noise.texture_full_scale * exposure_gain) * albedo * light
         np.minimum(texture, np.float32(noise.texture_saturation), out=texture)
         texture[~hit] = 0.0
 
+        sigma = np.where(valid, sigma, np.float32(0.0))
         measured = np.where(valid, depth_mm, np.float32(0.0))
-        keep = np.flatnonzero(valid)
-        if settings.noise and len(keep):
-            rng = np.random.default_rng([int(settings.seed), int(frame_index)])
-            measured[keep] += rng.standard_normal(len(keep), dtype=np.float32) * sigma[keep]
+        if settings.noise:
+            rng = np.random.default_rng([int(settings.seed), job.frame_index, chunk.start])
+            measured += rng.standard_normal(len(rays), dtype=np.float32) * sigma
         normal *= valid[:, None]
-        confidence = np.where(valid, sigma, np.float32(0.0))
+        job.depth_mm[chunk] = measured
+        job.normals_out[chunk] = normal
+        job.confidence[chunk] = sigma
+        job.texture[chunk] = texture
+        return int(hit.sum()), int(lit.sum()), int(valid.sum())
 
-        h, w = intrinsics.height, intrinsics.width
-        return Frame(
-            index=int(frame_index),
-            intrinsics=intrinsics,
-            depth_mm=measured.reshape(h, w),
-            normals=normal.reshape(h, w, 3),
-            confidence=confidence.reshape(h, w),
-            texture=texture.reshape(h, w),
-            camera_pose=pose.copy(),
-            model=model.name,
-            stats={"pixels": n_pixels, "hits": int(hit.sum()), "lit": int(lit.sum()), "valid": len(keep)},
-        )
+
+@lru_cache(maxsize=4)
+def _inverse_norms(width: int, height: int, fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
+    rays = _pixel_rays(width, height, fx, fy, cx, cy)
+    inverse = (1.0 / np.sqrt(np.einsum("ij,ij->i", rays.astype(np.float64), rays))).astype(np.float32)
+    inverse.setflags(write=False)
+    return inverse
 
 
 def _rotate(vectors: np.ndarray, rotation: np.ndarray) -> np.ndarray:
@@ -671,20 +738,3 @@ def matrix_to_rpy(rotation: np.ndarray) -> np.ndarray:
     if abs(math.cos(pitch)) < 1e-9:  # gimbal lock: put everything into yaw
         return np.array([0.0, pitch, math.atan2(-r[0, 1], r[1, 1])])
     return np.array([math.atan2(r[2, 1], r[2, 2]), pitch, math.atan2(r[1, 0], r[0, 0])])
-
-
-def keep_freed_memory() -> bool:
-    """Let glibc keep freed memory for reuse instead of handing large blocks back to the kernel.
-
-    A frame allocates and frees dozens of arrays of tens of MB. By default glibc maps each one afresh and the
-    kernel zero-fills every page on first touch, which costs about a third of a high-resolution frame. Call once
-    per process (the node and the benchmark do); returns False where it does not apply (no glibc).
-    """
-    import ctypes
-
-    try:
-        libc = ctypes.CDLL("libc.so.6")
-    except OSError:
-        return False
-    m_trim_threshold, m_mmap_max = -1, -4
-    return bool(libc.mallopt(m_mmap_max, 0)) and bool(libc.mallopt(m_trim_threshold, 1 << 30))

@@ -629,9 +629,7 @@ class TrajectoryManager:
         verified_count = 0
         result = None
         for round_index in range(max_rounds):
-            alive = [
-                v for v in views if getattr(v, "mechanics_valid", True) and v.measurable_indices.size
-            ]
+            alive = [v for v in views if getattr(v, "mechanics_valid", True) and v.measurable_indices.size]
             if not alive:
                 raise PlanningError("no viewpoint is executable: every candidate failed the mechanical checks")
             matrix = self._coverage_matrix(alive, n_points)
