@@ -145,13 +145,25 @@ def _tip_pose_m(pose_mm: np.ndarray) -> np.ndarray:
     return pose
 
 
-def p2p_durations(starts: np.ndarray, goals: np.ndarray, max_velocity: np.ndarray, max_acceleration: np.ndarray):
+def p2p_durations(
+    starts: np.ndarray,
+    goals: np.ndarray,
+    max_velocity: np.ndarray,
+    max_acceleration: np.ndarray,
+    wraps: np.ndarray | None = None,
+):
     """Durations (s) of synchronised point-to-point joint moves, all pairs: (A, n) x (B, n) -> (A, B).
 
     The time of the straight joint-space move, a lower bound of any collision-free connection and the exact
-    time where the straight move is free.
+    time where the straight move is free. Joints flagged in ``wraps`` (a range of at least 2 pi) count their
+    shortest angular distance, since the goal can be reached at an angle shifted by 2 pi.
     """
-    distance = np.abs(starts[:, None, :] - goals[None, :, :])
+    difference = starts[:, None, :] - goals[None, :, :]
+    if wraps is not None:
+        wrapped = np.abs((difference + np.pi) % (2 * np.pi) - np.pi)
+        distance = np.where(wraps, wrapped, np.abs(difference))
+    else:
+        distance = np.abs(difference)
     triangular = distance < max_velocity**2 / max_acceleration
     own = np.where(
         triangular,
@@ -395,10 +407,28 @@ class TrajectoryManager:
             )
             useful &= keep_all[index]
         timings["metrology"] = time.perf_counter() - t2
-        self.measurability = result
         kept = index[useful]
         self._report("metrology", 1.0, f"{kept.size} viewpoints measure something")
         t3 = time.perf_counter()
+        # the returned views' columns, gathered once: views hold slices of these arrays (no per-view copies),
+        # and the set cover's matrix is built from them directly
+        columns = np.flatnonzero(useful)
+        starts = result.indptr[columns]
+        lengths = result.indptr[columns + 1] - starts
+        indptr = np.zeros(len(columns) + 1, dtype=np.int64)
+        np.cumsum(lengths, out=indptr[1:])
+        gather = np.repeat(starts - indptr[:-1], lengths) + np.arange(indptr[-1])
+        self.measurability = MeasurabilityResult(
+            result.n_points,
+            len(columns),
+            indptr,
+            result.point_indices[gather],
+            result.uncertainties[gather],
+            result.trajectory_distances[gather],
+        )
+        del result, gather
+        store = self.measurability
+        self._entry_alive = np.ones(store.nnz, dtype=bool)
         views = build_viewpoints(
             candidates,
             samples.points,
@@ -410,13 +440,22 @@ class TrajectoryManager:
         )
         overmeasure = self._mechanics["minimum_required_overmeasure"]
         min_length = self._mechanics["minimum_trajectory_length"]
-        for view, column in zip(views, np.flatnonzero(useful).tolist(), strict=True):
-            points, uncertainties, t0s = result.view(column)
-            view.set_measurable_surface_point_indices_and_uncertainties(points, uncertainties, t0s)
-            view.scan_line = self._scan_line(t0s, overmeasure, min_length)
+        lo, hi = self._scan_lines(store.t0_min, store.t0_max, overmeasure, min_length)
+        self._durations = np.array([self._estimate_scan_duration((a, b)) for a, b in zip(lo, hi, strict=True)])
+        self._durations_estimate = self._durations.copy()
+        self._duration_verified = np.zeros(len(self._durations), dtype=bool)
+        self._duration_bias = 1.0
+        for j, view in enumerate(views):
+            a, b = indptr[j], indptr[j + 1]
+            view.attach_measurements(
+                store.point_indices[a:b], store.uncertainties[a:b], store.trajectory_distances[a:b]
+            )
+            view.coverage_column = j
+            view.scan_line = (float(lo[j]), float(hi[j]))
             view.mechanics_verified = False
             view.mechanics_valid = True
-            view.estimated_duration_s = self._estimate_scan_duration(view.scan_line)
+            view.estimated_duration_s = float(self._durations[j])
+        self._generation_views = views
         timings["viewpoint_objects"] = time.perf_counter() - t3
         self.last_viewpoints = views
         if not views:
@@ -462,13 +501,20 @@ class TrajectoryManager:
         )
 
     @staticmethod
-    def _scan_line(t0s: np.ndarray, overmeasure: float, min_length: float) -> tuple[float, float]:
-        lo = float(np.min(t0s)) - overmeasure
-        hi = float(np.max(t0s)) + overmeasure
-        if hi - lo < min_length:
-            middle = 0.5 * (lo + hi)
-            lo, hi = middle - 0.5 * min_length, middle + 0.5 * min_length
+    def _scan_lines(t0_min, t0_max, overmeasure: float, min_length: float):
+        """Scan-line extents (mm from the anchor along x) for arrays of the measured points' t0 ranges: the
+        range plus the overmeasure at both ends, widened symmetrically to ``min_length``."""
+        lo = np.asarray(t0_min, dtype=float) - overmeasure
+        hi = np.asarray(t0_max, dtype=float) + overmeasure
+        short = hi - lo < min_length
+        middle = 0.5 * (lo + hi)
+        lo = np.where(short, middle - 0.5 * min_length, lo)
+        hi = np.where(short, middle + 0.5 * min_length, hi)
         return lo, hi
+
+    def _scan_line(self, t0s: np.ndarray, overmeasure: float, min_length: float) -> tuple[float, float]:
+        lo, hi = self._scan_lines([np.min(t0s)], [np.max(t0s)], overmeasure, min_length)
+        return float(lo[0]), float(hi[0])
 
     def _estimate_scan_duration(self, scan_line: tuple[float, float]) -> float:
         # ramps at the joints' pace are short; a constant tip acceleration of 500 mm/s^2 is a fair estimate
@@ -520,9 +566,39 @@ class TrajectoryManager:
         )
         return self._verify_mechanics(viewpoint, settings)
 
+    def _column_range(self, view: ViewPoint):
+        """The view's entry range in the generation's coverage store, or None for a foreign view."""
+        j = getattr(view, "coverage_column", None)
+        views = getattr(self, "_generation_views", None)
+        if j is None or views is None or j >= len(views) or views[j] is not view:
+            return None
+        return int(self.measurability.indptr[j]), int(self.measurability.indptr[j + 1])
+
     def _verify_mechanics(self, view: ViewPoint, settings: dict | None = None) -> bool:
         """Compute the view's measurement trajectory; shorten the view to what is executable or reject it."""
-        settings = settings or self._mechanics
+        started = time.perf_counter()
+        try:
+            valid = self._verify_mechanics_inner(view, settings or self._mechanics)
+        finally:
+            self.timings_s["mechanics"] = self.timings_s.get("mechanics", 0.0) + time.perf_counter() - started
+            self.mechanics_checked = getattr(self, "mechanics_checked", 0) + 1
+        span = self._column_range(view)
+        if span is not None:
+            a, b = span
+            if not valid:
+                self._entry_alive[a:b] = False
+            else:
+                kept = np.isin(self.measurability.point_indices[a:b], view.measurable_indices)
+                self._entry_alive[a:b] &= kept
+                j = view.coverage_column
+                # estimates must not be optimistic, or IP_time keeps preferring views not yet verified
+                ratio = view.estimated_duration_s / max(self._durations_estimate[j], 1e-9)
+                self._duration_bias = max(getattr(self, "_duration_bias", 1.0), ratio)
+                self._durations[j] = view.estimated_duration_s
+                self._duration_verified[j] = True
+        return valid
+
+    def _verify_mechanics_inner(self, view: ViewPoint, settings: dict) -> bool:
         view.mechanics_verified = True
         step = settings["trajectory_sample_step"]
         overmeasure = settings["minimum_required_overmeasure"]
@@ -616,8 +692,9 @@ class TrajectoryManager:
 
         ``solver_type``: 'greedy', 'IP_basic', 'IP_uncertainty' or 'IP_time' (an unknown name raises
         ValueError listing these). Views picked but not yet verified mechanically are verified (and corrected
-        or dropped) and the problem is solved again until every chosen view is executable (at most
-        ``max_rounds`` rounds). Returns the chosen views as a set (documented type).
+        or dropped) and the problem is solved again until every chosen view is executable. After ``max_rounds``
+        rounds the cover is solved once more over verified views only, so the result is always executable.
+        Returns the chosen views as a set (documented type).
         """
         if solver_type not in SOLVER_TYPES:
             raise ValueError(f"unknown solver_type {solver_type!r}; valid names: {', '.join(SOLVER_TYPES)}")
@@ -626,48 +703,96 @@ class TrajectoryManager:
             raise PlanningError("solve_scp needs at least one viewpoint")
         n_points = len(self.sampled_surface_points) or 1 + max(int(v.measurable_indices.max(initial=0)) for v in views)
         t0 = time.perf_counter()
+        mechanics_before = self.timings_s.get("mechanics", 0.0)
+        set_cover_time = 0.0
         verified_count = 0
+        only_verified = False
         result = None
-        for round_index in range(max_rounds):
-            alive = [v for v in views if getattr(v, "mechanics_valid", True) and v.measurable_indices.size]
-            if not alive:
-                raise PlanningError("no viewpoint is executable: every candidate failed the mechanical checks")
-            matrix = self._coverage_matrix(alive, n_points)
-            durations = np.array([getattr(v, "estimated_duration_s", 1.0) for v in alive])
-            self._report(
-                "set cover", min(0.9, round_index / max_rounds), f"round {round_index + 1}: {len(alive)} views"
-            )
+        for round_index in range(max_rounds + 1):
+            if round_index == max_rounds:
+                only_verified = True  # the fallback: no more verification, a cover of verified views
+                LOG.warning("set cover: %d rounds of verification; solving over verified views only", max_rounds)
+            matrix, durations = self._coverage_problem(views, n_points, only_verified)
+            self._report("set cover", min(0.9, round_index / max_rounds), f"round {round_index + 1}")
             result = solve_set_cover(
                 matrix,
                 solver_type,
                 durations_s=durations if solver_type == "IP_time" else None,
                 time_limit_s=time_limit_s,
             )
-            chosen = [alive[j] for j in result.selected.tolist()]
+            set_cover_time += result.solve_time_s
+            chosen = [views[j] for j in result.selected.tolist()]
             pending = [v for v in chosen if not getattr(v, "mechanics_verified", True)]
             if not pending:
                 break
-            for i, view in enumerate(pending):
+            if solver_type != "greedy" and not only_verified:
+                # the greedy cover of the same matrix costs little and names views the next solve is likely to
+                # want: verifying them now saves rounds of the (slower) integer programme
+                extra = solve_set_cover(matrix, "greedy", time_limit_s=time_limit_s)
+                set_cover_time += extra.solve_time_s
+                pending += [
+                    views[j] for j in extra.selected.tolist() if not getattr(views[j], "mechanics_verified", True)
+                ]
+                pending = list(dict.fromkeys(pending))
+            for view in pending:
                 self._verify_mechanics(view)
                 verified_count += 1
-                self._report("mechanics", (i + 1) / len(pending), f"verified {verified_count} scan lines")
-        else:
-            raise PlanningError(f"set cover did not settle within {max_rounds} rounds of mechanical verification")
+                self._report(
+                    "mechanics",
+                    min(1.0, verified_count / (verified_count + 10)),
+                    f"verified {verified_count} scan lines",
+                )
+        if not chosen:
+            raise PlanningError("no viewpoint is executable: every candidate failed the mechanical checks")
         self.timings_s["set_cover_and_mechanics"] = time.perf_counter() - t0
+        self.timings_s["set_cover"] = set_cover_time
         self.timings_s["set_cover_last_solve"] = result.solve_time_s
+        self.timings_s["set_cover_rounds"] = round_index + 1
+        self.timings_s["mechanics_in_set_cover"] = self.timings_s.get("mechanics", 0.0) - mechanics_before
         self.last_set_cover = result
         self.parameters["solver_type"] = solver_type
         self._report("set cover", 1.0, f"{len(chosen)} views cover {int(result.covered.sum())} points")
         return set(chosen)
 
-    @staticmethod
-    def _coverage_matrix(views: list[ViewPoint], n_points: int) -> scipy.sparse.csc_matrix:
-        indices = [v.measurable_indices for v in views]
-        indptr = np.zeros(len(views) + 1, dtype=np.int64)
-        np.cumsum([len(i) for i in indices], out=indptr[1:])
-        rows = np.concatenate(indices) if indices else np.zeros(0, dtype=np.int64)
-        data = np.concatenate([v.measurable_uncertainties for v in views]) if views else np.zeros(0)
-        return scipy.sparse.csc_matrix((np.maximum(data, 1e-12), rows, indptr), shape=(n_points, len(views)))
+    def _coverage_problem(self, views: list[ViewPoint], n_points: int, only_verified: bool = False):
+        """(points x views CSC matrix of uncertainties, per-view durations) for the set cover. Rejected views
+        have empty columns, shortened ones only their remaining points."""
+        store = getattr(self, "measurability", None)
+        columns = [getattr(v, "coverage_column", None) for v in views]
+        from_store = store is not None and all(
+            c is not None and c < store.n_views and self._generation_views[c] is v
+            for c, v in zip(columns, views, strict=True)
+        )
+        if from_store:
+            data = np.where(self._entry_alive, np.maximum(store.uncertainties, 1e-12), 0.0)
+            matrix = scipy.sparse.csc_matrix(
+                (data, store.point_indices, store.indptr), shape=(store.n_points, store.n_views)
+            )
+            columns = np.asarray(columns, dtype=np.int64)
+            if len(columns) != store.n_views or np.any(columns != np.arange(store.n_views)):
+                matrix = matrix[:, columns]
+            durations = np.where(self._duration_verified, self._durations, self._durations * self._duration_bias)[
+                columns
+            ]
+        else:
+            indices = [
+                v.measurable_indices if getattr(v, "mechanics_valid", True) else np.zeros(0, np.int64) for v in views
+            ]
+            values = [v.measurable_uncertainties if getattr(v, "mechanics_valid", True) else np.zeros(0) for v in views]
+            indptr = np.zeros(len(views) + 1, dtype=np.int64)
+            np.cumsum([len(i) for i in indices], out=indptr[1:])
+            rows = np.concatenate(indices) if indices else np.zeros(0, dtype=np.int64)
+            data = np.maximum(np.concatenate(values), 1e-12) if values else np.zeros(0)
+            matrix = scipy.sparse.csc_matrix((data, rows, indptr), shape=(n_points, len(views)))
+            durations = np.array([getattr(v, "estimated_duration_s", 1.0) for v in views])
+        if only_verified:
+            unverified = np.flatnonzero([not getattr(v, "mechanics_verified", True) for v in views])
+            if unverified.size:
+                keep = np.ones(matrix.shape[1])
+                keep[unverified] = 0.0
+                matrix = matrix @ scipy.sparse.diags(keep)
+                matrix = scipy.sparse.csc_matrix(matrix)
+        return matrix, durations
 
     # ----------------------------------------------------------------------------------- connection
     def _straight_is_free(self, start: np.ndarray, goal: np.ndarray, max_step_rad: float = 0.02) -> bool:
@@ -718,6 +843,7 @@ class TrajectoryManager:
             view = views[i]
             if flip != view.reversed:
                 view.reverse_trajectory_for_measurement()
+            view.set_trajectory_for_measurement(self._unwrapped_towards(view.get_trajectory_for_measurement(), state))
             entry = view.get_trajectory_for_measurement().start
             self._report("connection", k / len(order), f"connecting view {k + 1} of {len(order)}")
             connection = self._connect(state, entry, planning_time_s=min_planning_time)
@@ -734,6 +860,28 @@ class TrajectoryManager:
         self._report("connection", 1.0, f"{len(ordered)} views connected, {len(unconnected)} left out")
         return ordered
 
+    def _wrapping_joints(self) -> np.ndarray:
+        return (self.limits.upper - self.limits.lower) >= 2 * np.pi - 1e-6
+
+    def _unwrapped_towards(self, trajectory: JointTrajectory, reference: np.ndarray) -> JointTrajectory:
+        """The same motion with its wide joints shifted by multiples of 2 pi so that it starts as near
+        ``reference`` as the joint limits allow (a revolute joint reaches the same pose at q and q + 2 pi)."""
+        wraps = self._wrapping_joints()
+        turns = np.where(wraps, np.round((reference - trajectory.start) / (2 * np.pi)), 0.0)
+        for _ in range(3):
+            shift = 2 * np.pi * turns
+            moved = trajectory.positions + shift
+            low = moved.min(axis=0) < self.limits.lower - 1e-9
+            high = moved.max(axis=0) > self.limits.upper + 1e-9
+            if not (low.any() or high.any()):
+                if not np.any(shift):
+                    return trajectory
+                shifted = trajectory.copy()
+                shifted.positions = moved
+                return shifted
+            turns = turns + low - high  # step back towards the limits
+        return trajectory
+
     def _order_views(self, current: np.ndarray, starts: np.ndarray, ends: np.ndarray):
         """Greedy order + 2-opt on estimated connection times; returns (order, flipped per position)."""
         n = len(starts)
@@ -743,8 +891,9 @@ class TrajectoryManager:
         entries[0::2], entries[1::2] = starts, ends
         exits = np.empty_like(entries)
         exits[0::2], exits[1::2] = ends, starts
-        from_current = p2p_durations(current[None], entries, vmax, amax)[0]
-        between = p2p_durations(exits, entries, vmax, amax)  # exit of (i, dir) -> entry of (j, dir')
+        wraps = self._wrapping_joints()
+        from_current = p2p_durations(current[None], entries, vmax, amax, wraps)[0]
+        between = p2p_durations(exits, entries, vmax, amax, wraps)  # exit of (i, dir) -> entry of (j, dir')
         remaining = set(range(n))
         tour = []
         cost = from_current.copy()

@@ -246,6 +246,44 @@ class ViewPoint:
         #: free-form provenance (sample / orientation / tilt index) set by whoever builds the view
         self.metadata: dict = {}
 
+    @classmethod
+    def from_anchor_pose(
+        cls,
+        surface_point: np.ndarray,
+        surface_normal: np.ndarray,
+        angle_around_boresight: float,
+        standoff_distance: float,
+        tilt_theta: float,
+        tilt_psi: float,
+        anchor_pose: np.ndarray,
+    ) -> ViewPoint:
+        """A view whose anchor pose was already computed by :func:`anchor_poses` for exactly these values
+        (the batch path: skips recomputing the pose and re-validating the inputs)."""
+        view = cls.__new__(cls)
+        view._surface_point = surface_point
+        view._surface_normal = surface_normal
+        view.angle_around_boresight = float(angle_around_boresight)
+        view.standoff_distance = float(standoff_distance)
+        view.tilt_theta = float(tilt_theta)
+        view.tilt_psi = float(tilt_psi)
+        view._anchor_pose = anchor_pose
+        view._measurable_indices = np.zeros(0, dtype=np.int64)
+        view._uncertainties = np.zeros(0)
+        view._trajectory_distances = np.zeros(0)
+        view._trajectory_for_measurement = None
+        view._trajectory_to_view = None
+        view.scan_line = None
+        view.reversed = False
+        view.metadata = {}
+        return view
+
+    def attach_measurements(self, indices: np.ndarray, uncertainties: np.ndarray, trajectory_distances) -> None:
+        """Like :meth:`set_measurable_surface_point_indices_and_uncertainties` without copying or checking:
+        for arrays (e.g. slices of a batch result) the caller guarantees to be consistent."""
+        self._measurable_indices = indices
+        self._uncertainties = uncertainties
+        self._trajectory_distances = trajectory_distances
+
     # ------------------------------------------------------------------------------------ geometry
     def get_anchor_pose(self) -> np.ndarray:
         """4x4 pose (mm) of the laser_emitter_frame at the anchor."""
@@ -390,12 +428,23 @@ def build_viewpoints(
     if chosen.dtype == bool:
         chosen = np.flatnonzero(chosen)
     standoff = sensor_model.get_optimal_standoff()
+    unit_normals = _unit_rows(normals, "surface normals")
+    samples = candidates.sample_index[chosen]
+    orientations = candidates.orientation_index[chosen]
+    tilt_rows = candidates.tilt_index[chosen]
     views = []
-    for index in chosen.tolist():
-        sample = int(candidates.sample_index[index])
-        orientation = int(candidates.orientation_index[index])
-        tilt = int(candidates.tilt_index[index])
-        view = ViewPoint(points[sample], normals[sample], angles[orientation], standoff, *tilts[tilt])
+    for index, sample, orientation, tilt in zip(
+        chosen.tolist(), samples.tolist(), orientations.tolist(), tilt_rows.tolist(), strict=True
+    ):
+        view = ViewPoint.from_anchor_pose(
+            points[sample],
+            unit_normals[sample],
+            angles[orientation],
+            standoff,
+            tilts[tilt, 0],
+            tilts[tilt, 1],
+            candidates.poses[index],
+        )
         view.metadata = {"candidate": index, "sample": sample, "orientation": orientation, "tilt": tilt}
         views.append(view)
     return views
