@@ -34,15 +34,15 @@ from agiprobot_measurement.mild_robot_model import (
 def reachable_poses(model: MildRobotModel, count: int, rng: np.random.Generator):
     lo, hi = model.pan_limits
     tlo, thi = model.tilt_limits
-    states = []
-    while len(states) < count:
+    chunks, found = [], 0
+    while found < count:
         xy = rng.uniform([-0.5, -0.5], [10.5, 7.5], (count, 2))
         xy = xy[model.map.is_allowed(xy, model.settings.col_thresh)]
         n = len(xy)
-        states.append(np.column_stack([rng.uniform(lo, hi, n), rng.uniform(tlo, thi, n),
+        chunks.append(np.column_stack([rng.uniform(lo, hi, n), rng.uniform(tlo, thi, n),
                                        rng.uniform(0, 2 * np.pi, n), xy]))  # fmt: skip
-        states = [np.vstack(states)]
-    states = states[0][:count]
+        found += n
+    states = np.vstack(chunks)[:count]
     poses = model.camera_poses(states)
     return states, poses[:, :3, 3], Rotation.from_matrix(poses[:, :3, :3]).as_quat()
 

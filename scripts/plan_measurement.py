@@ -215,25 +215,6 @@ class _ProgressLogHandler(logging.Handler):
         self.progress.write(f"{record.levelname.lower()}: {record.getMessage()}")
 
 
-def _timed_mechanics(manager) -> dict:
-    """Accumulate the time of the lazy mechanical verification, which runs inside solve_scp."""
-    spent = {"mechanics": 0.0, "verified": 0}
-    verify = getattr(manager, "_verify_mechanics", None)
-    if verify is None:
-        return spent
-
-    def timed(*args, **kwargs):
-        start = time.perf_counter()
-        try:
-            return verify(*args, **kwargs)
-        finally:
-            spent["mechanics"] += time.perf_counter() - start
-            spent["verified"] += 1
-
-    manager._verify_mechanics = timed
-    return spent
-
-
 def stage_times(manager, mechanics_s: float) -> dict[str, float]:
     t = manager.timings_s
     set_cover_and_mechanics = t.get("set_cover_and_mechanics", 0.0)
@@ -241,7 +222,7 @@ def stage_times(manager, mechanics_s: float) -> dict[str, float]:
         "sampling": t.get("sampling", 0.0),
         "metrology": t.get("anchor_reachability", 0.0) + t.get("metrology", 0.0) + t.get("viewpoint_objects", 0.0),
         "mechanics": mechanics_s,
-        "set cover": max(0.0, set_cover_and_mechanics - mechanics_s),
+        "set cover": manager.timings_s.get("set_cover", max(0.0, set_cover_and_mechanics - mechanics_s)),
         "connection": t.get("connection", 0.0),
     }
 
@@ -352,7 +333,6 @@ def run(args: argparse.Namespace, transform: np.ndarray, progress: StageProgress
     t0 = time.perf_counter()
     station = Station.load(scene=args.scene)
     manager = TrajectoryManager(station, scan_speed_mm_s=args.scan_speed, progress=progress, seed=args.seed)
-    mechanics = _timed_mechanics(manager)
     manager.load_target_mesh(args.part, transform=transform, add_wbk_mirrors=not args.no_mirrors, units=args.units)
     _, views = manager.generate_samples_and_viewpoints(args.density, args.threshold, args.orientations, args.tilt)
     chosen = manager.solve_scp(views, args.solver, time_limit_s=args.time_limit)
@@ -390,7 +370,9 @@ def run(args: argparse.Namespace, transform: np.ndarray, progress: StageProgress
         outputs["summary"] = args.summary
     if args.output is None:
         outputs["plan"] = "not written (give -o FILE)"
-    rows, data = summarise(args, manager, report, stage_times(manager, mechanics["mechanics"]), total_s, outputs)
+    rows, data = summarise(
+        args, manager, report, stage_times(manager, manager.timings_s.get("mechanics", 0.0)), total_s, outputs
+    )
     table = format_table(rows)
     if args.summary is not None:
         if args.summary.suffix.lower() in (".yaml", ".yml"):

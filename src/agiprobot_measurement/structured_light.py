@@ -644,7 +644,7 @@ class StructuredLightScanner:
         shadow_dirs += job.origin - job.projector_world
         origins[:] = job.projector_world
         t_max = np.where(candidate, 1.0 - noise.shadow_epsilon_m / projector_distance, np.float32(-1.0))
-        lit = candidate
+        lit = candidate & ~job.caster.occluded(origins, shadow_dirs, t_max)
 
         albedo = job.albedo[face]
         depth_mm = depth * np.float32(1000.0)

@@ -252,7 +252,8 @@ class TrajectoryManager:
         if self._planner is None:
             from agiprobot_measurement.motion_planning import MotionPlanner
 
-            self._planner = MotionPlanner(self.collision, planner=self.planner_name, seed=self.seed)
+            # OMPL refuses the seed 0 (and says so on every call): seeds count from 1 there
+            self._planner = MotionPlanner(self.collision, planner=self.planner_name, seed=self.seed + 1)
         return self._planner
 
     # ------------------------------------------------------------------------------------------- load
@@ -1099,6 +1100,8 @@ class TrajectoryManager:
         orientations_around_boresight=12,
         viewpoint_tilt_mode="none",
         solver_type="IP_basic",
+        set_cover_time_limit_s=60.0,
+        min_planning_time=0.2,
         **generation,
     ) -> list[ViewPoint]:
         """The whole pipeline on the loaded part: generate, solve the set cover, connect. Returns the ordered
@@ -1107,7 +1110,7 @@ class TrajectoryManager:
         _, views = self.generate_samples_and_viewpoints(
             sampling_density, uncertainty_threshold, orientations_around_boresight, viewpoint_tilt_mode, **generation
         )
-        chosen = self.solve_scp(views, solver_type)
-        ordered = self.connect_viewpoints(chosen)
+        chosen = self.solve_scp(views, solver_type, time_limit_s=set_cover_time_limit_s)
+        ordered = self.connect_viewpoints(chosen, min_planning_time=min_planning_time)
         self.timings_s["total"] = time.perf_counter() - t0
         return ordered
