@@ -52,7 +52,7 @@ EXACT_IK, APPROXIMATED_IK = 1, 2
 # --------------------------------------------------------------------------------------------------- angles
 def wrap_to_pi(angle_rad):
     """Angles mapped to [-pi, pi)."""
-    return (np.asarray(angle_rad) + math.pi) % TWO_PI - math.pi
+    return np.remainder(np.add(angle_rad, math.pi), TWO_PI) - math.pi
 
 
 def wrap_to_2pi(angle_rad):
@@ -546,10 +546,14 @@ def rating_angle_approximation(source_xy_m, target_xy_m, source_rotation_rad, ta
     """ANGLE_APPROXIMATION: 0.6 ** (turn onto the straight line from source to target + turn from it to the target
     heading); a turn in place (positions closer than 1 um) is rated by the turn itself."""
     delta = np.asarray(target_xy_m, dtype=float) - np.asarray(source_xy_m, dtype=float)
-    line = np.arctan2(delta[..., 1], delta[..., 0])
+    return _angle_approximation(delta[..., 0], delta[..., 1], source_rotation_rad, target_rotation_rad)
+
+
+def _angle_approximation(dx, dy, source_rotation_rad, target_rotation_rad):
+    line = np.arctan2(dy, dx)
     via_line = np.abs(wrap_to_pi(source_rotation_rad - line)) + np.abs(wrap_to_pi(target_rotation_rad - line))
     in_place = np.abs(wrap_to_pi(np.asarray(target_rotation_rad) - source_rotation_rad))
-    moving = np.hypot(delta[..., 0], delta[..., 1]) > 1e-6
+    moving = np.hypot(dx, dy) > 1e-6
     return RATING_BASE ** np.where(moving, via_line, in_place)
 
 
@@ -750,16 +754,18 @@ class MildRobotModel:
         """Heuristic rating (``IKAngleRating``) of candidate base poses (..., 2) / (...) reached from ``source``;
         0 where the map does not allow the base position (when the model has a map)."""
         xy = np.asarray(xy_m, dtype=float)
-        rotations = np.asarray(rotations_rad, dtype=float)
+        return self._rate(source, xy[..., 0], xy[..., 1], np.asarray(rotations_rad, dtype=float))
+
+    def _rate(self, source: RobotState, x: np.ndarray, y: np.ndarray, rotations: np.ndarray) -> np.ndarray:
         name = self.settings.ik_angle_rating
         if name == "NAVIGATION_PATH" and self.map is not None:
-            ratings = self._rate_navigation_path(source, xy, rotations)
+            ratings = self._rate_navigation_path(source, np.stack([x, y], -1), rotations)
         elif name in ("ANGLE_APPROXIMATION", "NAVIGATION_PATH"):  # NAVIGATION_PATH without a map: straight line
-            ratings = rating_angle_approximation([source.x, source.y], xy, source.rotation, rotations)
+            ratings = _angle_approximation(x - source.x, y - source.y, source.rotation, rotations)
         else:
             ratings = rating_simple(source.rotation, rotations)
         if self.map is not None:
-            ratings = np.where(self.map.is_allowed(xy, self.settings.col_thresh), ratings, 0.0)
+            ratings = np.where(self.map.is_allowed_xy(x, y, self.settings.col_thresh), ratings, 0.0)
         return ratings
 
     def _rate_navigation_path(self, source: RobotState, xy: np.ndarray, rotations: np.ndarray) -> np.ndarray:
@@ -806,12 +812,12 @@ class MildRobotModel:
         return heading, tilt_c, pan_xy, reachable, clamped, centres, achieved, view
 
     def _base_poses(self, heading: np.ndarray, pan_xy: np.ndarray, pans: np.ndarray):
-        """Base positions (n, k, 2) and rotations (n, k) putting the pan axis at ``pan_xy`` for pans (n, k)."""
+        """Base positions x, y (n, k) and rotations (n, k) putting the pan axis at ``pan_xy`` (n, 2) for pans (n, k)."""
         rotation = heading[:, None] - pans
         c, s = np.cos(rotation), np.sin(rotation)
         bx = pan_xy[:, 0, None] - (self._bp[0] * c - self._bp[1] * s)
         by = pan_xy[:, 1, None] - (self._bp[0] * s + self._bp[1] * c)
-        return np.stack([bx, by], -1), rotation
+        return bx, by, rotation
 
     def _sample_pan(self, source: RobotState, heading, pan_xy, record: bool = False):
         """The original's pan sampling: ``panAngleSamplingStepsPerIteration`` samples spread evenly across a window
@@ -835,10 +841,10 @@ class MildRobotModel:
         for _ in range(self.settings.pan_sampling_max_iterations):
             centre = np.clip(centre, lo + 0.5 * width, hi - 0.5 * width)
             pans = centre[:, None] + width[:, None] * offsets
-            xy, rotation = self._base_poses(heading, pan_xy, pans)
-            ratings = self.rate_base_poses(source, xy, rotation)
+            bx, by, rotation = self._base_poses(heading, pan_xy, pans)
+            ratings = self._rate(source, bx, by, rotation)
             if record:
-                trace.append(np.concatenate([pans[..., None], xy, rotation[..., None], ratings[..., None]], -1))
+                trace.append(np.stack([pans, bx, by, rotation, ratings], -1))
             best = np.argmax(ratings, axis=1)
             rating = ratings[rows, best]
             improved = active & (rating > best_rating)
@@ -870,8 +876,8 @@ class MildRobotModel:
         if reachable.any():
             idx = np.flatnonzero(reachable)
             pan, _, samples = self._sample_pan(source, heading[idx], pan_xy[idx], record)
-            xy, rotation = self._base_poses(heading[idx], pan_xy[idx], pan[:, None])
-            states[idx] = np.stack([pan, tilt[idx], wrap_to_2pi(rotation[:, 0]), xy[:, 0, 0], xy[:, 0, 1]], -1)
+            bx, by, rotation = self._base_poses(heading[idx], pan_xy[idx], pan[:, None])
+            states[idx] = np.stack([pan, tilt[idx], wrap_to_2pi(rotation[:, 0]), bx[:, 0], by[:, 0]], -1)
         deviation = np.where(reachable, angle_between(view, views), np.nan)
         batch = IKBatch(
             states, reachable, deviation, clamped & reachable, centres, np.where(reachable[:, None], achieved, np.nan)

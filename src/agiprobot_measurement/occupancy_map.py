@@ -150,6 +150,8 @@ class OccupancyMap:
         )
         c, s = math.cos(self.origin_yaw_rad), math.sin(self.origin_yaw_rad)
         self._rotation = np.array([[c, -s], [s, c]])
+        # a border of unknown cells lets the IK's hot path clip indices instead of masking points outside the map
+        self._padded_costmap = np.pad(self.costmap, 1, constant_values=UNKNOWN)
 
     # ------------------------------------------------------------------------------------------ loading
     @classmethod
@@ -203,10 +205,17 @@ class OccupancyMap:
     def world_to_cell(self, xy_m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(rows, cols, inside) of points (..., 2) in the map frame."""
         xy = np.asarray(xy_m, dtype=float)
-        local = (xy - self.origin_xy_m) @ self._rotation  # rotate by -yaw
+        return self.cells_of(xy[..., 0], xy[..., 1])
+
+    def cells_of(self, x_m: np.ndarray, y_m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(rows, cols, inside) of points given as separate x and y arrays (the IK's hot path: no stacking)."""
+        dx, dy = np.asarray(x_m, dtype=float) - self.origin_xy_m[0], np.asarray(y_m, dtype=float) - self.origin_xy_m[1]
+        if self.origin_yaw_rad:
+            c, s = self._rotation[0, 0], self._rotation[1, 0]
+            dx, dy = dx * c + dy * s, dy * c - dx * s  # rotate by -yaw
         with np.errstate(invalid="ignore"):
-            cols = np.floor(local[..., 0] / self.resolution_m)
-            rows = np.floor(local[..., 1] / self.resolution_m)
+            cols = np.floor(dx / self.resolution_m)
+            rows = np.floor(dy / self.resolution_m)
         inside = (rows >= 0) & (rows < self.shape[0]) & (cols >= 0) & (cols < self.shape[1])
         rows = np.where(inside, rows, 0).astype(np.intp)
         cols = np.where(inside, cols, 0).astype(np.intp)
@@ -225,7 +234,20 @@ class OccupancyMap:
 
     def is_allowed(self, xy_m: np.ndarray, col_thresh: float) -> np.ndarray:
         """Whether the inflated occupancy at points (..., 2) lies within [0, col_thresh]."""
-        values = self.values_at(xy_m)
+        xy = np.asarray(xy_m, dtype=float)
+        return self.is_allowed_xy(xy[..., 0], xy[..., 1], col_thresh)
+
+    def is_allowed_xy(self, x_m: np.ndarray, y_m: np.ndarray, col_thresh: float) -> np.ndarray:
+        """:meth:`is_allowed` for finite x and y arrays, with as few array operations as possible (the IK rates
+        every pan sample's base position with it)."""
+        dx, dy = x_m - self.origin_xy_m[0], y_m - self.origin_xy_m[1]
+        if self.origin_yaw_rad:
+            c, s = self._rotation[0, 0], self._rotation[1, 0]
+            dx, dy = dx * c + dy * s, dy * c - dx * s
+        height, width = self.shape
+        cols = np.clip(np.floor(dx / self.resolution_m), -1, width).astype(np.intp)
+        rows = np.clip(np.floor(dy / self.resolution_m), -1, height).astype(np.intp)
+        values = self._padded_costmap[rows + 1, cols + 1]
         return (values >= 0) & (values <= col_thresh)
 
     # ------------------------------------------------------------------------------------------ paths

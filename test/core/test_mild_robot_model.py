@@ -293,8 +293,8 @@ def _dense_best_rating(model, source, position, quaternion):
     views = view_directions(np.asarray(quaternion)[None])
     heading, _, pan_xy, *_ = model._exact_geometry(np.asarray(position)[None], views)
     pans = np.linspace(*model.pan_limits, 4001)[None]
-    xy, rotation = model._base_poses(heading, pan_xy, pans)
-    return model.rate_base_poses(source, xy, rotation).max()
+    bx, by, rotation = model._base_poses(heading, pan_xy, pans)
+    return model.rate_base_poses(source, np.stack([bx, by], -1), rotation).max()
 
 
 @pytest.mark.parametrize("rating", ["SIMPLE", "ANGLE_APPROXIMATION"])
