@@ -13,9 +13,9 @@ What is here (the reference's section asr_robot_model_services, see ../shared/re
   closed-form tilt from the tilt axis' constant height and the camera offset so that the camera faces the requested
   view centre from the viewing distance with the least angle deviation (the view azimuth is matched exactly; the
   elevation is whatever the heights force), then the pan sampled over its limits, refined by halving the window
-  around the best sample until the best rating changes less than ``inverseKinematicIterationAccuracy``, each sample
-  rated by a heuristic on the base pose it implies (SIMPLE, ANGLE_APPROXIMATION, NAVIGATION_PATH); no solution when
-  the view centre is too far above or below the camera's reach;
+  around the best sample until the ratings change by less than ``inverseKinematicIterationAccuracy``, each sample
+  rated by a heuristic on the base pose it implies (SIMPLE, ANGLE_APPROXIMATION, NAVIGATION_PATH; 0 where the map
+  does not allow the base); no solution when the view centre is too far above or below the camera's reach;
 - approximated inverse kinematics (``robotModelId: 2``, :meth:`MildRobotModel.approximated_ik`): the original's linear
   programme splitting the remaining azimuth turn between pan and base rotation at least weighted cost
   (:func:`solve_turn_lp`: GLPK through swiglpk as the original, HiGHS, or its closed form); tilt = elevation of the
@@ -28,7 +28,9 @@ What is here (the reference's section asr_robot_model_services, see ../shared/re
 Deliberate differences from the original, each because the original's behaviour was a defect: CalculateCameraPose
 is implemented (it returned zeros); the approximated IK clamps the tilt to its limits and splits the turn from the
 clamped current pan (so pan + rotation always equals the requested azimuth); ANGLE_APPROXIMATION rates a turn in
-place (same position) as the turn itself instead of against a heading of 0; pan samples include the window's ends.
+place (same position) as the turn itself instead of against a heading of 0; pan samples include the window's ends
+and the refinement also continues while the window's samples still differ by more than the accuracy (the original
+stopped when two samples straddling the optimum rated alike).
 """
 
 from __future__ import annotations

@@ -233,9 +233,9 @@ class OccupancyMap:
         return np.where(inside, grid[rows, cols], UNKNOWN).astype(np.int8)
 
     def is_allowed(self, xy_m: np.ndarray, col_thresh: float) -> np.ndarray:
-        """Whether the inflated occupancy at points (..., 2) lies within [0, col_thresh]."""
-        xy = np.asarray(xy_m, dtype=float)
-        return self.is_allowed_xy(xy[..., 0], xy[..., 1], col_thresh)
+        """Whether the inflated occupancy at points (..., 2) lies within [0, col_thresh] (False for NaN points)."""
+        values = self.values_at(xy_m)
+        return (values >= 0) & (values <= col_thresh)
 
     def is_allowed_xy(self, x_m: np.ndarray, y_m: np.ndarray, col_thresh: float) -> np.ndarray:
         """:meth:`is_allowed` for finite x and y arrays, with as few array operations as possible (the IK rates

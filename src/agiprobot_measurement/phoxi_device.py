@@ -196,8 +196,8 @@ class PhoxiDevice:
         geometry = SceneGeometry.concatenate(parts)
         index = self.next_index
         frame = self.scanner.capture(geometry, camera_pose, self.settings, index, RayCaster(geometry))
-        frame.stats["coordinate_space"] = self.coordinate_space
-        frame.stats["output_transform"] = self.output_transform()
+        frame.coordinate_space = self.coordinate_space
+        frame.output_transform = self.output_transform().copy()
         self.next_index += 1
         self.frames[index] = frame
         while len(self.frames) > self.frame_buffer_size:
@@ -306,7 +306,7 @@ class PhoxiDevice:
         comments = [
             f"PhoXi 3D scanner {frame.model} (simulated), frame {frame.index}",
             "units: metres",
-            f"coordinate space: {COORDINATE_SPACES[frame.stats.get('coordinate_space', CAMERA_SPACE)]}",
+            f"coordinate space: {COORDINATE_SPACES[frame.coordinate_space]}",
         ]
         if organized:
             comments.append(f"organized: width {frame.width} height {frame.height} (invalid points are 0 0 0)")
@@ -323,8 +323,7 @@ class PhoxiDevice:
 
 def frame_output(frame: Frame) -> tuple[np.ndarray, np.ndarray]:
     """Points (m) and normals (H, W, 3) float32 of a frame in the coordinate space it was captured in."""
-    transform = frame.stats.get("output_transform")
     points = frame.points_m()
-    if transform is None or np.allclose(transform, np.eye(4)):
+    if np.array_equal(frame.output_transform, np.eye(4)):
         return points, frame.normals
-    return transform_points(points, frame.normals, frame.valid, transform)
+    return transform_points(points, frame.normals, frame.valid, frame.output_transform)

@@ -474,6 +474,9 @@ class Frame:
     camera_pose: np.ndarray  # world <- camera (4x4) the frame was taken from
     model: str = ""
     stats: dict = field(default_factory=dict)
+    #: the PhoXi coordinate space the frame was captured in, and its transform of camera-frame points (p' = T p)
+    coordinate_space: int = 1
+    output_transform: np.ndarray = field(default_factory=lambda: np.eye(4))
 
     @property
     def width(self) -> int:

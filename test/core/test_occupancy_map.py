@@ -97,6 +97,9 @@ def test_positions_allowed_under_the_threshold(tmp_path):
     assert values[4] == UNKNOWN and values[5] == UNKNOWN
     assert grid.is_allowed(points, 40).tolist() == [True, False, False, values[3] <= 40, False, False]
     assert grid.is_allowed(points[3], 100) and not grid.is_allowed(points[3], values[3] - 1)
+    assert not grid.is_allowed(np.array([np.nan, 1.0]), 40)
+    # the IK's fast path agrees with the checked one, also outside the map
+    np.testing.assert_array_equal(grid.is_allowed_xy(points[:, 0], points[:, 1], 40), grid.is_allowed(points, 40))
 
 
 def test_planner_goes_around_a_wall_and_reports_blocked_goals(tmp_path):
