@@ -23,6 +23,8 @@ if [ "$only_rostest" = 0 ]; then
 fi
 
 echo "== rostest =="
+# rostests write bags and pictures here (rosbag record cannot create a missing folder)
+mkdir -p "${ROS_HOME:-$ROOT/.ros_home}/test_artifacts"
 rm -rf "$AGIPROBOT_WS/build/test_results"
 catkin_make -C "$AGIPROBOT_WS" run_tests -DPYTHON_EXECUTABLE="$ROOT/.venv/bin/python3" > "$RESULTS/rostest.log" 2>&1
 grep -E "^\[ROSTEST\]|^\[ROSUNIT\]|SUMMARY|^ \* RESULT|FAILURE|ERROR|^\[Testcase" "$RESULTS/rostest.log" | grep -v "^-- " | head -200
