@@ -60,7 +60,7 @@ def run_seed(args):
     h_coarse_inv = np.linalg.inv(coarse.transform)
     zz = cfg["zigzag"]
     path = zigzag_path(flags, seed=seed, jitter_m=zz["jitter_m"], fractions=tuple(zz["fractions"]))
-    spoiled = set(rng.choice(len(path), int(round(spoil_fraction * len(path))), replace=False).tolist())
+    spoiled = set(rng.choice(len(path), round(spoil_fraction * len(path)), replace=False).tolist())
     acc = cfg["acceptance"]
     for k, p in enumerate(path):
         rotation = tool_rotation(cfg["tool_z_towards_m"], p)
@@ -78,10 +78,12 @@ def run_seed(args):
             plate[:3, 3] = p + rotation[:, 0] * 0.04 + rotation[:, 2] * 0.02
             extra = SceneGeometry.concatenate(
                 [
-                    SceneGeometry.from_trimesh(primitive_mesh("cylinder", radius=0.0315, length=0.004), "d", 0.6)
-                    .transformed(world @ decoy),
-                    SceneGeometry.from_trimesh(primitive_mesh("box", size=(0.05, 0.08, 0.002)), "p", 0.6)
-                    .transformed(world @ plate),
+                    SceneGeometry.from_trimesh(
+                        primitive_mesh("cylinder", radius=0.0315, length=0.004), "d", 0.6
+                    ).transformed(world @ decoy),
+                    SceneGeometry.from_trimesh(primitive_mesh("box", size=(0.05, 0.08, 0.002)), "p", 0.6).transformed(
+                        world @ plate
+                    ),
                 ]
             )
         expected = transform_points(h_coarse_inv, p[None])[0]
@@ -116,8 +118,10 @@ def main(argv=None) -> int:
     parser.add_argument("--spoil", type=float, nargs="+", default=[0.0, 0.2], help="fractions of spoiled frames")
     parser.add_argument("--workers", type=int, default=4)
     args = parser.parse_args(argv)
-    print(f"{'spoiled':>7} {'seed':>4} {'coarse_t_mm':>11} {'coarse_r_deg':>12} {'fine_t_mm':>9} {'fine_r_deg':>10} "
-          f"{'samples':>7} {'rej_frames':>10} {'outliers':>8} {'rms_mm':>7}")
+    print(
+        f"{'spoiled':>7} {'seed':>4} {'coarse_t_mm':>11} {'coarse_r_deg':>12} {'fine_t_mm':>9} {'fine_r_deg':>10} "
+        f"{'samples':>7} {'rej_frames':>10} {'outliers':>8} {'rms_mm':>7}"
+    )
     summary = []
     with ProcessPoolExecutor(args.workers) as pool:
         for spoil in args.spoil:
@@ -127,9 +131,12 @@ def main(argv=None) -> int:
                     print(f"{spoil:7.0%} {seed:4d} failed: {error}")
                     continue
                 rows.append(row)
-                print(f"{spoil:7.0%} {seed:4d} {row['coarse'][0]:11.3f} {row['coarse'][1]:12.4f} {row['fine'][0]:9.3f} "
-                      f"{row['fine'][1]:10.4f} {row['samples']:7d} {row['rejected_frames']:10d} {row['outliers']:8d} "
-                      f"{row['rms_mm']:7.3f}", flush=True)
+                print(
+                    f"{spoil:7.0%} {seed:4d} {row['coarse'][0]:11.3f} {row['coarse'][1]:12.4f} {row['fine'][0]:9.3f} "
+                    f"{row['fine'][1]:10.4f} {row['samples']:7d} {row['rejected_frames']:10d} {row['outliers']:8d} "
+                    f"{row['rms_mm']:7.3f}",
+                    flush=True,
+                )
             summary.append((spoil, rows))
     print("\nsummary over seeds (max / mean): translation error mm, rotation error deg")
     print(f"{'spoiled':>7} {'runs':>4} {'coarse t':>15} {'coarse r':>15} {'fine t':>15} {'fine r':>15}")

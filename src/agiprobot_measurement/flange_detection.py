@@ -223,9 +223,10 @@ def detect_flange(
     centroid, normal = fit_plane(disc)
     basis = plane_basis(normal)
     flat = (disc - centroid) @ basis.T
-    # point spacing: median distance to the 4th neighbour (robust to jittered sampling)
-    spacing = float(np.median(cKDTree(flat).query(flat, k=5)[0][:, 4])) / 1.5
-    edge = boundary_mask(flat, 3.0 * spacing, config.boundary_gap_deg)
+    # outline radius from the point spacing: nearest and 4th-nearest neighbour (grid and jittered sampling)
+    dist = cKDTree(flat).query(flat, k=5)[0]
+    spacing = float(np.median(dist[:, 1]))
+    edge = boundary_mask(flat, max(2.5 * spacing, 2.0 * float(np.median(dist[:, 4]))), config.boundary_gap_deg)
     band = max(config.circle_band_m, 0.5 * spacing)
     circle = fit_circle_ransac(flat[edge], config.radius_m, band, iterations=config.ransac_iterations, seed=config.seed)
     if circle is None or circle.inlier_count < 8:
