@@ -107,6 +107,40 @@ def zigzag_path(
     return np.array(path).reshape(-1, 3)
 
 
+def select_consistent_flags(
+    p_robot_m: np.ndarray, candidates_camera_m: list[list[np.ndarray]], tolerance_m: float = 0.005
+) -> list[int]:
+    """Pick one flange candidate per flag point so that the flag points' pairwise distances agree.
+
+    A rigid transform keeps distances, so |c_i - c_j| (camera) must equal |p_i - p_j| (robot) for the true flange
+    centres; a wrong cluster at one flag point shows up as a mismatch. Every combination is tried (a few candidates
+    per flag point). Returns the chosen index per flag point; CalibrationError naming the flag point when one has no
+    candidate or the best combination still disagrees by more than ``tolerance_m``.
+    """
+    robot = np.asarray(p_robot_m, dtype=float).reshape(-1, 3)
+    if len(candidates_camera_m) != len(robot):
+        raise CalibrationError(f"{len(robot)} flag points but {len(candidates_camera_m)} candidate lists")
+    for i, options in enumerate(candidates_camera_m):
+        if not len(options):
+            raise CalibrationError(f"flag point {i} {robot[i].tolist()}: no flange found in its frame")
+    d_robot = np.linalg.norm(robot[:, None] - robot[None], axis=2)
+    best, best_choice, best_mismatch = math.inf, None, None
+    for choice in itertools.product(*[range(len(o)) for o in candidates_camera_m]):
+        cam = np.array([candidates_camera_m[i][k] for i, k in enumerate(choice)])
+        mismatch = np.abs(np.linalg.norm(cam[:, None] - cam[None], axis=2) - d_robot)
+        score = float(mismatch.max())
+        if score < best:
+            best, best_choice, best_mismatch = score, list(choice), mismatch
+    if best > tolerance_m:
+        worst = int(np.argmax(best_mismatch.sum(axis=1)))  # the point in most of the bad pairs
+        raise CalibrationError(
+            f"the flange positions found at the flag points disagree with the robot's by up to {best * 1000:.1f} mm "
+            f"(> {tolerance_m * 1000:.1f} mm), worst at flag point {worst} {robot[worst].tolist()}: a wrong cluster "
+            "or a flange not fully in view; move that flag point"
+        )
+    return best_choice
+
+
 # ------------------------------------------------------------------------------------------- geometry fits
 def fit_plane(points_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Least-squares plane: (centroid (3,), unit normal (3,)) by SVD."""

@@ -40,6 +40,10 @@ class FlangeDetectorConfig:
     boundary_gap_deg: float = 100.0
     ransac_iterations: int = 200
     min_plane_points: int = 200
+    min_arc_deg: float = 180.0  # the fitted circle's outline points must cover at least this much of it
+    max_outside_fraction: float = 0.05  # of the cluster's points beyond the circle (radius + 3 bands)
+    max_candidates: int = 8  # approximate centres refined per frame at most
+    max_offset_m: float = 0.02  # with an expected centre: farther discs are refused
     seed: int = 0
 
 
@@ -172,51 +176,64 @@ def _disc_score(points_m: np.ndarray, radius_m: float) -> float | None:
     return abs(extent - radius_m) / radius_m
 
 
-def locate_flange(points_m: np.ndarray, config: FlangeDetectorConfig, rng) -> np.ndarray | None:
-    """Approximate flange centre on a voxel-grid copy: planar segments by region growing, the most disc-like one
-    of the flange's size."""
+def flange_candidates(points_m: np.ndarray, config: FlangeDetectorConfig) -> list[np.ndarray]:
+    """Approximate flange centres (metres) on a voxel-grid copy, most likely first.
+
+    Planar segments by region growing: first the disc-like ones of the flange's size (best score first), then
+    fragments no larger than the flange (noise can split the disc into strips; each fragment seeds a full-resolution
+    refinement around it), largest first.
+    """
     voxels = voxel_downsample(points_m, config.voxel_m)
     voxels = statistical_outlier_removal(voxels, config.sor_neighbours, config.sor_std_ratio)
-    min_voxels = max(10, int(0.4 * math.pi * config.radius_m**2 / config.voxel_m**2))
-    candidates = []
+    disc_voxels = math.pi * config.radius_m**2 / config.voxel_m**2
+    min_voxels = max(10, int(0.4 * disc_voxels))
+    discs, fragments = [], []
     for segment in planar_segments(voxels, 1.8 * config.voxel_m):
-        if len(segment) < min_voxels:
+        if len(segment) < max(8, int(0.1 * disc_voxels)):
             continue
-        score = _disc_score(voxels[segment], config.radius_m)
+        points = voxels[segment]
+        centre = points.mean(axis=0)
+        score = _disc_score(points, config.radius_m) if len(segment) >= min_voxels else None
         if score is not None:
-            candidates.append((score, voxels[segment].mean(axis=0)))
-    if not candidates:
-        return None
-    return min(candidates, key=lambda c: c[0])[1]
+            discs.append((score, centre))
+        elif np.percentile(np.linalg.norm(points - centre, axis=1), 98) <= 1.3 * config.radius_m:
+            fragments.append((-len(segment), centre))
+    ordered = [c for _, c in sorted(discs, key=lambda c: c[0])] + [c for _, c in sorted(fragments, key=lambda c: c[0])]
+    unique: list[np.ndarray] = []
+    for centre in ordered:  # one seed per flange-sized neighbourhood
+        if all(np.linalg.norm(centre - u) > 0.5 * config.radius_m for u in unique):
+            unique.append(centre)
+    return unique
 
 
-def detect_flange(
-    cloud_m: np.ndarray,
-    config: FlangeDetectorConfig | None = None,
-    expected_centre_m: np.ndarray | None = None,
-) -> FlangeDetection:
-    """The flange centre in a camera-frame cloud ((H, W, 3) or (N, 3), metres; zeros = invalid)."""
-    config = config or FlangeDetectorConfig()
-    rng = np.random.default_rng(config.seed)
-    points = valid_points(cloud_m)
-    if expected_centre_m is not None:
-        points = points[np.linalg.norm(points - np.asarray(expected_centre_m), axis=1) <= config.crop_radius_m]
-    else:
-        low, high = (np.asarray(v) for v in config.crop_box_m)
-        points = points[((points >= low) & (points <= high)).all(axis=1)]
-    if len(points) < config.min_plane_points:
-        return FlangeDetection(False, reason=f"only {len(points)} points in the crop region: no flange in view")
-    guess = locate_flange(points, config, rng)
-    if guess is None:
-        return FlangeDetection(False, reason="no disc-shaped planar cluster of the flange's size found")
-    local = points[np.linalg.norm(points - guess, axis=1) <= 1.6 * config.radius_m]
+def locate_flange(points_m: np.ndarray, config: FlangeDetectorConfig, rng=None) -> np.ndarray | None:
+    """The most likely approximate flange centre (see :func:`flange_candidates`), None when there is none."""
+    candidates = flange_candidates(points_m, config)
+    return candidates[0] if candidates else None
+
+
+def _angular_coverage_deg(points_2d: np.ndarray, centre: np.ndarray, bins: int = 36) -> float:
+    """How much of the circle around ``centre`` the points cover (deg, in 360 / ``bins`` steps)."""
+    angles = np.arctan2(points_2d[:, 1] - centre[1], points_2d[:, 0] - centre[0])
+    occupied = np.unique(np.floor((angles + math.pi) / (2.0 * math.pi) * bins).astype(int) % bins)
+    return 360.0 * len(occupied) / bins
+
+
+def refine_flange(points_m: np.ndarray, guess_m: np.ndarray, config: FlangeDetectorConfig, rng) -> FlangeDetection:
+    """Full-resolution fit around an approximate centre; ``ok`` only for a disc of the flange's radius.
+
+    Accepted: a planar cluster of at least ``min_plane_points``, a circle of the flange's radius (within 15 %) with
+    at least 8 outline points on it covering at least ``min_arc_deg`` of the circle, and at most
+    ``max_outside_fraction`` of the cluster's points beyond the circle (a plate or strip is not a disc).
+    """
+    local = points_m[np.linalg.norm(points_m - guess_m, axis=1) <= 1.6 * config.radius_m]
     local = statistical_outlier_removal(local, config.sor_neighbours, config.sor_std_ratio)
     inliers = ransac_plane(local, config.plane_band_m, config.ransac_iterations, rng)
     if inliers.sum() < config.min_plane_points:
         return FlangeDetection(False, reason=f"flange plane has only {int(inliers.sum())} points")
     on_plane = local[inliers]
     clusters = euclidean_clusters(on_plane, config.cluster_tolerance_m)
-    cluster = min(clusters[:3], key=lambda c: np.linalg.norm(on_plane[c].mean(axis=0) - guess))
+    cluster = min(clusters[:3], key=lambda c: np.linalg.norm(on_plane[c].mean(axis=0) - guess_m))
     disc = on_plane[cluster]
     if len(disc) < config.min_plane_points:
         return FlangeDetection(False, reason=f"flange cluster has only {len(disc)} points")
@@ -233,6 +250,12 @@ def detect_flange(
         return FlangeDetection(False, reason="no circle of the flange's radius on the cluster's outline")
     if abs(circle.radius_m - config.radius_m) > 0.15 * config.radius_m:
         return FlangeDetection(False, reason=f"circle radius {circle.radius_m * 1000:.1f} mm is not the flange's")
+    arc_deg = _angular_coverage_deg(flat[edge][circle.inliers], circle.centre)
+    if arc_deg < config.min_arc_deg:
+        return FlangeDetection(False, reason=f"the circle's outline covers only {arc_deg:.0f} deg: not a disc")
+    outside = float(np.mean(np.linalg.norm(flat - circle.centre, axis=1) > circle.radius_m + 3.0 * band))
+    if outside > config.max_outside_fraction:
+        return FlangeDetection(False, reason=f"{outside:.0%} of the cluster lies beyond the circle: not a disc")
     centre = centroid + circle.centre @ basis
     if normal @ centre > 0.0:  # the normal towards the camera
         normal = -normal
@@ -243,19 +266,89 @@ def detect_flange(
         radius_m=circle.radius_m,
         plane_points=len(disc),
         circle_inliers=circle.inlier_count,
-        stats={"edge_points": int(edge.sum()), "spacing_m": spacing},
+        stats={"edge_points": int(edge.sum()), "spacing_m": spacing, "arc_deg": arc_deg, "outside": outside},
     )
 
 
+def _crop(cloud_m, config: FlangeDetectorConfig, expected_centre_m) -> np.ndarray:
+    points = valid_points(cloud_m)
+    if expected_centre_m is not None:
+        return points[np.linalg.norm(points - np.asarray(expected_centre_m), axis=1) <= config.crop_radius_m]
+    low, high = (np.asarray(v) for v in config.crop_box_m)
+    return points[((points >= low) & (points <= high)).all(axis=1)]
+
+
+def detect_flange_candidates(
+    cloud_m: np.ndarray,
+    config: FlangeDetectorConfig | None = None,
+    expected_centre_m: np.ndarray | None = None,
+    max_results: int = 1,
+) -> tuple[list[FlangeDetection], str]:
+    """Up to ``max_results`` accepted detections (distinct discs), most likely first, and the reason when none.
+
+    Candidates (:func:`flange_candidates`; nearest ``expected_centre_m`` first when given) are refined one after
+    the other, at most ``max_candidates``; with an expected centre a disc farther than ``max_offset_m`` is refused.
+    """
+    config = config or FlangeDetectorConfig()
+    rng = np.random.default_rng(config.seed)
+    points = _crop(cloud_m, config, expected_centre_m)
+    if len(points) < config.min_plane_points:
+        return [], f"only {len(points)} points in the crop region: no flange in view"
+    candidates = flange_candidates(points, config)
+    if expected_centre_m is not None:
+        expected = np.asarray(expected_centre_m, dtype=float)
+        candidates.sort(key=lambda c: float(np.linalg.norm(c - expected)))
+    if not candidates:
+        return [], "no disc-shaped planar cluster of the flange's size found"
+    found: list[FlangeDetection] = []
+    reasons: list[str] = []
+    for guess in candidates[: config.max_candidates]:
+        det = refine_flange(points, guess, config, rng)
+        if det.ok and expected_centre_m is not None:
+            offset = float(np.linalg.norm(det.centre_m - expected))
+            if offset > config.max_offset_m:
+                det = FlangeDetection(
+                    False,
+                    reason=f"disc {offset * 1000:.0f} mm from the expected centre (> {config.max_offset_m * 1000:.0f})",
+                )
+        if not det.ok:
+            reasons.append(det.reason)
+            continue
+        if any(np.linalg.norm(det.centre_m - f.centre_m) < config.radius_m for f in found):
+            continue
+        det.stats["candidate"] = len(reasons) + len(found)
+        found.append(det)
+        if len(found) >= max_results:
+            break
+    if found:
+        return found, ""
+    return [], f"no flange among {len(reasons)} candidate(s): " + "; ".join(dict.fromkeys(reasons))
+
+
+def detect_flange(
+    cloud_m: np.ndarray,
+    config: FlangeDetectorConfig | None = None,
+    expected_centre_m: np.ndarray | None = None,
+) -> FlangeDetection:
+    """The flange centre in a camera-frame cloud ((H, W, 3) or (N, 3), metres; zeros = invalid)."""
+    found, reason = detect_flange_candidates(cloud_m, config, expected_centre_m, max_results=1)
+    return found[0] if found else FlangeDetection(False, reason=reason)
+
+
 def _detect_job(args):
-    cloud, config, expected = args
-    return detect_flange(cloud, config, expected)
+    cloud, config, expected, max_results = args
+    if max_results is None:
+        return detect_flange(cloud, config, expected)
+    return detect_flange_candidates(cloud, config, expected, max_results)
 
 
-def detect_flanges(clouds, config=None, expected_centres=None, workers: int = 1) -> list[FlangeDetection]:
-    """:func:`detect_flange` over several clouds, on ``workers`` processes when > 1 (the original's use_mp)."""
+def detect_flanges(clouds, config=None, expected_centres=None, workers: int = 1, max_results: int | None = None):
+    """:func:`detect_flange` over several clouds, on ``workers`` processes when > 1 (the original's use_mp).
+
+    With ``max_results``: :func:`detect_flange_candidates` instead, a (detections, reason) pair per cloud.
+    """
     expected_centres = expected_centres if expected_centres is not None else [None] * len(clouds)
-    jobs = [(c, config, e) for c, e in zip(clouds, expected_centres, strict=True)]
+    jobs = [(c, config, e, max_results) for c, e in zip(clouds, expected_centres, strict=True)]
     if workers <= 1 or len(jobs) <= 1:
         return [_detect_job(j) for j in jobs]
     from concurrent.futures import ProcessPoolExecutor

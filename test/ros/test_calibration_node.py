@@ -1,0 +1,156 @@
+#!/usr/bin/env python3
+"""rostest: the calibration node on the simulated station (flange disc, PhoXi rendered at its true pose).
+
+Ordered tests: a missing flag point file gives a clear error and the node keeps serving; the automatic collection
+produces a calibration within 0.5 mm / 0.1 deg of the true camera pose, its YAML and the static tf; a sample with
+no flange in view is rejected with its reason and the session goes on; test mode without a chessboard in the
+scene says so; the manual services (flag points at the robot's pose, samples, remove, save, load) keep the data file
+current sample by sample.
+"""
+
+import unittest
+from pathlib import Path
+
+import numpy as np
+import rospy
+import rostest
+import tf2_ros
+from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
+
+from agiprobot_measurement.calibration import pose_error, read_result_yaml
+from agiprobot_measurement.calibration_sim import nominal_camera_pose
+from agiprobot_measurement.ros_conversions import transform_to_matrix
+from agiprobot_measurement.srv import SetJointState
+
+CAMERA_FRAME = "PhoXi3Dscanner_sensor"
+OUT_OF_VIEW = [0.0, -1.5707, 0.0, -1.5707, 0.0, 0.0]  # named state "up": the flange above the scanner's view
+
+
+def _service(name):
+    rospy.wait_for_service(name, 60.0)
+    return rospy.ServiceProxy(name, Trigger)
+
+
+class CalibrationNodeTest(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        rospy.init_node("test_calibration_node")
+        cls.output_dir = Path(rospy.get_param("~output_dir"))
+        cls.run_collection = _service("/calibration/run")
+        cls.take_sample = _service("/calibration/take_sample")
+        cls.list_samples = _service("/calibration/list_samples")
+        cls.compute_fine = _service("/calibration/compute_fine")
+        cls.tf_buffer = tf2_ros.Buffer()
+        cls.tf_listener = tf2_ros.TransformListener(cls.tf_buffer)
+
+    def test_1_missing_flag_file_is_a_clear_error(self):
+        original = rospy.get_param("/calibration/flag_points_file")
+        rospy.set_param("/calibration/flag_points_file", "/nonexistent/flags.txt")
+        try:
+            response = self.run_collection()
+        finally:
+            rospy.set_param("/calibration/flag_points_file", original)
+        self.assertFalse(response.success)
+        self.assertIn("/nonexistent/flags.txt", response.message)
+        self.assertIn("not found", response.message)
+        self.assertTrue(self.list_samples().success, "the node keeps serving")
+
+    def test_2_automatic_collection_is_accurate(self):
+        response = self.run_collection()
+        self.assertTrue(response.success, response.message)
+        result_file = self.output_dir / "calibration_result.yaml"
+        self.assertTrue(result_file.is_file())
+        self.assertTrue((self.output_dir / "calibration_data.txt").is_file())
+        estimate = read_result_yaml(result_file)
+        world_from_base = transform_to_matrix(
+            self.tf_buffer.lookup_transform("world", "base_link", rospy.Time(0), rospy.Duration(10.0))
+        )
+        truth = np.linalg.inv(world_from_base) @ nominal_camera_pose()
+        t_mm, r_deg = pose_error(estimate, truth)
+        rospy.loginfo("calibration error: %.3f mm, %.4f deg (%s)", t_mm, r_deg, response.message)
+        self.assertLess(t_mm, 0.5, response.message)
+        self.assertLess(r_deg, 0.1, response.message)
+        published = transform_to_matrix(
+            self.tf_buffer.lookup_transform("base_link", CAMERA_FRAME, rospy.Time(0), rospy.Duration(10.0))
+        )
+        np.testing.assert_allclose(published, estimate, atol=1e-6)
+
+    def test_3_no_flange_in_view_is_rejected_and_collection_goes_on(self):
+        set_state = rospy.ServiceProxy("/robot_sim/set_joint_state", SetJointState)
+        before = self.list_samples().message.count("path")
+        placed = set_state(positions=[], named_state="up")
+        self.assertTrue(placed.success, placed.message)
+        deadline = rospy.Time.now() + rospy.Duration(10.0)
+        while rospy.Time.now() < deadline:  # joint states and tf of the new pose are out
+            state = rospy.wait_for_message("/joint_states", JointState, 5.0)
+            if np.allclose(state.position, OUT_OF_VIEW, atol=1e-3):
+                break
+        rospy.sleep(0.5)
+        response = self.take_sample()
+        self.assertFalse(response.success, response.message)
+        self.assertIn("rejected", response.message)
+        listing = self.list_samples().message
+        self.assertIn("rejected sample", listing)
+        self.assertEqual(listing.count(" path "), before)
+        self.assertTrue(self.compute_fine().success, "the session goes on after a rejected sample")
+
+    def test_4_test_mode_without_chessboard_is_a_clear_error(self):
+        rospy.set_param("/calibration/mode", "test")
+        try:
+            response = self.run_collection()
+        finally:
+            rospy.set_param("/calibration/mode", "cal_fine")
+        self.assertFalse(response.success)
+        self.assertIn("8 x 11 inner corners", response.message)
+
+    def _place(self, positions):
+        set_state = rospy.ServiceProxy("/robot_sim/set_joint_state", SetJointState)
+        placed = set_state(positions=list(positions), named_state="")
+        self.assertTrue(placed.success, placed.message)
+        deadline = rospy.Time.now() + rospy.Duration(10.0)
+        while rospy.Time.now() < deadline:
+            state = rospy.wait_for_message("/joint_states", JointState, 5.0)
+            if np.allclose(state.position, positions, atol=1e-3):
+                break
+        rospy.sleep(0.5)  # tf of the new pose reaches the camera
+
+    def test_5_manual_flag_points_samples_save_and_load(self):
+        from agiprobot_measurement.calibration import read_data_file, read_flag_points
+        from agiprobot_measurement.calibration_sim import load_calibration_config, tool_rotation
+        from agiprobot_measurement.ik import make_ik_solver
+        from agiprobot_measurement.kinematics import KinematicModel
+        from agiprobot_measurement.station import Station
+
+        station = Station.load()
+        model = KinematicModel.from_station(station, tip_frame="tool0", base_frame="base_link")
+        ik = make_ik_solver(model, station.robot)
+        config = load_calibration_config()
+        self.assertTrue(_service("/calibration/clear")().success)
+        add_flag = _service("/calibration/add_flag_point")
+        seed = np.array([0.0, -1.5707, 1.5707, -1.5707, -1.5707, 0.0])
+        for p in read_flag_points(config["flag_points_file"]):
+            pose = np.eye(4)
+            pose[:3, :3], pose[:3, 3] = tool_rotation(config["tool_z_towards_m"], p), p
+            q, ok = ik.solve_nearest(pose, seed)
+            self.assertTrue(bool(np.all(ok)))
+            self._place(np.asarray(q).reshape(-1))
+            response = add_flag()
+            self.assertTrue(response.success, response.message)
+        self.assertIn("4 flag samples stored", response.message)
+        response = _service("/calibration/compute_coarse")()
+        self.assertTrue(response.success, response.message)
+        data_file = self.output_dir / "calibration_data.txt"
+        self.assertEqual(len(read_data_file(data_file).samples), 4)  # written as the samples came
+        self.assertTrue(_service("/calibration/take_sample")().success)  # at the last flag point: accepted
+        self.assertEqual(len(read_data_file(data_file).samples), 5)
+        self.assertTrue(_service("/calibration/remove_sample")().success)
+        self.assertEqual(len(read_data_file(data_file).samples), 4)
+        self.assertTrue(_service("/calibration/save_samples")().success)
+        response = _service("/calibration/load_samples")()
+        self.assertTrue(response.success, response.message)
+        self.assertIn("4 samples", response.message)
+
+
+if __name__ == "__main__":
+    rostest.rosrun("agiprobot_measurement", "calibration_node", CalibrationNodeTest)
