@@ -27,21 +27,31 @@ def load_calibration_config(path: str | Path | None = None) -> dict:
 
 
 def tool_rotation(z_towards_m: np.ndarray, position_m: np.ndarray) -> np.ndarray:
-    """Rotation (3x3) whose z axis points from ``position_m`` towards ``z_towards_m`` (x kept horizontal)."""
+    """Rotation (3x3) whose z axis points from ``position_m`` towards ``z_towards_m`` (x kept horizontal; for a
+    vertical z, x is the frame's x axis)."""
     z = np.asarray(z_towards_m, dtype=float) - np.asarray(position_m, dtype=float)
-    z /= np.linalg.norm(z)
+    length = np.linalg.norm(z)
+    if not length > 1e-9:
+        raise ValueError("tool_rotation: the point to face coincides with the position")
+    z /= length
     x = np.cross([0.0, 0.0, 1.0], z)
+    if np.linalg.norm(x) < 1e-6:  # straight up or down: no horizontal direction is singled out
+        x = np.array([1.0, 0.0, 0.0]) - z[0] * z
     x /= np.linalg.norm(x)
     return np.column_stack([x, np.cross(z, x), z])
 
 
-def flange_station_urdf() -> str:
-    """The station URDF with ``tool:=flange_disc`` (xacro in-process)."""
+def flange_station_urdf(scene: str | Path | None = None) -> str:
+    """The station URDF with ``tool:=flange_disc`` (xacro in-process); ``scene``: a scene file (default
+    config/scene.yaml) for the robot's mounting."""
     import xacro
 
     from agiprobot_measurement.station import URDF_DIR
 
-    return xacro.process_file(str(URDF_DIR / "station.urdf.xacro"), mappings={"tool": "flange_disc"}).toprettyxml()
+    mappings = {"tool": "flange_disc"}
+    if scene:
+        mappings["scene"] = str(Path(scene).resolve())
+    return xacro.process_file(str(URDF_DIR / "station.urdf.xacro"), mappings=mappings).toprettyxml()
 
 
 @dataclass
@@ -51,6 +61,7 @@ class SimulatedStation:
     camera_pose_world: np.ndarray
     model_name: str = "L"
     noise_seed: int = 0
+    scene_path: str | Path | None = None  # None: config/scene.yaml
 
     def __post_init__(self):
         from agiprobot_measurement.ik import make_ik_solver
@@ -64,11 +75,11 @@ class SimulatedStation:
         )
         from agiprobot_measurement.urdf_model import UrdfModel
 
-        self.station = Station.load()
+        self.station = Station.load(scene=self.scene_path)
         self.kinematics = KinematicModel.from_station(self.station, tip_frame="tool0", base_frame="base_link")
         self.world_kinematics = KinematicModel.from_station(self.station, tip_frame="tool0", base_frame="world")
         self.ik = make_ik_solver(self.kinematics, self.station.robot)
-        self.urdf = UrdfModel(flange_station_urdf())
+        self.urdf = UrdfModel(flange_station_urdf(self.scene_path))
         self.robot = RobotGeometry(self.urdf)
         self.scene = scene_geometry(self.station.scene, exclude_groups=("wbk_mirrors",))
         self.scanner = StructuredLightScanner(load_scanner_model(self.model_name))

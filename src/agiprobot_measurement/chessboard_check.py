@@ -26,19 +26,18 @@ def chessboard_corners_board(inner_corners=(8, 11), square_m: float = 0.03) -> n
     return np.column_stack([uu.ravel(), vv.ravel(), np.zeros(uu.size)])
 
 
-def chessboard_geometry(board_pose: np.ndarray, inner_corners=(8, 11), square_m: float = 0.03):
+def chessboard_geometry(board_pose: np.ndarray, inner_corners=(8, 11), square_m: float = 0.03, thickness_m=0.003):
     """SceneGeometry (frame of ``board_pose``'s parent) of a chessboard: (rows+1) x (cols+1) squares of alternating
     albedo, printed (0.1 mm) on a white backing board with a one-square margin (the quiet zone OpenCV needs)."""
+    from agiprobot_measurement.station import CHESSBOARD_MARGIN_SQUARES
     from agiprobot_measurement.structured_light import SceneGeometry, primitive_mesh
 
     rows, cols = inner_corners
-    parts = []
+    border = 2 * (CHESSBOARD_MARGIN_SQUARES + 1)
     backing = np.eye(4)
-    backing[2, 3] = -0.001  # its face at z = 0: the corners' plane
-    size = ((cols + 3) * square_m, (rows + 3) * square_m, 0.002)
-    parts.append(
-        SceneGeometry.from_trimesh(primitive_mesh("box", size=size), "board", WHITE_ALBEDO).transformed(backing)
-    )
+    backing[2, 3] = -thickness_m / 2.0  # its face at z = 0: the corners' plane
+    size = ((cols - 1 + border) * square_m, (rows - 1 + border) * square_m, thickness_m)
+    parts = [SceneGeometry.from_trimesh(primitive_mesh("box", size=size), "board", WHITE_ALBEDO).transformed(backing)]
     for i in range(rows + 1):
         for j in range(cols + 1):
             if (i + j) % 2:
@@ -48,6 +47,21 @@ def chessboard_geometry(board_pose: np.ndarray, inner_corners=(8, 11), square_m:
             mesh = primitive_mesh("box", size=(square_m, square_m, 0.0002))  # printed: 0.1 mm proud
             parts.append(SceneGeometry.from_trimesh(mesh, "square", BLACK_ALBEDO).transformed(square))
     return SceneGeometry.concatenate(parts).transformed(np.asarray(board_pose, dtype=float))
+
+
+def scene_chessboards(scene) -> list:
+    """The chessboard objects of a station scene (station.Scene)."""
+    return [obj for obj in scene.objects if obj.type == "chessboard"]
+
+
+def scene_chessboard_geometry(board) -> object:
+    """SceneGeometry of a scene file's chessboard object (station.SceneObject of type chessboard)."""
+    return chessboard_geometry(board.pose, board.inner_corners, board.square_m, board.thickness_m)
+
+
+def scene_chessboard_corners(board) -> np.ndarray:
+    """True inner corners (N, 3) of a scene file's chessboard object in the scene frame (metres)."""
+    return transform_points(board.pose, chessboard_corners_board(board.inner_corners, board.square_m))
 
 
 def detect_corners(texture: np.ndarray, inner_corners=(8, 11)) -> np.ndarray:

@@ -424,8 +424,8 @@ class CollisionChecker:
 
     def add_object(self, obstacle: SceneObject) -> None:
         """Add a :class:`~agiprobot_measurement.station.SceneObject` from a scene file."""
-        if obstacle.type == "box":
-            self.add_box(obstacle.name, obstacle.size_m, obstacle.pose)
+        if obstacle.type in ("box", "chessboard"):
+            self.add_box(obstacle.name, *obstacle.solid_box())
         elif obstacle.type == "cylinder":
             self.add_cylinder(obstacle.name, obstacle.radius_m, obstacle.length_m, obstacle.pose)
         elif obstacle.type == "sphere":

@@ -341,3 +341,55 @@ class MotionPlanner:
         return result(
             False, [], f"no path found by {name} in {spent:.2f} s ({attempts} attempt(s)): {detail}", attempts
         )
+
+
+def collision_free_trajectory(
+    start,
+    goal,
+    limits,
+    checker: CollisionChecker,
+    planner=None,
+    velocity_scaling: float = 1.0,
+    planning_time_s: float = 0.2,
+    attempts: int = 3,
+    max_step_rad: float = 0.02,
+):
+    """Collision-free, time-parameterised joint trajectory (rad, s) from ``start`` to ``goal``, or None.
+
+    The straight joint move when every state on it (at ``max_step_rad``) is free: a synchronised point-to-point
+    motion, time-optimal for that path. Otherwise ``planner`` (when given) plans around the obstacles, with
+    ``attempts`` tries, each with twice the previous time budget; its path is time-parameterised within the
+    limits (scaled by ``velocity_scaling``) and the sampled trajectory is checked once more. ``planner``: a
+    :class:`MotionPlanner`, or a function returning one (called only when the straight move is blocked).
+    """
+    from agiprobot_measurement.point_to_point import point_to_point
+    from agiprobot_measurement.time_parameterization import time_optimal_trajectory
+    from agiprobot_measurement.trajectory import JointTrajectory
+
+    start = np.asarray(start, dtype=float)
+    goal = np.asarray(goal, dtype=float)
+    if np.abs(goal - start).max() < 1e-9:
+        return JointTrajectory(list(limits.names), [0.0], start[None], np.zeros((1, len(start))))
+    steps = max(2, int(np.ceil(np.abs(goal - start).max() / max_step_rad)) + 1)
+    if checker.check_states(np.linspace(start, goal, steps)).all():
+        return point_to_point(start, goal, limits, velocity_scaling, velocity_scaling)
+    if callable(planner):
+        planner = planner()
+    if planner is None:
+        return None
+    budget = max(float(planning_time_s), 0.05)
+    for _ in range(attempts):
+        result = planner.plan(start, goal, time_budget_s=budget)
+        if result.success:
+            trajectory = time_optimal_trajectory(
+                result.path,
+                limits,
+                velocity_scaling_factor=velocity_scaling,
+                acceleration_scaling_factor=velocity_scaling,
+                max_waypoint_step_rad=0.01,
+            )
+            samples, _, _ = trajectory.sample(trajectory.dense_times(step_s=0.02, per_segment=2))
+            if checker.check_states(samples).all():
+                return trajectory
+        budget *= 2.0
+    return None

@@ -19,6 +19,30 @@ def pose_msg(matrix: np.ndarray) -> Pose:
     return pose
 
 
+def _chessboard_squares(board, frame_id: str, namespace: str, marker_id: int) -> Marker:
+    """The dark squares of a chessboard object as one CUBE_LIST in the board frame (printed on its face)."""
+    from geometry_msgs.msg import Point
+
+    rows, cols = board.inner_corners
+    marker = Marker()
+    marker.header.frame_id = frame_id
+    marker.ns = namespace
+    marker.id = marker_id
+    marker.action = Marker.ADD
+    marker.type = Marker.CUBE_LIST
+    marker.pose = pose_msg(board.pose)
+    marker.scale.x = marker.scale.y = board.square_m
+    marker.scale.z = 0.0004
+    marker.color.r = marker.color.g = marker.color.b = 0.05
+    marker.color.a = 1.0
+    for i in range(rows + 1):
+        for j in range(cols + 1):
+            if (i + j) % 2 == 0:
+                x, y = (j - cols / 2.0) * board.square_m, (i - rows / 2.0) * board.square_m
+                marker.points.append(Point(x=x, y=y, z=0.0002))
+    return marker
+
+
 def scene_marker_array(scene: Scene, namespace: str = "scene") -> MarkerArray:
     markers = MarkerArray()
     for i, obj in enumerate(scene.objects):
@@ -29,9 +53,13 @@ def scene_marker_array(scene: Scene, namespace: str = "scene") -> MarkerArray:
         marker.action = Marker.ADD
         marker.pose = pose_msg(obj.pose)
         marker.color.r, marker.color.g, marker.color.b, marker.color.a = obj.color_rgba
-        if obj.type == "box":
+        if obj.type in ("box", "chessboard"):
+            size, centre = obj.solid_box()
             marker.type = Marker.CUBE
-            marker.scale.x, marker.scale.y, marker.scale.z = (float(v) for v in obj.size_m)
+            marker.pose = pose_msg(centre)
+            marker.scale.x, marker.scale.y, marker.scale.z = (float(v) for v in size)
+            if obj.type == "chessboard":
+                markers.markers.append(_chessboard_squares(obj, scene.frame_id, f"{namespace}_chessboard", i))
         elif obj.type == "cylinder":
             marker.type = Marker.CYLINDER
             marker.scale.x = marker.scale.y = 2.0 * obj.radius_m

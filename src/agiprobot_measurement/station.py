@@ -238,7 +238,10 @@ SCENE_OBJECT_TYPES = {
     "cylinder": ("radius_m", "length_m"),
     "sphere": ("radius_m",),
     "mesh": (),
+    # a printed calibration chessboard on a flat backing board: pose = centre of the printed face, z out of it
+    "chessboard": ("inner_corners", "square_m"),
 }
+CHESSBOARD_MARGIN_SQUARES = 1  # white border around the squares (the quiet zone OpenCV's detector needs)
 
 
 @dataclass(frozen=True)
@@ -256,6 +259,21 @@ class SceneObject:
     color_rgba: tuple[float, float, float, float] = (0.6, 0.6, 0.6, 1.0)
     #: optional group name, so a set of obstacles can be switched off together (e.g. ``wbk_mirrors``)
     group: str | None = None
+    #: chessboard: inner corners (rows, columns), square edge (m), backing board thickness (m)
+    inner_corners: tuple[int, int] | None = None
+    square_m: float | None = None
+    thickness_m: float | None = None
+
+    def solid_box(self) -> tuple[np.ndarray, np.ndarray]:
+        """Edge lengths (m) and centre pose (4x4) of the solid of a box or a chessboard's backing board (its
+        printed face is the chessboard's pose, the board lies behind it)."""
+        if self.type == "box":
+            return np.asarray(self.size_m, dtype=float), self.pose
+        if self.type == "chessboard":
+            behind = np.eye(4)
+            behind[2, 3] = -self.thickness_m / 2.0
+            return np.asarray(self.size_m, dtype=float), self.pose @ behind
+        raise ValueError(f"scene object '{self.name}' ({self.type}) is not box-shaped")
 
 
 @dataclass(frozen=True)
@@ -322,6 +340,28 @@ def _pose_of(entry: dict, where: str) -> np.ndarray:
     return pose_matrix(xyz, rpy)
 
 
+def _chessboard(entry: dict, where: str) -> dict:
+    corners = entry["inner_corners"]
+    if (
+        not isinstance(corners, list)
+        or len(corners) != 2
+        or not all(isinstance(v, int) and not isinstance(v, bool) and v >= 2 for v in corners)
+    ):
+        raise ConfigError(f"{where}.inner_corners: expected [rows, columns], integers >= 2, got {corners!r}")
+    square = _positive(entry["square_m"], f"{where}.square_m")
+    if square > 0.5:
+        raise ConfigError(f"{where}.square_m: {square} m per square; the unit is metres (0.03 = 30 mm)")
+    thickness = _positive(entry.get("thickness_m", 0.003), f"{where}.thickness_m")
+    border = 2 * (CHESSBOARD_MARGIN_SQUARES + 1)  # the outer squares plus the white margin on each side
+    rows, cols = corners
+    return {
+        "inner_corners": (rows, cols),
+        "square_m": square,
+        "thickness_m": thickness,
+        "size_m": np.array([(cols - 1 + border) * square, (rows - 1 + border) * square, thickness]),
+    }
+
+
 def load_scene(path: str | Path | None = None) -> Scene:
     """Read a scene file (see ``config/scene.yaml``). Errors name the file and the bad key."""
     path = Path(path) if path else CONFIG_DIR / "scene.yaml"
@@ -368,6 +408,8 @@ def load_scene(path: str | Path | None = None) -> Scene:
         if kind == "mesh":
             kwargs["mesh"] = _resolve_path(_require(entry, "mesh", here), f"{here}.mesh", path.parent)
             kwargs["mesh_scale"] = _units(entry.get("units", "m"), f"{here}.units")
+        if kind == "chessboard":
+            kwargs.update(_chessboard(entry, here))
         objects.append(
             SceneObject(
                 name=str(name),

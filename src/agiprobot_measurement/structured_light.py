@@ -319,6 +319,11 @@ def scene_geometry(scene: Scene, exclude_groups: tuple[str, ...] = ()) -> SceneG
     for obj in scene.objects:
         if obj.group is not None and obj.group in exclude_groups:
             continue
+        if obj.type == "chessboard":
+            from agiprobot_measurement.chessboard_check import scene_chessboard_geometry
+
+            parts.append(scene_chessboard_geometry(obj))
+            continue
         if obj.type == "mesh":
             mesh = _load_mesh(obj.mesh, obj.mesh_scale)
         else:

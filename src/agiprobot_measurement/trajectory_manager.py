@@ -42,11 +42,10 @@ from agiprobot_measurement.ik import make_ik_solver
 from agiprobot_measurement.kinematics import KinematicModel
 from agiprobot_measurement.part_loading import LoadedPart, SurfaceSamples, load_part
 from agiprobot_measurement.plan_io import PlanSegment
-from agiprobot_measurement.point_to_point import point_to_point
 from agiprobot_measurement.sensor_model import MeasurabilityResult, SensorModel
 from agiprobot_measurement.set_cover import SOLVER_TYPES, SetCoverResult, solve_set_cover
 from agiprobot_measurement.station import ConfigError, Station
-from agiprobot_measurement.time_parameterization import constant_speed_scan_trajectory, time_optimal_trajectory
+from agiprobot_measurement.time_parameterization import constant_speed_scan_trajectory
 from agiprobot_measurement.trajectory import JointTrajectory, check_trajectory
 from agiprobot_measurement.viewpoint import (
     TILT_MODES,
@@ -796,31 +795,23 @@ class TrajectoryManager:
         return matrix, durations
 
     # ----------------------------------------------------------------------------------- connection
-    def _straight_is_free(self, start: np.ndarray, goal: np.ndarray, max_step_rad: float = 0.02) -> bool:
-        steps = max(2, int(np.ceil(np.abs(goal - start).max() / max_step_rad)) + 1)
-        states = np.linspace(start, goal, steps)
-        return bool(self.collision.check_states(states).all())
-
     def _connect(self, start: np.ndarray, goal: np.ndarray, planning_time_s: float = 0.2, attempts: int = 3):
         """Collision-free, time-parameterised joint trajectory from ``start`` to ``goal``, or None.
 
         The straight joint move when it is free (exactly time-optimal), else OMPL with a bounded number of
         attempts, each with twice the previous time budget.
         """
-        if np.abs(goal - start).max() < 1e-9:
-            return JointTrajectory(list(self.limits.names), [0.0], start[None], np.zeros((1, len(start))))
-        if self._straight_is_free(start, goal):
-            return point_to_point(start, goal, self.limits)
-        budget = max(float(planning_time_s), 0.05)
-        for _ in range(attempts):
-            result = self.planner.plan(start, goal, time_budget_s=budget)
-            if result.success:
-                trajectory = time_optimal_trajectory(result.path, self.limits, max_waypoint_step_rad=0.01)
-                samples, _, _ = trajectory.sample(trajectory.dense_times(step_s=0.02, per_segment=2))
-                if self.collision.check_states(samples).all():
-                    return trajectory
-            budget *= 2.0
-        return None
+        from agiprobot_measurement.motion_planning import collision_free_trajectory
+
+        return collision_free_trajectory(
+            start,
+            goal,
+            self.limits,
+            self.collision,
+            lambda: self.planner,  # OMPL is set up only when a straight move is blocked
+            planning_time_s=planning_time_s,
+            attempts=attempts,
+        )
 
     def connect_viewpoints(self, unordered_viewpoints, min_planning_time=0.2):
         """Order the views for a fast execution and connect them (greedy by connection time from the current

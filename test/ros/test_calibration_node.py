@@ -3,8 +3,9 @@
 
 Ordered tests: a missing flag point file gives a clear error and the node keeps serving; the automatic collection
 produces a calibration within 0.5 mm / 0.1 deg of the true camera pose, its YAML and the static tf; a sample with
-no flange in view is rejected with its reason and the session goes on; test mode without a chessboard in the
-scene says so; the manual services (flag points at the robot's pose, samples, remove, save, load) keep the data file
+no flange in view is rejected with its reason and the session goes on; test mode finds the chessboard of the
+calibration scene, moves the flange to each of its 88 corners and reports the positioning error per corner; the
+manual services (flag points at the robot's pose, samples, remove, save, load) keep the data file
 current sample by sample.
 """
 
@@ -95,14 +96,33 @@ class CalibrationNodeTest(unittest.TestCase):
         self.assertEqual(listing.count(" path "), before)
         self.assertTrue(self.compute_fine().success, "the session goes on after a rejected sample")
 
-    def test_4_test_mode_without_chessboard_is_a_clear_error(self):
+    def test_4_test_mode_moves_to_every_corner(self):
+        import yaml
+
         rospy.set_param("/calibration/mode", "test")
         try:
             response = self.run_collection()
         finally:
             rospy.set_param("/calibration/mode", "cal_fine")
-        self.assertFalse(response.success)
-        self.assertIn("8 x 11 inner corners", response.message)
+        self.assertTrue(response.success, response.message)
+        self.assertIn("positioning error against the true corners", response.message)
+        report = yaml.safe_load((self.output_dir / "test_result.yaml").read_text())
+        summary, corners = report["summary"], report["corners"]
+        rospy.loginfo("test mode: %s", summary)
+        self.assertEqual(summary["corners_detected"], 88)
+        self.assertEqual(summary["corners_reached"], 88, [c.get("error") for c in corners if "error" in c])
+        self.assertEqual(sorted(c["corner"] for c in corners), list(range(88)))
+        errors = np.array([c["positioning_error_mm"] for c in corners])
+        self.assertLess(errors.max(), 1.0, summary)  # calibration + corner detection, mm
+        self.assertAlmostEqual(summary["positioning_error_max_mm"], errors.max(), places=6)
+        # the flange really went there: 20 mm above the board, spread over its 300 x 210 mm of corners
+        reached = np.array([c["reached_m"] for c in corners])
+        targets = np.array([c["target_m"] for c in corners])
+        self.assertLess(np.abs(reached - targets).max(), 1e-4)
+        self.assertGreater(np.ptp(reached[:, 0]) + np.ptp(reached[:, 1]), 0.45)
+        # and came back out of the camera's view
+        state = rospy.wait_for_message("/joint_states", JointState, 5.0)
+        np.testing.assert_allclose(state.position, OUT_OF_VIEW, atol=1e-3)
 
     def _place(self, positions):
         set_state = rospy.ServiceProxy("/robot_sim/set_joint_state", SetJointState)
