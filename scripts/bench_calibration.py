@@ -12,8 +12,9 @@ of the flange's size sits 8 cm beside it: a wrong cluster); the clean frames are
     scripts/bench_calibration.py                          # 20 seeds, 20 % spoiled, 2 workers
     scripts/bench_calibration.py --seeds 3 --workers 4 --fractions 0.5
 
-Test mode (--no-chessboard skips it): a chessboard (8 x 11 inner corners) 1 m in front of the camera, its corners
-found in the texture image (OpenCV), taken to 3D through the organised cloud and transformed with the fine
+The station is that of launch/calibration.launch (config/calibration_scene.yaml: the chessboard lies on the table in
+every frame). Test mode (--no-chessboard skips it): the chessboard's 8 x 11 inner corners found in the texture image
+(OpenCV) with the robot out of view, taken to 3D through the organised cloud and transformed with the fine
 calibration; the positioning error per corner against the true corners (the simulated robot reaches any target
 exactly, so this is the error of moving the tip to the corner).
 
@@ -52,30 +53,22 @@ def _spoiler(sim, p, rotation):
 
 
 def chessboard_test(sim, h_base_camera, cfg):
-    """Test mode: a chessboard 1 m in front of the nominal camera (robot out of view), its corners found in the
-    texture, taken to 3D and transformed with the calibration; positioning error per corner (mm) against the truth."""
-    from scipy.spatial.transform import Rotation
-
+    """Test mode: the chessboard of config/calibration_scene.yaml (on the table, 1.6 m from the camera) seen with the
+    robot out of view, its corners found in the texture, taken to 3D and transformed with the calibration; the
+    positioning error per corner (mm) against the true corners."""
     from agiprobot_measurement.calibration import transform_points
-    from agiprobot_measurement.calibration_sim import nominal_camera_pose
     from agiprobot_measurement.chessboard_check import (
-        chessboard_corners_board,
-        chessboard_geometry,
         corner_points,
         detect_corners,
         positioning_errors_mm,
+        scene_chessboard_corners,
+        scene_chessboards,
     )
 
-    board = cfg.get("chessboard", {}) or {}
-    inner, square = tuple(board.get("inner_corners", (8, 11))), float(board.get("square_m", 0.03))
-    in_camera = np.eye(4)
-    in_camera[:3, :3] = Rotation.from_euler("xyz", [np.pi + 0.3, 0.0, 0.1]).as_matrix()
-    in_camera[:3, 3] = [0.0, 0.0, 1.0]
-    board_world = nominal_camera_pose() @ in_camera
-    up = np.array([0.0, -1.5707, 0.0, -1.5707, 0.0, 0.0])
-    frame = sim.capture(up, 999, chessboard_geometry(board_world, inner, square))
-    points = corner_points(frame.points_m(), detect_corners(frame.texture, inner))
-    truth = transform_points(np.linalg.inv(sim.world_from_base) @ board_world, chessboard_corners_board(inner, square))
+    (board,) = scene_chessboards(sim.station.scene)
+    frame = sim.capture(sim.station.named_states["up"], 999)
+    points = corner_points(frame.points_m(), detect_corners(frame.texture, board.inner_corners))
+    truth = transform_points(np.linalg.inv(sim.world_from_base), scene_chessboard_corners(board))
     return positioning_errors_mm(h_base_camera, points, truth)
 
 
@@ -91,10 +84,15 @@ def run_seed(args):
         tool_rotation,
     )
     from agiprobot_measurement.flange_detection import detect_flange, detect_flange_candidates
+    from agiprobot_measurement.station import CONFIG_DIR
 
     started = time.monotonic()
     rng = np.random.default_rng(1000 + seed)
-    sim = SimulatedStation(perturbed_pose(nominal_camera_pose(), rng, 0.05, np.radians(3.0)), noise_seed=seed)
+    sim = SimulatedStation(
+        perturbed_pose(nominal_camera_pose(), rng, 0.05, np.radians(3.0)),
+        noise_seed=seed,
+        scene_path=CONFIG_DIR / "calibration_scene.yaml",
+    )
     sim.scanner.workers = 1
     cfg = load_calibration_config()
     detector = detector_config(cfg)

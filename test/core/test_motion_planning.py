@@ -11,6 +11,7 @@ from agiprobot_measurement.motion_planning import (
     MotionPlanner,
     PlanningResult,
     available_planners,
+    collision_free_trajectory,
     interpolate_path,
 )
 
@@ -179,3 +180,36 @@ def test_available_planners_include_the_usual_ones():
     names = available_planners()
     for name in ("RRTConnect", "RRT", "RRTstar", "PRM", "KPIECE1", "BITstar"):
         assert name in names
+
+
+def test_collision_free_trajectory_goes_straight_when_free_and_around_when_blocked(station, kinematic_model):
+    checker = CollisionChecker.from_station(station, model=kinematic_model)
+    limits = station.limits
+    start = np.array([0.0, -0.5, 0.0, 0.0, 0.0, 0.0])
+    goal = start + np.array([-1.2, 0.0, 0.0, 0.0, 0.0, 0.0])
+    straight = collision_free_trajectory(start, goal, limits, checker, velocity_scaling=0.5)
+    # the synchronised straight joint move: every sample on the line from start to goal
+    along = (straight.positions - start) @ (goal - start) / np.dot(goal - start, goal - start)
+    np.testing.assert_allclose(straight.positions, start + along[:, None] * (goal - start), atol=1e-9)
+    assert np.abs(straight.velocities).max(axis=0)[0] <= 0.5 * limits.max_velocity[0] + 1e-9
+    halfway = kinematic_model.link_poses_batch(((start + goal) / 2)[None], ["wrist_2_link"])["wrist_2_link"][0]
+    wall = np.eye(4)
+    wall[:3, 3] = halfway[:3, 3]
+    checker.add_box("wall", [0.25, 0.25, 0.25], wall)
+    assert collision_free_trajectory(start, goal, limits, checker) is None  # blocked, and no planner given
+    created = []
+
+    def make_planner():
+        created.append(MotionPlanner(checker, seed=3))
+        return created[-1]
+
+    around = collision_free_trajectory(start, goal, limits, checker, make_planner, velocity_scaling=0.5)
+    assert len(created) == 1 and around is not None
+    np.testing.assert_allclose(around.positions[0], start, atol=1e-9)
+    np.testing.assert_allclose(around.positions[-1], goal, atol=1e-9)
+    samples, velocities, _ = around.sample(around.dense_times(step_s=0.005, per_segment=4))
+    assert checker.check_states(samples).all()
+    assert (np.abs(velocities) <= 0.5 * limits.max_velocity + 1e-6).all()
+    # a free straight move never sets up the planner
+    collision_free_trajectory(start, start + 0.05, limits, checker, make_planner)
+    assert len(created) == 1

@@ -138,3 +138,50 @@ def test_scanner_offset_and_robot_mount_are_configuration(tmp_path):
     np.testing.assert_allclose(model.fixed_transform("world", "base_link")[:3, 3], [0.1, 0.2, 0.8])
     default = UrdfModel(build_station_urdf())
     np.testing.assert_allclose(default.fixed_transform("tool0", "laser_emitter_frame")[:3, 3], [0.0, 0.0, 0.15])
+
+
+def test_calibration_scene_is_the_station_plus_its_chessboard():
+    station_scene = read_yaml(CONFIG_DIR / "scene.yaml")
+    calibration_scene = read_yaml(CONFIG_DIR / "calibration_scene.yaml")
+    boards = [o for o in calibration_scene["objects"] if o["type"] == "chessboard"]
+    assert [b["name"] for b in boards] == ["calibration_chessboard"]
+    calibration_scene["objects"] = [o for o in calibration_scene["objects"] if o["type"] != "chessboard"]
+    assert calibration_scene == station_scene  # the same station: only the test mode's board is added
+
+
+def test_chessboard_object_loads_with_its_backing_board():
+    scene = load_scene(CONFIG_DIR / "calibration_scene.yaml")
+    board = next(o for o in scene.objects if o.type == "chessboard")
+    assert board.inner_corners == (8, 11) and board.square_m == pytest.approx(0.03)
+    size, centre = board.solid_box()
+    # 12 x 9 squares plus a one-square white margin on every side, 3 mm thick, lying below the printed face
+    np.testing.assert_allclose(size, [14 * 0.03, 11 * 0.03, 0.003])
+    np.testing.assert_allclose(centre[:3, 3], board.pose[:3, 3] - [0.0, 0.0, 0.0015])
+    table = next(o for o in scene.objects if o.name == "table")
+    table_top = table.pose[2, 3] + table.size_m[2] / 2.0
+    assert centre[2, 3] - size[2] / 2.0 == pytest.approx(table_top)  # it lies on the table
+
+
+@pytest.mark.parametrize(
+    "change, expected",
+    [
+        ({"inner_corners": [8]}, "inner_corners: expected [rows, columns]"),
+        ({"inner_corners": [8, 1]}, "inner_corners: expected [rows, columns]"),
+        ({"inner_corners": [8.5, 11]}, "inner_corners: expected [rows, columns]"),
+        ({"square_m": 30}, "the unit is metres"),
+        ({"square_m": -0.03}, "square_m: must be a positive number"),
+        ({"thickness_m": "thin"}, "thickness_m: expected a number"),
+    ],
+)
+def test_malformed_chessboard_names_the_bad_key(tmp_path, change, expected):
+    scene = read_yaml(CONFIG_DIR / "calibration_scene.yaml")
+    scene["part"]["mesh"] = str(CONFIG_DIR.parent / scene["part"]["mesh"])
+    board = next(o for o in scene["objects"] if o["type"] == "chessboard")
+    board.update(change)
+    with pytest.raises(ConfigError) as info:
+        load_scene(_write(tmp_path, "scene.yaml", scene))
+    assert expected in str(info.value)
+    assert "calibration_chessboard" in str(info.value)
+    board.pop("square_m")
+    with pytest.raises(ConfigError, match="square_m"):
+        load_scene(_write(tmp_path, "scene.yaml", scene))
