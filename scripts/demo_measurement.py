@@ -69,7 +69,6 @@ def main() -> int:
 
 
 def run_demo(args, launch, out, bag, plan_file, snapshot, figure, summary, started) -> int:
-    import actionlib
     import rospy
     from actionlib_msgs.msg import GoalStatus
 
@@ -79,6 +78,7 @@ def run_demo(args, launch, out, bag, plan_file, snapshot, figure, summary, start
         PlanMeasurementAction,
         PlanMeasurementGoal,
     )
+    from agiprobot_measurement.ros_action_client import ActionClient
     from agiprobot_measurement.srv import GetCoverageReport
 
     for _ in range(100):
@@ -91,8 +91,8 @@ def run_demo(args, launch, out, bag, plan_file, snapshot, figure, summary, start
             break
         time.sleep(0.2)
     rospy.init_node("measurement_demo", anonymous=True, disable_signals=True)
-    planner = actionlib.SimpleActionClient("/trajectory_manager/plan_measurement", PlanMeasurementAction)
-    executor = actionlib.SimpleActionClient("/trajectory_manager/execute_plan", ExecutePlanAction)
+    planner = ActionClient("/trajectory_manager/plan_measurement", PlanMeasurementAction)
+    executor = ActionClient("/trajectory_manager/execute_plan", ExecutePlanAction)
     if not (planner.wait_for_server(rospy.Duration(60)) and executor.wait_for_server(rospy.Duration(10))):
         print("demo failed: the trajectory_manager did not come up", file=sys.stderr)
         return 1

@@ -11,7 +11,6 @@ Prints the planning stages and the execution's segments as they progress, then t
 import argparse
 import sys
 
-import actionlib
 import rospy
 from actionlib_msgs.msg import GoalStatus
 
@@ -21,12 +20,13 @@ from agiprobot_measurement.msg import (
     PlanMeasurementAction,
     PlanMeasurementGoal,
 )
+from agiprobot_measurement.ros_action_client import ActionClient
 
 NODE = "/trajectory_manager"
 
 
 def plan(args) -> bool:
-    client = actionlib.SimpleActionClient(f"{NODE}/plan_measurement", PlanMeasurementAction)
+    client = ActionClient(f"{NODE}/plan_measurement", PlanMeasurementAction)
     if not client.wait_for_server(rospy.Duration(20.0)):
         print(f"error: no {NODE}/plan_measurement action server (is measurement.launch running?)", file=sys.stderr)
         return False
@@ -64,7 +64,7 @@ def plan(args) -> bool:
 
 
 def execute(plan_file: str) -> bool:
-    client = actionlib.SimpleActionClient(f"{NODE}/execute_plan", ExecutePlanAction)
+    client = ActionClient(f"{NODE}/execute_plan", ExecutePlanAction)
     if not client.wait_for_server(rospy.Duration(20.0)):
         print(f"error: no {NODE}/execute_plan action server", file=sys.stderr)
         return False

@@ -11,13 +11,13 @@ collision-free (the named states of config/named_states.yaml are).
 import argparse
 import sys
 
-import actionlib
 import numpy as np
 import rospy
 from sensor_msgs.msg import JointState
 
 from agiprobot_measurement.msg import ExecuteJointTrajectoryAction, ExecuteJointTrajectoryGoal
 from agiprobot_measurement.point_to_point import point_to_point
+from agiprobot_measurement.ros_action_client import ActionClient
 from agiprobot_measurement.station import ConfigError, load_joint_limits, load_named_states
 
 
@@ -45,7 +45,7 @@ def main() -> int:
     if unknown:
         print(f"error: unknown named state(s) {unknown}; known: {', '.join(named)}", file=sys.stderr)
         return 2
-    client = actionlib.SimpleActionClient(args.action, ExecuteJointTrajectoryAction)
+    client = ActionClient(args.action, ExecuteJointTrajectoryAction)
     if not client.wait_for_server(rospy.Duration(10.0)):
         print(f"error: no controller action server at {args.action}", file=sys.stderr)
         return 1

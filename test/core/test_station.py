@@ -152,10 +152,10 @@ def test_calibration_scene_is_the_station_plus_its_chessboard():
 def test_chessboard_object_loads_with_its_backing_board():
     scene = load_scene(CONFIG_DIR / "calibration_scene.yaml")
     board = next(o for o in scene.objects if o.type == "chessboard")
-    assert board.inner_corners == (8, 11) and board.square_m == pytest.approx(0.03)
+    assert board.inner_corners == (8, 11) and board.square_m == pytest.approx(0.02)
     size, centre = board.solid_box()
     # 12 x 9 squares plus a one-square white margin on every side, 3 mm thick, lying below the printed face
-    np.testing.assert_allclose(size, [14 * 0.03, 11 * 0.03, 0.003])
+    np.testing.assert_allclose(size, [14 * 0.02, 11 * 0.02, 0.003])
     np.testing.assert_allclose(centre[:3, 3], board.pose[:3, 3] - [0.0, 0.0, 0.0015])
     table = next(o for o in scene.objects if o.name == "table")
     table_top = table.pose[2, 3] + table.size_m[2] / 2.0

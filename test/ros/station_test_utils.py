@@ -1,12 +1,12 @@
 """Helpers shared by the rostest nodes of the station."""
 
-import actionlib
 import numpy as np
 import rospy
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from agiprobot_measurement.msg import ExecuteJointTrajectoryAction, ExecuteJointTrajectoryGoal
+from agiprobot_measurement.ros_action_client import ActionClient
 from agiprobot_measurement.srv import SetJointState
 from agiprobot_measurement.station import load_joint_limits, load_named_states
 
@@ -30,7 +30,7 @@ def place_robot(named_state="home"):
 
 
 def action_client():
-    client = actionlib.SimpleActionClient(ACTION, ExecuteJointTrajectoryAction)
+    client = ActionClient(ACTION, ExecuteJointTrajectoryAction)
     assert client.wait_for_server(rospy.Duration(20.0)), f"no action server at {ACTION}"
     return client
 

@@ -12,7 +12,6 @@ import time
 import unittest
 from pathlib import Path
 
-import actionlib
 import numpy as np
 import rosnode
 import rospy
@@ -27,6 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from agiprobot_measurement.bag_coverage import coverage_from_bag
 from agiprobot_measurement.msg import ExecutePlanAction, ExecutePlanGoal, PlanMeasurementAction, PlanMeasurementGoal
 from agiprobot_measurement.plan_io import load_execution_plan
+from agiprobot_measurement.ros_action_client import ActionClient
 from agiprobot_measurement.snapshot import OffscreenRviz
 from agiprobot_measurement.srv import GetCoverageReport, LoadPlan, StorePlan
 from agiprobot_measurement.station import PACKAGE_ROOT
@@ -55,8 +55,8 @@ class MeasurementNodeTest(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
         rospy.init_node("test_measurement_node")
-        cls.planner = actionlib.SimpleActionClient("/trajectory_manager/plan_measurement", PlanMeasurementAction)
-        cls.executor = actionlib.SimpleActionClient("/trajectory_manager/execute_plan", ExecutePlanAction)
+        cls.planner = ActionClient("/trajectory_manager/plan_measurement", PlanMeasurementAction)
+        cls.executor = ActionClient("/trajectory_manager/execute_plan", ExecutePlanAction)
         assert cls.planner.wait_for_server(rospy.Duration(60)), "no plan_measurement action"
         assert cls.executor.wait_for_server(rospy.Duration(10)), "no execute_plan action"
         ARTIFACTS.mkdir(parents=True, exist_ok=True)
