@@ -29,23 +29,20 @@ def chessboard_corners_board(inner_corners=(8, 11), square_m: float = 0.03) -> n
 def chessboard_geometry(board_pose: np.ndarray, inner_corners=(8, 11), square_m: float = 0.03, thickness_m=0.003):
     """SceneGeometry (frame of ``board_pose``'s parent) of a chessboard: (rows+1) x (cols+1) squares of alternating
     albedo, printed (0.1 mm) on a white backing board with a one-square margin (the quiet zone OpenCV needs)."""
-    from agiprobot_measurement.station import CHESSBOARD_MARGIN_SQUARES
+    from agiprobot_measurement.station import chessboard_board_size, chessboard_dark_squares
     from agiprobot_measurement.structured_light import SceneGeometry, primitive_mesh
 
-    rows, cols = inner_corners
-    border = 2 * (CHESSBOARD_MARGIN_SQUARES + 1)
     backing = np.eye(4)
     backing[2, 3] = -thickness_m / 2.0  # its face at z = 0: the corners' plane
-    size = ((cols - 1 + border) * square_m, (rows - 1 + border) * square_m, thickness_m)
+    size = chessboard_board_size(inner_corners, square_m, thickness_m)
     parts = [SceneGeometry.from_trimesh(primitive_mesh("box", size=size), "board", WHITE_ALBEDO).transformed(backing)]
-    for i in range(rows + 1):
-        for j in range(cols + 1):
-            if (i + j) % 2:
-                continue
-            square = np.eye(4)
-            square[:3, 3] = [(j - cols / 2.0) * square_m, (i - rows / 2.0) * square_m, 0.0]
-            mesh = primitive_mesh("box", size=(square_m, square_m, 0.0002))  # printed: 0.1 mm proud
-            parts.append(SceneGeometry.from_trimesh(mesh, "square", BLACK_ALBEDO).transformed(square))
+    printed = SceneGeometry.from_trimesh(
+        primitive_mesh("box", size=(square_m, square_m, 0.0002)), "square", BLACK_ALBEDO
+    )
+    for x, y in chessboard_dark_squares(inner_corners, square_m):
+        square = np.eye(4)
+        square[:2, 3] = [x, y]  # printed: 0.1 mm proud of the face
+        parts.append(printed.transformed(square))
     return SceneGeometry.concatenate(parts).transformed(np.asarray(board_pose, dtype=float))
 
 

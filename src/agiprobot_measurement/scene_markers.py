@@ -23,7 +23,8 @@ def _chessboard_squares(board, frame_id: str, namespace: str, marker_id: int) ->
     """The dark squares of a chessboard object as one CUBE_LIST in the board frame (printed on its face)."""
     from geometry_msgs.msg import Point
 
-    rows, cols = board.inner_corners
+    from agiprobot_measurement.station import chessboard_dark_squares
+
     marker = Marker()
     marker.header.frame_id = frame_id
     marker.ns = namespace
@@ -35,11 +36,9 @@ def _chessboard_squares(board, frame_id: str, namespace: str, marker_id: int) ->
     marker.scale.z = 0.0004
     marker.color.r = marker.color.g = marker.color.b = 0.05
     marker.color.a = 1.0
-    for i in range(rows + 1):
-        for j in range(cols + 1):
-            if (i + j) % 2 == 0:
-                x, y = (j - cols / 2.0) * board.square_m, (i - rows / 2.0) * board.square_m
-                marker.points.append(Point(x=x, y=y, z=0.0002))
+    marker.points = [
+        Point(x=float(x), y=float(y), z=0.0002) for x, y in chessboard_dark_squares(board.inner_corners, board.square_m)
+    ]
     return marker
 
 

@@ -244,6 +244,20 @@ SCENE_OBJECT_TYPES = {
 CHESSBOARD_MARGIN_SQUARES = 1  # white border around the squares (the quiet zone OpenCV's detector needs)
 
 
+def chessboard_board_size(inner_corners: tuple[int, int], square_m: float, thickness_m: float) -> np.ndarray:
+    """Edge lengths (m) of a chessboard's backing board: (rows+1) x (cols+1) squares and the white margin."""
+    rows, cols = inner_corners
+    border = 2 * (CHESSBOARD_MARGIN_SQUARES + 1)  # the outer squares plus the margin on each side
+    return np.array([(cols - 1 + border) * square_m, (rows - 1 + border) * square_m, thickness_m])
+
+
+def chessboard_dark_squares(inner_corners: tuple[int, int], square_m: float) -> np.ndarray:
+    """Centres (N, 2) of a chessboard's dark squares in its board frame (origin at the centre of the corners)."""
+    rows, cols = inner_corners
+    i, j = np.nonzero((np.add.outer(np.arange(rows + 1), np.arange(cols + 1)) % 2) == 0)
+    return np.column_stack([(j - cols / 2.0) * square_m, (i - rows / 2.0) * square_m])
+
+
 @dataclass(frozen=True)
 class SceneObject:
     """A static obstacle. ``pose`` is 4x4 in the scene frame (metres); ``mesh`` is a path for type mesh."""
@@ -352,13 +366,11 @@ def _chessboard(entry: dict, where: str) -> dict:
     if square > 0.5:
         raise ConfigError(f"{where}.square_m: {square} m per square; the unit is metres (0.03 = 30 mm)")
     thickness = _positive(entry.get("thickness_m", 0.003), f"{where}.thickness_m")
-    border = 2 * (CHESSBOARD_MARGIN_SQUARES + 1)  # the outer squares plus the white margin on each side
-    rows, cols = corners
     return {
-        "inner_corners": (rows, cols),
+        "inner_corners": tuple(corners),
         "square_m": square,
         "thickness_m": thickness,
-        "size_m": np.array([(cols - 1 + border) * square, (rows - 1 + border) * square, thickness]),
+        "size_m": chessboard_board_size(tuple(corners), square, thickness),
     }
 
 
