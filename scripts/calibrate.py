@@ -26,7 +26,7 @@ def main(argv=None) -> int:
     parser.add_argument("--camera-frame", default="PhoXi3Dscanner_sensor")
     args = parser.parse_args(argv)
 
-    from agiprobot_measurement.calibration import (
+    from agiprobot_measurement.calibration.registration import (
         CalibrationError,
         calibrate_data,
         pose_error,

@@ -7,7 +7,7 @@ scripts/coverage_from_bag.py demo_output/measurement_demo.bag [--radius-mm 1.0]
 import argparse
 import sys
 
-from agiprobot_measurement.bag_coverage import coverage_from_bag
+from agiprobot_measurement.ros.bag_coverage import coverage_from_bag
 
 
 def main() -> int:

@@ -78,7 +78,7 @@ def run_demo(args, launch, out, bag, plan_file, snapshot, figure, summary, start
         PlanMeasurementAction,
         PlanMeasurementGoal,
     )
-    from agiprobot_measurement.ros_action_client import ActionClient
+    from agiprobot_measurement.ros.action_client import ActionClient
     from agiprobot_measurement.srv import GetCoverageReport
 
     for _ in range(100):

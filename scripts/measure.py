@@ -20,7 +20,7 @@ from agiprobot_measurement.msg import (
     PlanMeasurementAction,
     PlanMeasurementGoal,
 )
-from agiprobot_measurement.ros_action_client import ActionClient
+from agiprobot_measurement.ros.action_client import ActionClient
 
 NODE = "/trajectory_manager"
 

@@ -15,9 +15,9 @@ import numpy as np
 import rospy
 from sensor_msgs.msg import JointState
 
+from agiprobot_measurement.motion.point_to_point import point_to_point
 from agiprobot_measurement.msg import ExecuteJointTrajectoryAction, ExecuteJointTrajectoryGoal
-from agiprobot_measurement.point_to_point import point_to_point
-from agiprobot_measurement.ros_action_client import ActionClient
+from agiprobot_measurement.ros.action_client import ActionClient
 from agiprobot_measurement.station import ConfigError, load_joint_limits, load_named_states
 
 

@@ -21,7 +21,6 @@ import logging
 import math
 import os
 import sys
-import tempfile
 import time
 import warnings
 from pathlib import Path
@@ -35,9 +34,10 @@ except ImportError:  # run from a checkout without the catkin environment
 import numpy as np  # noqa: E402
 
 # Only light modules here: bad input is reported before trimesh, FCL and OMPL are loaded (about 1 s).
-from agiprobot_measurement.set_cover import SOLVER_TYPES  # noqa: E402
+from agiprobot_measurement.common.files import atomic_write_text  # noqa: E402
+from agiprobot_measurement.planning.set_cover import SOLVER_TYPES  # noqa: E402
+from agiprobot_measurement.planning.viewpoint import TILT_MODES  # noqa: E402
 from agiprobot_measurement.station import UNIT_SCALES_TO_M, pose_matrix  # noqa: E402
-from agiprobot_measurement.viewpoint import TILT_MODES  # noqa: E402
 
 EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 STAGE_ORDER = ("sampling", "metrology", "mechanics", "set cover", "connection")
@@ -310,22 +310,10 @@ def format_table(rows: list[tuple[str, str]]) -> str:
     return "\n".join([rule, *(f"{label:<{width}}  {value}" for label, value in rows), rule])
 
 
-def write_text_atomically(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(text)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def run(args: argparse.Namespace, transform: np.ndarray, progress: StageProgress) -> int:
-    from agiprobot_measurement.part_loading import PartWarning
+    from agiprobot_measurement.planning.part_loading import PartWarning
+    from agiprobot_measurement.planning.trajectory_manager import PlanningError, TrajectoryManager
     from agiprobot_measurement.station import Station
-    from agiprobot_measurement.trajectory_manager import PlanningError, TrajectoryManager
 
     # the part loader both warns and logs its doubts: show them once, as 'warning: ...' lines (log handler)
     warnings.simplefilter("ignore", PartWarning)
@@ -349,7 +337,7 @@ def run(args: argparse.Namespace, transform: np.ndarray, progress: StageProgress
         manager.store_execution_plan(args.output, segments)
         outputs["plan"] = manager.last_plan_path
     if args.report is not None:
-        from agiprobot_measurement.coverage_figure import plot_coverage
+        from agiprobot_measurement.planning.coverage_figure import plot_coverage
 
         title = (
             f"{Path(args.part).name}: {report.n_views} views ({args.solver}), "
@@ -378,9 +366,9 @@ def run(args: argparse.Namespace, transform: np.ndarray, progress: StageProgress
         if args.summary.suffix.lower() in (".yaml", ".yml"):
             import yaml
 
-            write_text_atomically(args.summary, yaml.safe_dump(data, sort_keys=False))
+            atomic_write_text(args.summary, yaml.safe_dump(data, sort_keys=False))
         else:
-            write_text_atomically(args.summary, table + "\n")
+            atomic_write_text(args.summary, table + "\n")
     print(table, flush=True)
     return EXIT_OK
 
@@ -410,7 +398,7 @@ def main(argv=None) -> int:
     except RuntimeError as exc:
         # the module is loaded lazily (OMPL, FCL: slow imports); an error raised before it was loaded is not one
         # of its exceptions
-        manager_module = sys.modules.get("agiprobot_measurement.trajectory_manager")
+        manager_module = sys.modules.get("agiprobot_measurement.planning.trajectory_manager")
         if manager_module is not None and isinstance(exc, manager_module.PlanningCancelled):
             _fail(progress, "interrupted: nothing more written", debug)
             return EXIT_INTERRUPTED

@@ -16,7 +16,7 @@ def station() -> Station:
 
 @pytest.fixture(scope="session")
 def kinematic_model(station):
-    from agiprobot_measurement.kinematics import KinematicModel
+    from agiprobot_measurement.motion.kinematics import KinematicModel
 
     return KinematicModel.from_station(station)
 

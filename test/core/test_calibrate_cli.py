@@ -5,7 +5,8 @@ import sys
 
 import numpy as np
 
-from agiprobot_measurement.calibration import CalibrationData, Sample, transform_points, write_data_file
+from agiprobot_measurement.calibration.registration import CalibrationData, Sample, write_data_file
+from agiprobot_measurement.common.geometry import transform_points
 from agiprobot_measurement.station import PACKAGE_ROOT
 
 CLI = PACKAGE_ROOT / "scripts" / "calibrate.py"

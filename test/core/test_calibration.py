@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from agiprobot_measurement.calibration import (
+from agiprobot_measurement.calibration.flange_detection import FlangeDetectorConfig, detect_flange
+from agiprobot_measurement.calibration.registration import (
     CalibrationData,
     CalibrationError,
     Sample,
@@ -20,13 +21,12 @@ from agiprobot_measurement.calibration import (
     read_data_file,
     read_flag_points,
     read_result_yaml,
-    transform_points,
     umeyama,
     write_data_file,
     write_result_yaml,
     zigzag_path,
 )
-from agiprobot_measurement.flange_detection import FlangeDetectorConfig, detect_flange
+from agiprobot_measurement.common.geometry import transform_points
 
 RADIUS_M = 0.0315
 

@@ -4,21 +4,21 @@ refused, the session's criteria, sample bookkeeping and the data file rewritten 
 import numpy as np
 import pytest
 
-from agiprobot_measurement.calibration import (
-    CalibrationError,
-    plane_basis,
-    read_data_file,
-    select_consistent_flags,
-    transform_points,
-)
-from agiprobot_measurement.calibration_session import CalibrationSession, detector_config
-from agiprobot_measurement.calibration_sim import load_calibration_config
-from agiprobot_measurement.flange_detection import (
+from agiprobot_measurement.calibration.flange_detection import (
     FlangeDetection,
     FlangeDetectorConfig,
     detect_flange,
     detect_flange_candidates,
 )
+from agiprobot_measurement.calibration.registration import (
+    CalibrationError,
+    plane_basis,
+    read_data_file,
+    select_consistent_flags,
+)
+from agiprobot_measurement.calibration.session import CalibrationSession, detector_config
+from agiprobot_measurement.calibration.simulation import load_calibration_config
+from agiprobot_measurement.common.geometry import transform_points
 
 RADIUS_M = 0.0315
 FLAGS = np.array([[-0.55, 0.25, 0.25], [-0.25, 0.60, 0.30], [-0.40, 0.35, 0.45], [-0.60, 0.55, 0.50]])

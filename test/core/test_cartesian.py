@@ -4,14 +4,14 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from agiprobot_measurement.cartesian import (
+from agiprobot_measurement.motion.cartesian import (
     STOP_COMPLETE,
     STOP_INVALID_STATE,
     STOP_JOINT_JUMP,
     STOP_UNREACHABLE,
     compute_cartesian_path,
 )
-from agiprobot_measurement.ik import KDLIK, URAnalyticIK, pose_errors
+from agiprobot_measurement.motion.ik import KDLIK, URAnalyticIK, pose_errors
 
 # scanner pointing down about 0.5 m above the table, well inside the workspace
 START_Q = np.array([-0.8, -1.6, -1.6, -1.5, 1.57, 0.0])

@@ -4,15 +4,20 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from agiprobot_measurement.calibration import CalibrationError, transform_points
-from agiprobot_measurement.chessboard_check import (
+from agiprobot_measurement.calibration.chessboard_test import (
     chessboard_corners_board,
-    chessboard_geometry,
     corner_points,
     detect_corners,
     positioning_errors_mm,
 )
-from agiprobot_measurement.structured_light import ScanSettings, StructuredLightScanner, load_scanner_model
+from agiprobot_measurement.calibration.registration import CalibrationError
+from agiprobot_measurement.common.geometry import transform_points
+from agiprobot_measurement.sensors.phoxi.renderer import (
+    ScanSettings,
+    StructuredLightScanner,
+    chessboard_geometry,
+    load_scanner_model,
+)
 
 
 @pytest.fixture(scope="module")
@@ -49,10 +54,10 @@ def test_no_chessboard_is_a_clear_error():
 
 def test_chessboard_of_the_calibration_scene_is_rendered_and_found():
     """The scene file's chessboard object as phoxi_camera renders it: 88 corners at their true 3D positions."""
-    from agiprobot_measurement.calibration_sim import nominal_camera_pose
-    from agiprobot_measurement.chessboard_check import scene_chessboard_corners, scene_chessboards
+    from agiprobot_measurement.calibration.chessboard_test import scene_chessboard_corners, scene_chessboards
+    from agiprobot_measurement.calibration.simulation import nominal_camera_pose
+    from agiprobot_measurement.sensors.phoxi.renderer import scene_geometry
     from agiprobot_measurement.station import CONFIG_DIR, load_scene
-    from agiprobot_measurement.structured_light import scene_geometry
 
     scene = load_scene(CONFIG_DIR / "calibration_scene.yaml")
     (board,) = scene_chessboards(scene)
@@ -75,7 +80,7 @@ def test_chessboard_of_the_calibration_scene_is_rendered_and_found():
 
 
 def test_tool_rotation_faces_the_point_also_straight_down():
-    from agiprobot_measurement.calibration_sim import tool_rotation
+    from agiprobot_measurement.calibration.simulation import tool_rotation
 
     for towards in ([0.3, 0.2, -1.0], [0.0, 0.0, -1.0], [0.0, 0.0, 2.0]):
         rotation = tool_rotation(np.array(towards), np.zeros(3))

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from agiprobot_measurement.collision import (
+from agiprobot_measurement.motion.collision import (
     AllowedEntry,
     CollisionChecker,
     CollisionConfig,

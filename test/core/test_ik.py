@@ -5,7 +5,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from agiprobot_measurement.ik import (
+from agiprobot_measurement.motion.ik import (
     KDLIK,
     ORIENTATION_TOLERANCE_RAD,
     POSITION_TOLERANCE_M,
@@ -15,9 +15,9 @@ from agiprobot_measurement.ik import (
     nearest_representative,
     pose_errors,
 )
-from agiprobot_measurement.kinematics import KinematicModel
+from agiprobot_measurement.motion.kinematics import KinematicModel
 from agiprobot_measurement.station import ConfigError, JointLimits, Station
-from agiprobot_measurement.urdf_model import UrdfModel
+from agiprobot_measurement.station.urdf_model import UrdfModel
 
 
 @pytest.fixture(scope="module")

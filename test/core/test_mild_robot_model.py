@@ -1,5 +1,5 @@
 """The MILD's kinematic model: configuration, forward kinematics, both inverse kinematics, the PTU pose correction,
-heuristics, movement costs and the map services (agiprobot_measurement.mild_robot_model)."""
+heuristics, movement costs and the map services (agiprobot_measurement.mild.robot_model)."""
 
 import itertools
 import math
@@ -9,7 +9,8 @@ import pytest
 import xacro
 from scipy.spatial.transform import Rotation
 
-from agiprobot_measurement.mild_robot_model import (
+from agiprobot_measurement.common.geometry import wrap_to_pi
+from agiprobot_measurement.mild.robot_model import (
     RATING_BASE,
     MildKinematics,
     MildRobotModel,
@@ -24,10 +25,9 @@ from agiprobot_measurement.mild_robot_model import (
     solve_turn_lp,
     turn_split_closed_form,
     view_directions,
-    wrap_to_pi,
 )
 from agiprobot_measurement.station import CONFIG_DIR, URDF_DIR, ConfigError, read_yaml
-from agiprobot_measurement.urdf_model import UrdfModel
+from agiprobot_measurement.station.urdf_model import UrdfModel
 
 REAL = CONFIG_DIR / "mild_robot_model_services_real.yaml"
 SIM = CONFIG_DIR / "mild_robot_model_services_sim.yaml"

@@ -6,8 +6,8 @@ import time
 import numpy as np
 import pytest
 
-from agiprobot_measurement.collision import CollisionChecker
-from agiprobot_measurement.motion_planning import (
+from agiprobot_measurement.motion.collision import CollisionChecker
+from agiprobot_measurement.motion.motion_planning import (
     MotionPlanner,
     PlanningResult,
     available_planners,

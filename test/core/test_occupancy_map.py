@@ -1,4 +1,4 @@
-"""Occupancy grid: map_server loading, inflation, position checks and grid paths (agiprobot_measurement.occupancy_map)."""
+"""Occupancy grid: map_server loading, inflation, position checks and grid paths (agiprobot_measurement.mild.occupancy_map)."""
 
 import itertools
 import math
@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from agiprobot_measurement.occupancy_map import (
+from agiprobot_measurement.mild.occupancy_map import (
     INSCRIBED,
     LETHAL,
     UNKNOWN,

@@ -9,7 +9,7 @@ import pytest
 import trimesh
 from scipy.spatial import cKDTree
 
-from agiprobot_measurement.part_loading import (
+from agiprobot_measurement.planning.part_loading import (
     LoadedPart,
     PartLoadError,
     PartWarning,

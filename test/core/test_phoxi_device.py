@@ -5,8 +5,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from agiprobot_measurement import phoxi_config
-from agiprobot_measurement.phoxi_device import (
+from agiprobot_measurement.sensors.phoxi import reconfigure as phoxi_config
+from agiprobot_measurement.sensors.phoxi.device import (
     CUSTOM_SPACE,
     ROBOT_SPACE,
     PhoxiDevice,
@@ -15,8 +15,8 @@ from agiprobot_measurement.phoxi_device import (
     load_camera_config,
     transform_from_quaternion,
 )
-from agiprobot_measurement.point_cloud_io import read_ply, read_point_tiff
-from agiprobot_measurement.structured_light import (
+from agiprobot_measurement.sensors.phoxi.point_cloud_io import read_ply, read_point_tiff
+from agiprobot_measurement.sensors.phoxi.renderer import (
     RESOLUTION_HIGH,
     RESOLUTION_LOW,
     SceneGeometry,
@@ -174,7 +174,7 @@ def test_save_last_frame_by_extension(device):
 def test_pointcloud_and_depth_map_agree_pixel_by_pixel(device):
     from std_msgs.msg import Header
 
-    from agiprobot_measurement import phoxi_messages
+    from agiprobot_measurement.ros import phoxi_messages
 
     device.update_settings(resolution=RESOLUTION_HIGH)
     frame = device.trigger(CAMERA)
@@ -203,7 +203,7 @@ def test_pointcloud_and_depth_map_agree_pixel_by_pixel(device):
 def test_camera_info_holds_the_intrinsics(device):
     from std_msgs.msg import Header
 
-    from agiprobot_measurement import phoxi_messages
+    from agiprobot_measurement.ros import phoxi_messages
 
     intr = device.model.intrinsics(RESOLUTION_HIGH)
     info = phoxi_messages.camera_info(intr, Header())

@@ -9,8 +9,11 @@ import numpy as np
 import pytest
 import yaml
 
-from agiprobot_measurement import plan_io
-from agiprobot_measurement.plan_io import (
+from agiprobot_measurement.common import files
+from agiprobot_measurement.motion.time_parameterization import time_optimal_trajectory
+from agiprobot_measurement.motion.trajectory import JointTrajectory
+from agiprobot_measurement.planning import plan_io
+from agiprobot_measurement.planning.plan_io import (
     CONNECT,
     MEASURE,
     ExecutionPlan,
@@ -31,8 +34,6 @@ from agiprobot_measurement.plan_io import (
     validate_execution_plan,
 )
 from agiprobot_measurement.station import load_joint_limits
-from agiprobot_measurement.time_parameterization import time_optimal_trajectory
-from agiprobot_measurement.trajectory import JointTrajectory
 
 PLAN_NAME = "zylinder_low_sampling.yaml"
 
@@ -190,7 +191,7 @@ def test_failed_write_keeps_the_old_file(plan, tmp_path, monkeypatch):
     def failing_replace(src, dst):
         raise OSError("disk full")
 
-    monkeypatch.setattr(plan_io.os, "replace", failing_replace)
+    monkeypatch.setattr(files.os, "replace", failing_replace)
     with pytest.raises(PlanError, match="disk full"):
         store_execution_plan(target, plan, {"new": 1})
     assert target.read_text() == before

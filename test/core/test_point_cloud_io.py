@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from agiprobot_measurement.point_cloud_io import (
+from agiprobot_measurement.sensors.phoxi.point_cloud_io import (
     OutputPathError,
     read_ply,
     read_point_tiff,

@@ -2,7 +2,7 @@
 
 from actionlib import CommState, SimpleActionClient, SimpleGoalState
 
-from agiprobot_measurement.ros_action_client import ActionClient
+from agiprobot_measurement.ros.action_client import ActionClient
 
 
 class _Handle:

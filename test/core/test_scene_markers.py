@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from agiprobot_measurement.scene_markers import scene_marker_array
+from agiprobot_measurement.ros.markers import scene_marker_array
 from agiprobot_measurement.station import CONFIG_DIR, load_scene
 
 

@@ -6,15 +6,15 @@ import numpy as np
 import pytest
 import trimesh
 
-from agiprobot_measurement.part_loading import load_part
-from agiprobot_measurement.sensor_model import (
+from agiprobot_measurement.planning.part_loading import load_part
+from agiprobot_measurement.planning.viewpoint import ViewPoint, generate_viewpoint_poses
+from agiprobot_measurement.sensors.laser_line.model import (
     MeasurabilityResult,
     ProcessingContextError,
     SensorModel,
     supporting_faces,
 )
 from agiprobot_measurement.station import PACKAGE_ROOT
-from agiprobot_measurement.viewpoint import ViewPoint, generate_viewpoint_poses
 
 PARAMS = {
     "optimal_standoff_mm": 181.82,

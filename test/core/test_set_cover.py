@@ -1,4 +1,4 @@
-"""Tests of the viewpoint-selection set cover (agiprobot_measurement.set_cover)."""
+"""Tests of the viewpoint-selection set cover (agiprobot_measurement.planning.set_cover)."""
 
 import itertools
 import time
@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from scipy import sparse
 
-from agiprobot_measurement import set_cover as sc
-from agiprobot_measurement.set_cover import SOLVER_TYPES, SetCoverError, solve_set_cover
-from agiprobot_measurement.set_cover_instances import cube_instance, random_instance
+from agiprobot_measurement.planning import set_cover as sc
+from agiprobot_measurement.planning.set_cover import SOLVER_TYPES, SetCoverError, solve_set_cover
+from agiprobot_measurement.testing.set_cover_instances import cube_instance, random_instance
 
 IP_SOLVERS = ("IP_basic", "IP_uncertainty", "IP_time")
 

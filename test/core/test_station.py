@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import yaml
 
-from agiprobot_measurement.kinematics import KinematicModel
+from agiprobot_measurement.motion.kinematics import KinematicModel
 from agiprobot_measurement.station import (
     CONFIG_DIR,
     ConfigError,
@@ -13,7 +13,7 @@ from agiprobot_measurement.station import (
     load_scene,
     read_yaml,
 )
-from agiprobot_measurement.urdf_model import UrdfModel, build_station_urdf
+from agiprobot_measurement.station.urdf_model import UrdfModel, build_station_urdf
 
 JOINTS = ["shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint", "wrist_3_joint"]
 

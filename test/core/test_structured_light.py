@@ -6,10 +6,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from agiprobot_measurement.kinematics import KinematicModel
-from agiprobot_measurement.phoxi_device import load_camera_config
-from agiprobot_measurement.station import ConfigError
-from agiprobot_measurement.structured_light import (
+from agiprobot_measurement.common.geometry import look_at, matrix_to_rpy
+from agiprobot_measurement.motion.kinematics import KinematicModel
+from agiprobot_measurement.sensors.phoxi.device import load_camera_config
+from agiprobot_measurement.sensors.phoxi.renderer import (
     RESOLUTION_HIGH,
     RESOLUTION_LOW,
     RobotGeometry,
@@ -19,13 +19,12 @@ from agiprobot_measurement.structured_light import (
     depth_sigma_mm,
     load_scanner_model,
     load_scanner_models,
-    look_at,
-    matrix_to_rpy,
     primitive_mesh,
     rgb_texture,
     scene_geometry,
 )
-from agiprobot_measurement.urdf_model import UrdfModel
+from agiprobot_measurement.station import ConfigError
+from agiprobot_measurement.station.urdf_model import UrdfModel
 
 
 def translation(x=0.0, y=0.0, z=0.0):

@@ -5,13 +5,13 @@ import time
 import numpy as np
 import pytest
 
-from agiprobot_measurement.station import load_joint_limits
-from agiprobot_measurement.time_parameterization import (
+from agiprobot_measurement.motion.time_parameterization import (
     TimeParameterizationError,
     constant_speed_scan_trajectory,
     time_optimal_trajectory,
 )
-from agiprobot_measurement.trajectory import check_trajectory, motion_peaks
+from agiprobot_measurement.motion.trajectory import check_trajectory, motion_peaks
+from agiprobot_measurement.station import load_joint_limits
 
 LIMIT_SLACK = 1e-6
 START = np.array([0.5, -1.5, -1.5, -1.0, 1.5, 0.0])

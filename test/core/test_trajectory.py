@@ -3,8 +3,7 @@
 import numpy as np
 import pytest
 
-from agiprobot_measurement.station import load_joint_limits
-from agiprobot_measurement.trajectory import (
+from agiprobot_measurement.motion.trajectory import (
     CheckTolerances,
     JointTrajectory,
     TrajectoryError,
@@ -12,6 +11,7 @@ from agiprobot_measurement.trajectory import (
     check_trajectory,
     motion_peaks,
 )
+from agiprobot_measurement.station import load_joint_limits
 
 NAMES = [
     "shoulder_pan_joint",

@@ -6,9 +6,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from agiprobot_measurement.sensor_model import SensorModel
-from agiprobot_measurement.trajectory import JointTrajectory
-from agiprobot_measurement.viewpoint import (
+from agiprobot_measurement.motion.trajectory import JointTrajectory
+from agiprobot_measurement.planning.viewpoint import (
     TILT_MODES,
     TILT_STEPS,
     ViewPoint,
@@ -18,6 +17,7 @@ from agiprobot_measurement.viewpoint import (
     reverse_trajectory,
     select_limited_tilt,
 )
+from agiprobot_measurement.sensors.laser_line.model import SensorModel
 
 STANDOFF = 181.82
 

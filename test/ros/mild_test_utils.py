@@ -6,8 +6,8 @@ import numpy as np
 import rospy
 import tf2_ros
 
-from agiprobot_measurement.mild_robot_model import RobotState
-from agiprobot_measurement.mild_ros import state_to_msg, transform_to_matrix
+from agiprobot_measurement.mild.robot_model import RobotState
+from agiprobot_measurement.ros.mild_messages import state_to_msg, transform_to_matrix
 from agiprobot_measurement.srv import (
     CalculateCameraPose,
     CalculateCameraPoseCorrection,

@@ -6,7 +6,7 @@ from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from agiprobot_measurement.msg import ExecuteJointTrajectoryAction, ExecuteJointTrajectoryGoal
-from agiprobot_measurement.ros_action_client import ActionClient
+from agiprobot_measurement.ros.action_client import ActionClient
 from agiprobot_measurement.srv import SetJointState
 from agiprobot_measurement.station import load_joint_limits, load_named_states
 

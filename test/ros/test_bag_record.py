@@ -18,7 +18,7 @@ from sensor_msgs.msg import JointState
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from station_test_utils import LIMITS, NAMED, action_client, make_trajectory, place_robot
 
-from agiprobot_measurement.point_to_point import point_to_point
+from agiprobot_measurement.motion.point_to_point import point_to_point
 
 
 class BagRecordTest(unittest.TestCase):

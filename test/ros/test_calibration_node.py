@@ -19,9 +19,9 @@ import tf2_ros
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
-from agiprobot_measurement.calibration import pose_error, read_result_yaml
-from agiprobot_measurement.calibration_sim import nominal_camera_pose
-from agiprobot_measurement.ros_conversions import transform_to_matrix
+from agiprobot_measurement.calibration.registration import pose_error, read_result_yaml
+from agiprobot_measurement.calibration.simulation import nominal_camera_pose
+from agiprobot_measurement.ros.conversions import transform_to_matrix
 from agiprobot_measurement.srv import SetJointState
 
 CAMERA_FRAME = "PhoXi3Dscanner_sensor"
@@ -136,10 +136,10 @@ class CalibrationNodeTest(unittest.TestCase):
         rospy.sleep(0.5)  # tf of the new pose reaches the camera
 
     def test_5_manual_flag_points_samples_save_and_load(self):
-        from agiprobot_measurement.calibration import read_data_file, read_flag_points
-        from agiprobot_measurement.calibration_sim import load_calibration_config, tool_rotation
-        from agiprobot_measurement.ik import make_ik_solver
-        from agiprobot_measurement.kinematics import KinematicModel
+        from agiprobot_measurement.calibration.registration import read_data_file, read_flag_points
+        from agiprobot_measurement.calibration.simulation import load_calibration_config, tool_rotation
+        from agiprobot_measurement.motion.ik import make_ik_solver
+        from agiprobot_measurement.motion.kinematics import KinematicModel
         from agiprobot_measurement.station import Station
 
         station = Station.load()

@@ -23,11 +23,11 @@ from sensor_msgs.msg import JointState, PointCloud2
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from agiprobot_measurement.bag_coverage import coverage_from_bag
 from agiprobot_measurement.msg import ExecutePlanAction, ExecutePlanGoal, PlanMeasurementAction, PlanMeasurementGoal
-from agiprobot_measurement.plan_io import load_execution_plan
-from agiprobot_measurement.ros_action_client import ActionClient
-from agiprobot_measurement.snapshot import OffscreenRviz
+from agiprobot_measurement.planning.plan_io import load_execution_plan
+from agiprobot_measurement.ros.action_client import ActionClient
+from agiprobot_measurement.ros.bag_coverage import coverage_from_bag
+from agiprobot_measurement.ros.rviz_snapshot import OffscreenRviz
 from agiprobot_measurement.srv import GetCoverageReport, LoadPlan, StorePlan
 from agiprobot_measurement.station import PACKAGE_ROOT
 

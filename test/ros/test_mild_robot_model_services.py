@@ -25,8 +25,9 @@ from visualization_msgs.msg import Marker, MarkerArray
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from mild_test_utils import NS, SERVICE_TYPES, facing_error_deg, place, proxies, wait_for_camera
 
-from agiprobot_measurement.mild_robot_model import RobotState, matrix_to_quaternion
-from agiprobot_measurement.mild_ros import pose_to_matrix, state_to_msg, yaw_of
+from agiprobot_measurement.common.geometry import matrix_to_quaternion
+from agiprobot_measurement.mild.robot_model import RobotState
+from agiprobot_measurement.ros.mild_messages import pose_to_matrix, state_to_msg, yaw_of
 
 EXPECTED_TYPES = {
     "CalculateCameraPose": "agiprobot_measurement/CalculateCameraPose",

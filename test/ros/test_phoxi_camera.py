@@ -27,8 +27,9 @@ from std_srvs.srv import Empty as StdEmpty
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from phoxi_test_utils import NODE, FrameRecorder, reconfigure, service
 
-from agiprobot_measurement import phoxi_messages
-from agiprobot_measurement.point_cloud_io import read_ply
+from agiprobot_measurement.ros import phoxi_messages
+from agiprobot_measurement.sensors.phoxi.point_cloud_io import read_ply
+from agiprobot_measurement.sensors.phoxi.renderer import RESOLUTION_LOW, load_scanner_model
 from agiprobot_measurement.srv import (
     ConnectCamera,
     Empty,
@@ -46,7 +47,6 @@ from agiprobot_measurement.srv import (
     SetTransformationMatrix,
     TriggerImage,
 )
-from agiprobot_measurement.structured_light import RESOLUTION_LOW, load_scanner_model
 
 PKG = "agiprobot_measurement"
 SERVICES = {

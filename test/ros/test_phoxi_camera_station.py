@@ -15,12 +15,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from phoxi_test_utils import FrameRecorder, reconfigure, service
 from station_test_utils import place_robot
 
-from agiprobot_measurement import phoxi_messages
-from agiprobot_measurement.kinematics import KinematicModel
-from agiprobot_measurement.phoxi_device import load_camera_config, transform_from_quaternion
-from agiprobot_measurement.srv import SetJointState, TriggerImage
-from agiprobot_measurement.station import Station
-from agiprobot_measurement.structured_light import (
+from agiprobot_measurement.motion.kinematics import KinematicModel
+from agiprobot_measurement.ros import phoxi_messages
+from agiprobot_measurement.sensors.phoxi.device import load_camera_config, transform_from_quaternion
+from agiprobot_measurement.sensors.phoxi.renderer import (
     RESOLUTION_LOW,
     RobotGeometry,
     ScanSettings,
@@ -29,7 +27,9 @@ from agiprobot_measurement.structured_light import (
     load_scanner_model,
     scene_geometry,
 )
-from agiprobot_measurement.urdf_model import UrdfModel
+from agiprobot_measurement.srv import SetJointState, TriggerImage
+from agiprobot_measurement.station import Station
+from agiprobot_measurement.station.urdf_model import UrdfModel
 
 MOVED = np.array([-0.5, 0.0, 0.0, 0.0, 0.0, 0.0])  # shoulder pan towards the camera side
 

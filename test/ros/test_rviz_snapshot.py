@@ -18,7 +18,7 @@ import rostest
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from station_test_utils import place_robot
 
-from agiprobot_measurement.snapshot import OffscreenRviz
+from agiprobot_measurement.ros.rviz_snapshot import OffscreenRviz
 from agiprobot_measurement.station import PACKAGE_ROOT
 
 ARTIFACTS = Path(os.environ.get("ROS_HOME", "/tmp")) / "test_artifacts"

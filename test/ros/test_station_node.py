@@ -24,8 +24,8 @@ from station_test_utils import (
     place_robot,
 )
 
-from agiprobot_measurement.kinematics import KinematicModel
-from agiprobot_measurement.point_to_point import point_to_point
+from agiprobot_measurement.motion.kinematics import KinematicModel
+from agiprobot_measurement.motion.point_to_point import point_to_point
 
 
 class StationTest(unittest.TestCase):

@@ -1,0 +1,1 @@
+"""Flange-based robot-camera calibration of the PhoXi: detection, registration, session, simulation, test mode."""

@@ -1,0 +1,197 @@
+"""One calibration session of the flange method, ROS-free: the state behind ``nodes/calibration``.
+
+Holds the flag points, the samples (flange centre in the robot base frame and in the camera frame, metres), the
+acceptance criteria measured on the flag points, the rejected frames with their reasons, and writes the data file
+after every change (atomic rewrite, so an interrupted session keeps every sample taken so far).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from agiprobot_measurement.calibration.flange_detection import FlangeDetection, FlangeDetectorConfig
+from agiprobot_measurement.calibration.registration import (
+    CalibrationData,
+    CalibrationError,
+    CalibrationResult,
+    Sample,
+    calibrate_data,
+    check_flag_points,
+    read_data_file,
+    select_consistent_flags,
+    write_data_file,
+    zigzag_path,
+)
+from agiprobot_measurement.common.geometry import transform_points
+
+__all__ = [
+    "MODES",
+    "CalibrationSession",
+    "detector_config",
+    "sample_index",
+    "zigzag_for",
+]
+
+MODES = ("cal_fine", "cal_coarse", "test")
+
+
+def sample_index() -> str:
+    """Timestamp index of the original data file: ``<seconds>_<microseconds>`` (unique within a session)."""
+    now = time.time()
+    return f"{int(now)}_{int((now % 1) * 1e6):06d}"
+
+
+@dataclass
+class CalibrationSession:
+    """Flag points, samples and criteria of one calibration; the data file is rewritten after every change."""
+
+    data_file: Path | None = None
+    ransac: dict = field(default_factory=dict)
+    plane_fraction: float = 0.75
+    circle_fraction: float = 0.5
+    flag_tolerance_m: float = 0.005
+    data: CalibrationData = field(default_factory=CalibrationData)
+    rejections: list[tuple[str, str]] = field(default_factory=list)  # (what, reason)
+    _counter: int = 0
+
+    @classmethod
+    def from_config(cls, config: dict, data_file: str | Path | None) -> CalibrationSession:
+        acc = config.get("acceptance", {}) or {}
+        ransac = dict(config.get("ransac", {}) or {})
+        return cls(
+            data_file=Path(data_file) if data_file else None,
+            ransac=ransac,
+            plane_fraction=float(acc.get("plane_fraction", 0.75)),
+            circle_fraction=float(acc.get("circle_fraction", 0.5)),
+            flag_tolerance_m=float(acc.get("flag_tolerance_m", 0.005)),
+        )
+
+    # ------------------------------------------------------------------------------------------ samples
+    def _index(self) -> str:
+        self._counter += 1
+        return f"{sample_index()}_{self._counter:04d}"
+
+    def save(self, path: str | Path | None = None) -> Path | None:
+        target = Path(path) if path else self.data_file
+        if target is None:
+            return None
+        return write_data_file(target, self.data)
+
+    def load(self, path: str | Path | None = None) -> int:
+        """Replace the samples by a data file's; returns their number."""
+        source = Path(path) if path else self.data_file
+        if source is None:
+            raise CalibrationError("no data file given")
+        self.data = read_data_file(source)
+        return len(self.data.samples)
+
+    def clear(self) -> None:
+        self.data = CalibrationData()
+        self.rejections = []
+        self.save()
+
+    def add_flags(self, p_robot_m: np.ndarray, candidates: list[list[FlangeDetection]]) -> list[Sample]:
+        """The flag samples from the detections at every flag point (several candidates each): the combination
+        whose distances agree with the robot's (:func:`select_consistent_flags`); sets the criteria."""
+        robot = check_flag_points(p_robot_m)
+        choice = select_consistent_flags(
+            robot, [[d.centre_m for d in found] for found in candidates], self.flag_tolerance_m
+        )
+        chosen = [candidates[i][k] for i, k in enumerate(choice)]
+        self.data.samples = [s for s in self.data.samples if not s.flag]
+        added = [Sample(self._index(), robot[i], det.centre_m, True) for i, det in enumerate(chosen)]
+        self.data.samples[:0] = added
+        self.data.criteria_plane = min(d.plane_points for d in chosen)
+        self.data.criteria_line = min(d.circle_inliers for d in chosen)
+        self.save()
+        return added
+
+    def judge(self, detection: FlangeDetection) -> str:
+        """ "" when the detection passes the acceptance criteria, else the reason."""
+        if not detection.ok:
+            return detection.reason
+        if self.data.criteria_plane and detection.plane_points < self.plane_fraction * self.data.criteria_plane:
+            return (
+                f"{detection.plane_points} points on the flange plane < {self.plane_fraction} x "
+                f"{self.data.criteria_plane} (flag points)"
+            )
+        if self.data.criteria_line and detection.circle_inliers < self.circle_fraction * self.data.criteria_line:
+            return (
+                f"{detection.circle_inliers} circle inliers < {self.circle_fraction} x {self.data.criteria_line} "
+                "(flag points)"
+            )
+        return ""
+
+    def add_sample(self, p_robot_m: np.ndarray, detection: FlangeDetection, what: str = "sample") -> tuple[bool, str]:
+        """Judge a detection; accepted ones become a sample (data file rewritten), rejected ones are recorded."""
+        reason = self.judge(detection)
+        if reason:
+            self.rejections.append((what, reason))
+            return False, reason
+        sample = Sample(self._index(), np.asarray(p_robot_m, dtype=float), detection.centre_m)
+        self.data.samples.append(sample)
+        self.save()
+        return True, sample.index
+
+    def remove(self, index: str) -> Sample:
+        """Remove a sample by index ("" or "last": the last one)."""
+        if not self.data.samples:
+            raise CalibrationError("no samples")
+        if index in ("", "last"):
+            removed = self.data.samples.pop()
+        else:
+            matches = [s for s in self.data.samples if s.index == index]
+            if not matches:
+                raise CalibrationError(f"no sample with index {index!r}")
+            removed = matches[0]
+            self.data.samples.remove(removed)
+        self.save()
+        return removed
+
+    def listing(self) -> str:
+        lines = [
+            f"{s.index} {'flag' if s.flag else 'path'} robot {np.round(s.p_robot_m, 4).tolist()} "
+            f"camera {np.round(s.p_camera_m, 4).tolist()}"
+            for s in self.data.samples
+        ]
+        lines += [f"rejected {what}: {reason}" for what, reason in self.rejections]
+        return "\n".join(lines) or "no samples"
+
+    # -------------------------------------------------------------------------------------- calibration
+    def compute(self, mode: str) -> CalibrationResult:
+        options = {k: self.ransac[k] for k in ("threshold_m", "min_threshold_m", "det_threshold", "max_draws")}
+        options = {k: v for k, v in options.items() if v is not None}
+        result = calibrate_data(self.data, mode, **options)
+        if mode == "cal_coarse":
+            self.data.h_coarse = result.transform
+            self.save()
+        return result
+
+    def expected_camera_point(self, p_robot_m: np.ndarray) -> np.ndarray:
+        """Where the coarse calibration expects the flange centre in the camera frame (metres)."""
+        if self.data.h_coarse is None:
+            raise CalibrationError("no coarse calibration yet")
+        return transform_points(np.linalg.inv(self.data.h_coarse), np.asarray(p_robot_m, dtype=float)[None])[0]
+
+
+def zigzag_for(flag_points_m: np.ndarray, config: dict) -> np.ndarray:
+    zz = config.get("zigzag", {}) or {}
+    return zigzag_path(
+        flag_points_m,
+        seed=zz.get("seed", 0),
+        jitter_m=float(zz.get("jitter_m", 0.03)),
+        fractions=tuple(zz.get("fractions", (0.25, 0.5, 0.75))),
+    )
+
+
+def detector_config(config: dict) -> FlangeDetectorConfig:
+    flange = config.get("flange", {}) or {}
+    detector = FlangeDetectorConfig()
+    for key in ("radius_m", "crop_radius_m", "circle_band_m", "max_offset_m", "max_candidates"):
+        if key in flange:
+            setattr(detector, key, type(getattr(detector, key))(flange[key]))
+    return detector

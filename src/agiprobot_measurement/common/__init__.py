@@ -1,0 +1,1 @@
+"""Shared foundations: geometry, configuration validation, units, atomic files."""

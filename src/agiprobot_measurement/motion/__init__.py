@@ -1,0 +1,1 @@
+"""Robot motion: kinematics, inverse kinematics, Cartesian paths, collision checking, OMPL planning, trajectories."""

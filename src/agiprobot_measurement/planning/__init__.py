@@ -1,0 +1,1 @@
+"""Measurement planning: part loading, viewpoints, set cover, ordering, execution plans, the TrajectoryManager."""

@@ -1,0 +1,1121 @@
+"""TrajectoryManager: plan, store, load and execute measurement trajectories for a laser line scanner.
+
+The documented API of the original package (names, parameters, defaults, mm and points/mm^2), rebuilt on the
+package's ROS-free core: the station comes from configuration (``config/*.yaml``), MoveIt's jobs are done by
+KDL / closed-form IK, FCL and OMPL, and every stage works in batch.
+
+Pipeline (``generate_samples_and_viewpoints`` -> ``solve_scp`` -> ``connect_viewpoints`` ->
+``convert_viewpointlist_to_execution_plan`` -> ``store_execution_plan`` / ``execute``):
+
+1. the part is loaded in mm, placed at the scene file's part pose times the caller's transform, downward faces
+   are not sampled;
+2. samples are spread evenly by density; candidate viewpoints are anchored at the optimal standoff;
+3. the anchors of all candidates are checked for reachability with the batched closed-form IK, the reachable
+   ones are evaluated metrologically in one batch (sparse points x viewpoints matrix);
+4. mechanics without waste: the full scan line (Cartesian path, joint jumps, collisions, partial acceptance)
+   is computed only for the views the set cover picks; when one fails or is cut short, its column is
+   corrected and the set cover is solved again (bounded rounds);
+5. the chosen views are ordered greedily by connection time from the current state (either scan direction),
+   improved by 2-opt, and connected with collision-free, time-parameterised paths.
+
+Units: the API takes and returns mm (positions, lengths) and rad; kinematics and collision work in metres; the
+conversion happens here, at the edge.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import math
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse
+
+from agiprobot_measurement.errors import InternalError
+from agiprobot_measurement.motion.cartesian import compute_cartesian_path
+from agiprobot_measurement.motion.collision import CollisionChecker
+from agiprobot_measurement.motion.ik import make_ik_solver
+from agiprobot_measurement.motion.kinematics import KinematicModel
+from agiprobot_measurement.motion.time_parameterization import constant_speed_scan_trajectory
+from agiprobot_measurement.motion.trajectory import JointTrajectory, check_trajectory
+from agiprobot_measurement.planning import plan_io
+from agiprobot_measurement.planning.part_loading import LoadedPart, SurfaceSamples, load_part
+from agiprobot_measurement.planning.plan_io import PlanSegment
+from agiprobot_measurement.planning.set_cover import SOLVER_TYPES, SetCoverResult, solve_set_cover
+from agiprobot_measurement.planning.viewpoint import (
+    TILT_MODES,
+    ViewPoint,
+    ViewpointCandidates,
+    build_viewpoints,
+    generate_viewpoint_poses,
+    select_limited_tilt,
+)
+from agiprobot_measurement.sensors.laser_line.model import MeasurabilityResult, SensorModel
+from agiprobot_measurement.station import ConfigError, Station
+
+__all__ = [
+    "LOG",
+    "STAGES",
+    "CoverageReport",
+    "ExecutionError",
+    "PlanningCancelled",
+    "PlanningError",
+    "ProgressCallback",
+    "SimulatedExecutor",
+    "TrajectoryManager",
+    "p2p_durations",
+]
+
+LOG = logging.getLogger(__name__)
+
+#: progress callback: (stage, fraction done 0..1, message)
+ProgressCallback = Callable[[str, float, str], None]
+
+STAGES = ("sampling", "metrology", "mechanics", "set cover", "connection")
+
+
+class PlanningError(InternalError):
+    """The planning pipeline cannot go on (nothing reachable, nothing measurable, no part loaded...)."""
+
+
+class ExecutionError(InternalError):
+    """Executing a trajectory failed; the robot has been stopped."""
+
+
+class PlanningCancelled(RuntimeError):
+    """The caller cancelled planning (the progress callback raised it)."""
+
+
+@dataclass
+class CoverageReport:
+    """What a plan covers and what it costs (lengths mm, times s)."""
+
+    n_samples: int
+    n_coverable: int
+    n_covered: int
+    n_views: int
+    n_candidates: int
+    n_valid_candidates: int
+    estimated_execution_time_s: float
+    measurement_time_s: float
+    connection_time_s: float
+    mean_uncertainty_mm: float
+    max_uncertainty_mm: float
+    solver: str
+    solver_gap: float | None
+    timings_s: dict = field(default_factory=dict)
+    unconnected_views: int = 0
+
+    @property
+    def coverage_of_coverable(self) -> float:
+        return self.n_covered / self.n_coverable if self.n_coverable else 0.0
+
+    @property
+    def coverage_of_samples(self) -> float:
+        return self.n_covered / self.n_samples if self.n_samples else 0.0
+
+    def as_dict(self) -> dict:
+        out = {k: v for k, v in self.__dict__.items()}
+        out["coverage_of_coverable"] = self.coverage_of_coverable
+        out["coverage_of_samples"] = self.coverage_of_samples
+        return out
+
+
+class SimulatedExecutor:
+    """Executes trajectories instantly on a kinematic state (no ROS): the default executor.
+
+    An executor needs ``current_state() -> (6,) rad`` and ``execute_segment(trajectory, kind, viewpoint)``,
+    which raises :class:`ExecutionError` on failure. The ROS node plugs in one that drives the simulated
+    robot's action.
+    """
+
+    def __init__(self, start_state: np.ndarray, limits, on_measure: Callable | None = None):
+        self.state = np.asarray(start_state, dtype=float).copy()
+        self.limits = limits
+        self.on_measure = on_measure
+        self.log: list[tuple[str, float]] = []
+
+    def current_state(self) -> np.ndarray:
+        return self.state.copy()
+
+    def execute_segment(self, trajectory: JointTrajectory, kind: str, viewpoint=None) -> None:
+        verdict = check_trajectory(trajectory, self.limits, self.state)
+        if not verdict.ok:
+            raise ExecutionError(f"{kind} segment rejected: {verdict.reason}")
+        self.state = trajectory.end.copy()
+        self.log.append((kind, trajectory.duration))
+        if kind == "measure" and self.on_measure is not None and viewpoint is not None:
+            self.on_measure(viewpoint)
+
+
+def _tip_pose_m(pose_mm: np.ndarray) -> np.ndarray:
+    pose = np.array(pose_mm, dtype=float)
+    pose[..., :3, 3] *= 1e-3
+    return pose
+
+
+def p2p_durations(
+    starts: np.ndarray,
+    goals: np.ndarray,
+    max_velocity: np.ndarray,
+    max_acceleration: np.ndarray,
+    wraps: np.ndarray | None = None,
+):
+    """Durations (s) of synchronised point-to-point joint moves, all pairs: (A, n) x (B, n) -> (A, B).
+
+    The time of the straight joint-space move, a lower bound of any collision-free connection and the exact
+    time where the straight move is free. Joints flagged in ``wraps`` (a range of at least 2 pi) count their
+    shortest angular distance, since the goal can be reached at an angle shifted by 2 pi.
+    """
+    difference = starts[:, None, :] - goals[None, :, :]
+    if wraps is not None:
+        wrapped = np.abs((difference + np.pi) % (2 * np.pi) - np.pi)
+        distance = np.where(wraps, wrapped, np.abs(difference))
+    else:
+        distance = np.abs(difference)
+    triangular = distance < max_velocity**2 / max_acceleration
+    own = np.where(
+        triangular,
+        2.0 * np.sqrt(distance / max_acceleration),
+        distance / max_velocity + max_velocity / max_acceleration,
+    )
+    return own.max(axis=2)
+
+
+class TrajectoryManager:
+    """Completely integrated system for high-coverage, uncertainty-minimal scanning of a part with a laser line
+    scanner on the station's robot. Everything station-specific comes from configuration.
+
+    :param station: the station (default: ``Station.load()`` from ``config/``).
+    :param scan_speed_mm_s: tip speed during measurement segments.
+    :param planner_name: OMPL planner for connections.
+    :param progress: optional callback ``(stage, fraction, message)``; raising :class:`PlanningCancelled` in it
+        cancels planning.
+    :param seed: seeds sampling and planning, so plans are reproducible.
+    """
+
+    def __init__(
+        self,
+        station: Station | None = None,
+        scan_speed_mm_s: float = 50.0,
+        planner_name: str = "RRTConnect",
+        progress: ProgressCallback | None = None,
+        seed: int = 0,
+        start_state: np.ndarray | str = "home",
+        preferred_state: np.ndarray | str = "up",
+    ):
+        self.station = station or Station.load()
+        if not (math.isfinite(scan_speed_mm_s) and scan_speed_mm_s > 0):
+            raise ValueError(f"scan_speed_mm_s must be a positive number, got {scan_speed_mm_s}")
+        self.scan_speed_mm_s = float(scan_speed_mm_s)
+        self.kinematics = KinematicModel.from_station(self.station)
+        self.ik = make_ik_solver(self.kinematics)
+        self.limits = self.station.limits
+        self.sensor_model = SensorModel(self.station.scanner.sensor_parameters)
+        self._base_scene = self.station.scene
+        self.collision = CollisionChecker.from_station(self.station, model=self.kinematics, load_part=False)
+        self.planner_name = planner_name
+        self._planner = None
+        self.progress = progress
+        self.seed = int(seed)
+        self.current_state = self._state(start_state)
+        self.preferred_state = self._state(preferred_state)
+        self.part: LoadedPart | None = None
+        self.target_mesh = None
+        self.samples: SurfaceSamples | None = None
+        self.sampled_surface_points: list[np.ndarray] = []
+        self.candidates: ViewpointCandidates | None = None
+        self.measurability: MeasurabilityResult | None = None
+        self.last_set_cover: SetCoverResult | None = None
+        self.last_viewpoints: list[ViewPoint] = []
+        self.last_ordered: list[ViewPoint] = []
+        self.unconnected_views: list[ViewPoint] = []
+        self.timings_s: dict[str, float] = {}
+        self.parameters: dict = {}
+        # mechanics settings used by the lazy verification (set by generate_samples_and_viewpoints)
+        self._mechanics = {
+            "minimum_required_overmeasure": 5.0,
+            "trajectory_sample_step": 2.0,
+            "joint_jump_threshold": 1.5,
+            "minimum_trajectory_length": 25.0,
+            "plan_path_to_check_reachability": False,
+        }
+
+    # ----------------------------------------------------------------------------------------- helpers
+    def _state(self, value) -> np.ndarray:
+        if isinstance(value, str):
+            if value not in self.station.named_states:
+                raise ConfigError(f"unknown named state '{value}'; known: {', '.join(self.station.named_states)}")
+            return self.station.named_states[value].copy()
+        state = np.asarray(value, dtype=float)
+        if state.shape != (self.kinematics.dof,) or not np.all(np.isfinite(state)):
+            raise ValueError(f"a joint state needs {self.kinematics.dof} finite values")
+        return state
+
+    def _report(self, stage: str, fraction: float, message: str = "") -> None:
+        if self.progress is not None:
+            self.progress(stage, float(min(max(fraction, 0.0), 1.0)), message)
+
+    @property
+    def planner(self):
+        if self._planner is None:
+            from agiprobot_measurement.motion.motion_planning import MotionPlanner
+
+            # OMPL refuses the seed 0 (and says so on every call): seeds count from 1 there
+            self._planner = MotionPlanner(self.collision, planner=self.planner_name, seed=self.seed + 1)
+        return self._planner
+
+    # ------------------------------------------------------------------------------------------- load
+    def load_target_mesh(
+        self,
+        file_name,
+        transform=np.eye(4),  # noqa: B008 (read only)
+        add_wbk_mirrors=True,
+        remove_downside=True,
+        remove_threshold_angle_deg=20,
+        units="mm",
+    ) -> bool:
+        """Load the part to measure and put it into the collision world.
+
+        ``transform``: 4x4 placement of the CAD frame (translation in mm) relative to the scene file's part
+        pose (the station's part offset, ``config/scene.yaml``); identity puts the part where the scene says.
+        ``add_wbk_mirrors``: keep the scene objects of group ``wbk_mirrors`` (the original station's two mirrors).
+        ``units``: the file's length unit (mm, cm, dm, m, inch, ft). Raises
+        :class:`~agiprobot_measurement.planning.part_loading.PartLoadError` with the reason for unreadable, empty or
+        implausible input; returns True when everything was loaded.
+        """
+        transform = np.asarray(transform, dtype=float)
+        if transform.shape != (4, 4) or not np.all(np.isfinite(transform)):
+            from agiprobot_measurement.planning.part_loading import PartLoadError
+
+            raise PartLoadError(f"transform must be a finite 4x4 matrix, got shape {transform.shape}")
+        scene_part = self.station.scene.part
+        placement_mm = np.eye(4)
+        if scene_part is not None:
+            placement_mm = scene_part.pose.copy()
+            placement_mm[:3, 3] *= 1000.0
+        part = load_part(
+            file_name,
+            units=units,
+            transform=placement_mm @ transform,
+            remove_downside=remove_downside,
+            remove_threshold_angle_deg=remove_threshold_angle_deg,
+        )
+        for message in part.warnings:
+            LOG.warning("%s", message)
+        scene = self._base_scene if add_wbk_mirrors else self._base_scene.without_group("wbk_mirrors")
+        self.collision = CollisionChecker(self.kinematics, scene, self.collision.config, load_part=False)
+        self.collision.set_part(part.mesh, pose=np.eye(4), name="part", scale_to_m=1e-3)
+        self._planner = None
+        self.part = part
+        self.target_mesh = part.mesh
+        self.samples = None
+        self.parameters.update(
+            part_file=str(Path(file_name).resolve()),
+            units=units,
+            add_wbk_mirrors=bool(add_wbk_mirrors),
+            remove_downside=bool(remove_downside),
+            remove_threshold_angle_deg=float(remove_threshold_angle_deg),
+            # file coordinates -> world mm (scale included), so a stored plan names its part's placement
+            part_transform_mm=(part.transform @ np.diag([part.scale_to_mm] * 3 + [1.0])).reshape(-1).tolist(),
+            seed=self.seed,
+        )
+        return True
+
+    def _require_part(self) -> LoadedPart:
+        if self.part is None:
+            raise PlanningError("no part loaded: call load_target_mesh(file_name, ...) first")
+        return self.part
+
+    # -------------------------------------------------------------------------- samples + viewpoints
+    def generate_samples_and_viewpoints(
+        self,
+        sampling_density,
+        uncertainty_threshold,
+        orientations_around_boresight,
+        viewpoint_tilt_mode="full",
+        plan_path_to_check_reachability=False,
+        minimum_trajectory_length=25,
+        trajectory_sample_step=2,
+        minimum_required_overmeasure=5,
+        joint_jump_threshold=1.5,
+        maximum_deflection=500.0,
+    ):
+        """Sample the part (``sampling_density`` points/mm^2), generate candidate viewpoints and evaluate them.
+
+        Returns ``(sampled surface points (list of (3,) mm), viewpoints)``: the viewpoints whose anchor pose is
+        reachable and which measure at least one sample within ``uncertainty_threshold`` (mm). Their scan
+        lines are checked mechanically (Cartesian path, joint jumps, collisions) lazily, when ``solve_scp``
+        picks them, or at once with :meth:`process_viewpoint`.
+        """
+        part = self._require_part()
+        density = float(sampling_density)
+        if not (math.isfinite(density) and density > 0):
+            raise ValueError(f"sampling_density must be a positive number of points/mm^2, got {sampling_density}")
+        threshold = float(uncertainty_threshold)
+        if not (math.isfinite(threshold) and threshold > 0):
+            raise ValueError(f"uncertainty_threshold must be a positive number of mm, got {uncertainty_threshold}")
+        if viewpoint_tilt_mode not in TILT_MODES:
+            raise ValueError(
+                f"unknown viewpoint_tilt_mode {viewpoint_tilt_mode!r}; valid modes: {', '.join(TILT_MODES)}"
+            )
+        for name, value in (
+            ("minimum_trajectory_length", minimum_trajectory_length),
+            ("trajectory_sample_step", trajectory_sample_step),
+            ("joint_jump_threshold", joint_jump_threshold),
+        ):
+            if not (math.isfinite(float(value)) and float(value) > 0):
+                raise ValueError(f"{name} must be a positive number, got {value}")
+        self._mechanics = {
+            "minimum_required_overmeasure": float(minimum_required_overmeasure),
+            "trajectory_sample_step": float(trajectory_sample_step),
+            "joint_jump_threshold": float(joint_jump_threshold),
+            "minimum_trajectory_length": float(minimum_trajectory_length),
+            "plan_path_to_check_reachability": bool(plan_path_to_check_reachability),
+        }
+        self.parameters.update(
+            sampling_density=density,
+            uncertainty_threshold=threshold,
+            orientations_around_boresight=int(orientations_around_boresight),
+            viewpoint_tilt_mode=viewpoint_tilt_mode,
+            **self._mechanics,
+        )
+        timings = self.timings_s
+        t0 = time.perf_counter()
+        self._report("sampling", 0.0, f"sampling at {density} points/mm^2")
+        samples = part.sample(density, seed=self.seed)
+        if len(samples) == 0:
+            raise PlanningError(
+                f"sampling at {density} points/mm^2 gives no points on {part.measurable_area:.1f} mm^2: "
+                "raise the density (or check the part's unit)"
+            )
+        self.samples = samples
+        self.sampled_surface_points = [p for p in samples.points]
+        self.sensor_model.set_processing_context(part.mesh, samples.points, samples.face_ids)
+        candidates = generate_viewpoint_poses(
+            samples.points, samples.normals, orientations_around_boresight, viewpoint_tilt_mode, self.sensor_model
+        )
+        self.candidates = candidates
+        timings["sampling"] = time.perf_counter() - t0
+        self._report("sampling", 1.0, f"{len(samples)} samples, {len(candidates.poses)} candidate viewpoints")
+
+        # anchors: reachability for all candidates at once (closed-form IK); metrology only where reachable
+        t1 = time.perf_counter()
+        reachable = self._reachable(candidates.poses)
+        timings["anchor_reachability"] = time.perf_counter() - t1
+        self._report("metrology", 0.0, f"{int(reachable.sum())} of {len(reachable)} anchors reachable")
+        t2 = time.perf_counter()
+        index = np.flatnonzero(reachable)
+        result = self._evaluate_in_chunks(candidates.poses[index], threshold, maximum_deflection)
+        counts = result.counts
+        useful = counts > 0
+        if viewpoint_tilt_mode == "limited":
+            valid_all = np.zeros(len(candidates.poses), dtype=bool)
+            valid_all[index[useful]] = True
+            keep_all = select_limited_tilt(
+                valid_all, candidates.sample_index, candidates.orientation_index, candidates.tilt_index
+            )
+            useful &= keep_all[index]
+        timings["metrology"] = time.perf_counter() - t2
+        kept = index[useful]
+        self._report("metrology", 1.0, f"{kept.size} viewpoints measure something")
+        t3 = time.perf_counter()
+        # the returned views' columns, gathered once: views hold slices of these arrays (no per-view copies),
+        # and the set cover's matrix is built from them directly
+        columns = np.flatnonzero(useful)
+        starts = result.indptr[columns]
+        lengths = result.indptr[columns + 1] - starts
+        indptr = np.zeros(len(columns) + 1, dtype=np.int64)
+        np.cumsum(lengths, out=indptr[1:])
+        gather = np.repeat(starts - indptr[:-1], lengths) + np.arange(indptr[-1])
+        self.measurability = MeasurabilityResult(
+            result.n_points,
+            len(columns),
+            indptr,
+            result.point_indices[gather],
+            result.uncertainties[gather],
+            result.trajectory_distances[gather],
+        )
+        del result, gather
+        store = self.measurability
+        self._entry_alive = np.ones(store.nnz, dtype=bool)
+        views = build_viewpoints(
+            candidates,
+            samples.points,
+            samples.normals,
+            orientations_around_boresight,
+            viewpoint_tilt_mode,
+            self.sensor_model,
+            selection=kept,
+        )
+        overmeasure = self._mechanics["minimum_required_overmeasure"]
+        min_length = self._mechanics["minimum_trajectory_length"]
+        lo, hi = self._scan_lines(store.t0_min, store.t0_max, overmeasure, min_length)
+        self._durations = np.array([self._estimate_scan_duration((a, b)) for a, b in zip(lo, hi, strict=True)])
+        self._durations_estimate = self._durations.copy()
+        self._duration_verified = np.zeros(len(self._durations), dtype=bool)
+        self._duration_bias = 1.0
+        for j, view in enumerate(views):
+            a, b = indptr[j], indptr[j + 1]
+            view.attach_measurements(
+                store.point_indices[a:b], store.uncertainties[a:b], store.trajectory_distances[a:b]
+            )
+            view.coverage_column = j
+            view.scan_line = (float(lo[j]), float(hi[j]))
+            view.mechanics_verified = False
+            view.mechanics_valid = True
+            view.estimated_duration_s = float(self._durations[j])
+        self._generation_views = views
+        timings["viewpoint_objects"] = time.perf_counter() - t3
+        self.last_viewpoints = views
+        if not views:
+            raise PlanningError(
+                "no viewpoint can measure the part: no reachable anchor sees a sample within the uncertainty "
+                "threshold (is the part within reach of the robot and the threshold sensible?)"
+            )
+        return list(self.sampled_surface_points), views
+
+    def _reachable(self, anchor_poses_mm: np.ndarray, chunk: int = 20000) -> np.ndarray:
+        """Whether each anchor pose of the laser_emitter_frame has an IK solution within the joint limits."""
+        out = np.zeros(len(anchor_poses_mm), dtype=bool)
+        for start in range(0, len(anchor_poses_mm), chunk):
+            poses = _tip_pose_m(anchor_poses_mm[start : start + chunk])
+            _, valid = self.ik.solve_all(poses)
+            out[start : start + chunk] = valid.any(axis=1)
+        return out
+
+    def _evaluate_in_chunks(self, poses: np.ndarray, threshold: float, deflection: float) -> MeasurabilityResult:
+        """Batch metrology with progress: chunks of views, merged into one result."""
+        n = len(poses)
+        if n == 0:
+            return self.sensor_model.evaluate_viewpoints_batch(np.zeros((0, 4, 4)), threshold, deflection)
+        chunk = max(2000, n // 20)
+        parts = []
+        for start in range(0, n, chunk):
+            parts.append(
+                self.sensor_model.evaluate_viewpoints_batch(poses[start : start + chunk], threshold, deflection)
+            )
+            self._report("metrology", min(start + chunk, n) / n, f"{min(start + chunk, n)} of {n} viewpoints")
+        indptr = [np.zeros(1, dtype=np.int64)]
+        offset = 0
+        for part in parts:
+            indptr.append(part.indptr[1:] + offset)
+            offset += part.nnz
+        return MeasurabilityResult(
+            parts[0].n_points,
+            n,
+            np.concatenate(indptr),
+            np.concatenate([p.point_indices for p in parts]),
+            np.concatenate([p.uncertainties for p in parts]),
+            np.concatenate([p.trajectory_distances for p in parts]),
+        )
+
+    @staticmethod
+    def _scan_lines(t0_min, t0_max, overmeasure: float, min_length: float):
+        """Scan-line extents (mm from the anchor along x) for arrays of the measured points' t0 ranges: the
+        range plus the overmeasure at both ends, widened symmetrically to ``min_length``."""
+        lo = np.asarray(t0_min, dtype=float) - overmeasure
+        hi = np.asarray(t0_max, dtype=float) + overmeasure
+        short = hi - lo < min_length
+        middle = 0.5 * (lo + hi)
+        lo = np.where(short, middle - 0.5 * min_length, lo)
+        hi = np.where(short, middle + 0.5 * min_length, hi)
+        return lo, hi
+
+    def _scan_line(self, t0s: np.ndarray, overmeasure: float, min_length: float) -> tuple[float, float]:
+        lo, hi = self._scan_lines([np.min(t0s)], [np.max(t0s)], overmeasure, min_length)
+        return float(lo[0]), float(hi[0])
+
+    def _estimate_scan_duration(self, scan_line: tuple[float, float]) -> float:
+        # ramps at the joints' pace are short; a constant tip acceleration of 500 mm/s^2 is a fair estimate
+        length = abs(scan_line[1] - scan_line[0])
+        v, a = self.scan_speed_mm_s, 500.0
+        return length / v + v / a
+
+    # ------------------------------------------------------------------------------------ mechanics
+    def process_viewpoint(
+        self,
+        viewpoint,
+        ik_service=None,
+        uncertainty_threshold=None,
+        minimum_required_overmeasure=5,
+        trajectory_sample_step=2,
+        joint_jump_threshold=1.5,
+        minimum_trajectory_length=50,
+    ) -> bool:
+        """Process one viewpoint entirely: anchor reachability, metrology, the measurement trajectory (straight
+        Cartesian line, joint jumps, collisions, partial acceptance) and its timing. On success the results are
+        stored in the viewpoint and True is returned.
+
+        ``ik_service`` is accepted for compatibility and ignored (the package's own IK is used);
+        ``uncertainty_threshold`` (mm) defaults to the one of the last generation.
+        """
+        if self.samples is None:
+            raise PlanningError("no samples: call generate_samples_and_viewpoints(...) first")
+        threshold = uncertainty_threshold or self.parameters.get("uncertainty_threshold")
+        if threshold is None:
+            raise ValueError("uncertainty_threshold is required")
+        anchor = viewpoint.get_anchor_pose()
+        if not self._reachable(anchor[None])[0]:
+            return False
+        points, uncertainties, t0s = self.sensor_model.process_viewpoint_metrologically(viewpoint, float(threshold))
+        if points.size == 0:
+            return False
+        viewpoint.set_measurable_surface_point_indices_and_uncertainties(points, uncertainties, t0s)
+        viewpoint.scan_line = self._scan_line(
+            t0s, float(minimum_required_overmeasure), float(minimum_trajectory_length)
+        )
+        viewpoint.mechanics_verified = False
+        viewpoint.mechanics_valid = True
+        settings = dict(
+            minimum_required_overmeasure=float(minimum_required_overmeasure),
+            trajectory_sample_step=float(trajectory_sample_step),
+            joint_jump_threshold=float(joint_jump_threshold),
+            minimum_trajectory_length=float(minimum_trajectory_length),
+            plan_path_to_check_reachability=self._mechanics["plan_path_to_check_reachability"],
+        )
+        return self._verify_mechanics(viewpoint, settings)
+
+    def _column_range(self, view: ViewPoint):
+        """The view's entry range in the generation's coverage store, or None for a foreign view."""
+        j = getattr(view, "coverage_column", None)
+        views = getattr(self, "_generation_views", None)
+        if j is None or views is None or j >= len(views) or views[j] is not view:
+            return None
+        return int(self.measurability.indptr[j]), int(self.measurability.indptr[j + 1])
+
+    def _verify_mechanics(self, view: ViewPoint, settings: dict | None = None) -> bool:
+        """Compute the view's measurement trajectory; shorten the view to what is executable or reject it."""
+        started = time.perf_counter()
+        try:
+            valid = self._verify_mechanics_inner(view, settings or self._mechanics)
+        finally:
+            self.timings_s["mechanics"] = self.timings_s.get("mechanics", 0.0) + time.perf_counter() - started
+            self.mechanics_checked = getattr(self, "mechanics_checked", 0) + 1
+        span = self._column_range(view)
+        if span is not None:
+            a, b = span
+            if not valid:
+                self._entry_alive[a:b] = False
+            else:
+                kept = np.isin(self.measurability.point_indices[a:b], view.measurable_indices)
+                self._entry_alive[a:b] &= kept
+                j = view.coverage_column
+                # estimates must not be optimistic, or IP_time keeps preferring views not yet verified
+                ratio = view.estimated_duration_s / max(self._durations_estimate[j], 1e-9)
+                self._duration_bias = max(getattr(self, "_duration_bias", 1.0), ratio)
+                self._durations[j] = view.estimated_duration_s
+                self._duration_verified[j] = True
+        return valid
+
+    def _verify_mechanics_inner(self, view: ViewPoint, settings: dict) -> bool:
+        view.mechanics_verified = True
+        step = settings["trajectory_sample_step"]
+        overmeasure = settings["minimum_required_overmeasure"]
+        lo, hi = view.scan_line if not view.reversed else view.scan_line[::-1]
+        best = None
+        for direction in ((lo, hi), (hi, lo)):
+            attempt = self._scan_path(view, direction, step, settings["joint_jump_threshold"])
+            if attempt is not None and (best is None or attempt[0] > best[0]):
+                best = attempt
+            if best is not None and best[0] >= 1.0:
+                break
+        if best is None:
+            view.mechanics_valid = False
+            return False
+        fraction, path, line = best
+        start_t, end_t = line
+        achieved_end = start_t + fraction * (end_t - start_t)
+        achieved_lo, achieved_hi = sorted((start_t, achieved_end))
+        if achieved_hi - achieved_lo < settings["minimum_trajectory_length"] - 1e-6:
+            view.mechanics_valid = False
+            return False
+        if fraction < 1.0:
+            # partial acceptance: keep the points the laser line still sweeps, with the overmeasure margin
+            indices = np.asarray(view.get_measurable_surface_point_indices())
+            uncert = np.asarray(view.get_measurable_surface_point_uncertainties())
+            t0s = np.asarray(view.get_measurable_surface_point_trajectory_distances())
+            keep = (t0s >= achieved_lo + overmeasure - 1e-9) & (t0s <= achieved_hi - overmeasure + 1e-9)
+            if not keep.any():
+                view.mechanics_valid = False
+                return False
+            view.set_measurable_surface_point_indices_and_uncertainties(indices[keep], uncert[keep], t0s[keep])
+        if settings.get("plan_path_to_check_reachability"):
+            connection = self._connect(self.current_state, path[0], planning_time_s=1.0)
+            if connection is None:
+                view.mechanics_valid = False
+                return False
+        scan = constant_speed_scan_trajectory(
+            path, self.limits, self.scan_speed_mm_s, spacing_mm=None, tip_positions_m=self._path_positions(path)
+        )
+        view.set_trajectory_for_measurement(scan.trajectory)
+        view.scan_line = (start_t, achieved_end)
+        view.reversed = False
+        view.scan_speed_mm_s = scan.scan_speed_mm_s
+        view.estimated_duration_s = scan.trajectory.duration
+        view.mechanics_valid = True
+        return True
+
+    def _path_positions(self, path: np.ndarray) -> np.ndarray:
+        return self.kinematics.fk_batch(path)[:, :3, 3]
+
+    def _scan_path(self, view: ViewPoint, line: tuple[float, float], step_mm: float, jump_rad: float):
+        """Cartesian path along the view's line from ``line[0]`` to ``line[1]`` (mm from the anchor along x).
+
+        Tries every collision-free IK branch of the start pose, nearest the preferred state first, and returns
+        the best ``(fraction, joint path, line)`` or None.
+        """
+        anchor = view.get_anchor_pose()
+        x_axis = anchor[:3, 0]
+        start_pose = anchor.copy()
+        start_pose[:3, 3] += line[0] * x_axis
+        end_pose = anchor.copy()
+        end_pose[:3, 3] += line[1] * x_axis
+        start_m, end_m = _tip_pose_m(start_pose), _tip_pose_m(end_pose)
+        solutions, valid = self.ik.solve_all(start_m[None], seeds=self.preferred_state[None])
+        branches = solutions[0][valid[0]]
+        if len(branches) == 0:
+            return None
+        branches = branches[self.collision.check_states(branches)]
+        if len(branches) == 0:
+            return None
+        order = np.argsort(np.abs(branches - self.preferred_state).max(axis=1))
+        best = None
+        for q_start in branches[order]:
+            result = compute_cartesian_path(
+                self.ik,
+                q_start,
+                end_m,
+                step_mm=step_mm,
+                jump_threshold_rad=jump_rad,
+                validity_checker=self.collision.check_states,
+            )
+            if len(result.joint_path) >= 2 and (best is None or result.fraction > best[0]):
+                best = (result.fraction, result.joint_path, line)
+            if best is not None and best[0] >= 1.0:
+                break
+        return best
+
+    # ------------------------------------------------------------------------------------ set cover
+    def solve_scp(self, provided_viewpoints, solver_type="greedy", time_limit_s=60.0, max_rounds=30):
+        """Choose viewpoints that together measure every point any provided viewpoint measures.
+
+        ``solver_type``: 'greedy', 'IP_basic', 'IP_uncertainty' or 'IP_time' (an unknown name raises
+        ValueError listing these). Views picked but not yet verified mechanically are verified (and corrected
+        or dropped) and the problem is solved again until every chosen view is executable. After ``max_rounds``
+        rounds the cover is solved once more over verified views only, so the result is always executable.
+        Returns the chosen views as a set (documented type).
+        """
+        if solver_type not in SOLVER_TYPES:
+            raise ValueError(f"unknown solver_type {solver_type!r}; valid names: {', '.join(SOLVER_TYPES)}")
+        views = list(provided_viewpoints)
+        if not views:
+            raise PlanningError("solve_scp needs at least one viewpoint")
+        n_points = len(self.sampled_surface_points) or 1 + max(int(v.measurable_indices.max(initial=0)) for v in views)
+        t0 = time.perf_counter()
+        mechanics_before = self.timings_s.get("mechanics", 0.0)
+        set_cover_time = 0.0
+        verified_count = 0
+        only_verified = False
+        result = None
+        for round_index in range(max_rounds + 1):
+            if round_index == max_rounds:
+                only_verified = True  # the fallback: no more verification, a cover of verified views
+                LOG.warning("set cover: %d rounds of verification; solving over verified views only", max_rounds)
+            matrix, durations = self._coverage_problem(views, n_points, only_verified)
+            self._report("set cover", min(0.9, round_index / max_rounds), f"round {round_index + 1}")
+            result = solve_set_cover(
+                matrix,
+                solver_type,
+                durations_s=durations if solver_type == "IP_time" else None,
+                time_limit_s=time_limit_s,
+            )
+            set_cover_time += result.solve_time_s
+            chosen = [views[j] for j in result.selected.tolist()]
+            pending = [v for v in chosen if not getattr(v, "mechanics_verified", True)]
+            if not pending:
+                break
+            if solver_type != "greedy" and not only_verified:
+                # the greedy cover of the same matrix costs little and names views the next solve is likely to
+                # want: verifying them now saves rounds of the (slower) integer programme
+                extra = solve_set_cover(matrix, "greedy", time_limit_s=time_limit_s)
+                set_cover_time += extra.solve_time_s
+                pending += [
+                    views[j] for j in extra.selected.tolist() if not getattr(views[j], "mechanics_verified", True)
+                ]
+                pending = list(dict.fromkeys(pending))
+            for view in pending:
+                self._verify_mechanics(view)
+                verified_count += 1
+                self._report(
+                    "mechanics",
+                    min(1.0, verified_count / (verified_count + 10)),
+                    f"verified {verified_count} scan lines",
+                )
+        if not chosen:
+            raise PlanningError("no viewpoint is executable: every candidate failed the mechanical checks")
+        self.timings_s["set_cover_and_mechanics"] = time.perf_counter() - t0
+        self.timings_s["set_cover"] = set_cover_time
+        self.timings_s["set_cover_last_solve"] = result.solve_time_s
+        self.timings_s["set_cover_rounds"] = round_index + 1
+        self.timings_s["mechanics_in_set_cover"] = self.timings_s.get("mechanics", 0.0) - mechanics_before
+        self.last_set_cover = result
+        self.parameters["solver_type"] = solver_type
+        self._report("set cover", 1.0, f"{len(chosen)} views cover {int(result.covered.sum())} points")
+        return set(chosen)
+
+    def _coverage_problem(self, views: list[ViewPoint], n_points: int, only_verified: bool = False):
+        """(points x views CSC matrix of uncertainties, per-view durations) for the set cover. Rejected views
+        have empty columns, shortened ones only their remaining points."""
+        store = getattr(self, "measurability", None)
+        columns = [getattr(v, "coverage_column", None) for v in views]
+        from_store = store is not None and all(
+            c is not None and c < store.n_views and self._generation_views[c] is v
+            for c, v in zip(columns, views, strict=True)
+        )
+        if from_store:
+            data = np.where(self._entry_alive, np.maximum(store.uncertainties, 1e-12), 0.0)
+            matrix = scipy.sparse.csc_matrix(
+                (data, store.point_indices, store.indptr), shape=(store.n_points, store.n_views)
+            )
+            columns = np.asarray(columns, dtype=np.int64)
+            if len(columns) != store.n_views or np.any(columns != np.arange(store.n_views)):
+                matrix = matrix[:, columns]
+            durations = np.where(self._duration_verified, self._durations, self._durations * self._duration_bias)[
+                columns
+            ]
+        else:
+            indices = [
+                v.measurable_indices if getattr(v, "mechanics_valid", True) else np.zeros(0, np.int64) for v in views
+            ]
+            values = [v.measurable_uncertainties if getattr(v, "mechanics_valid", True) else np.zeros(0) for v in views]
+            indptr = np.zeros(len(views) + 1, dtype=np.int64)
+            np.cumsum([len(i) for i in indices], out=indptr[1:])
+            rows = np.concatenate(indices) if indices else np.zeros(0, dtype=np.int64)
+            data = np.maximum(np.concatenate(values), 1e-12) if values else np.zeros(0)
+            matrix = scipy.sparse.csc_matrix((data, rows, indptr), shape=(n_points, len(views)))
+            durations = np.array([getattr(v, "estimated_duration_s", 1.0) for v in views])
+        if only_verified:
+            unverified = np.flatnonzero([not getattr(v, "mechanics_verified", True) for v in views])
+            if unverified.size:
+                keep = np.ones(matrix.shape[1])
+                keep[unverified] = 0.0
+                matrix = matrix @ scipy.sparse.diags(keep)
+                matrix = scipy.sparse.csc_matrix(matrix)
+        return matrix, durations
+
+    # ----------------------------------------------------------------------------------- connection
+    def _connect(self, start: np.ndarray, goal: np.ndarray, planning_time_s: float = 0.2, attempts: int = 3):
+        """Collision-free, time-parameterised joint trajectory from ``start`` to ``goal``, or None.
+
+        The straight joint move when it is free (exactly time-optimal), else OMPL with a bounded number of
+        attempts, each with twice the previous time budget.
+        """
+        from agiprobot_measurement.motion.motion_planning import collision_free_trajectory
+
+        return collision_free_trajectory(
+            start,
+            goal,
+            self.limits,
+            self.collision,
+            lambda: self.planner,  # OMPL is set up only when a straight move is blocked
+            planning_time_s=planning_time_s,
+            attempts=attempts,
+        )
+
+    def connect_viewpoints(self, unordered_viewpoints, min_planning_time=0.2):
+        """Order the views for a fast execution and connect them (greedy by connection time from the current
+        state, either scan direction, then 2-opt). Each view stores its connecting trajectory
+        (``get_trajectory_to_view``). Views that cannot be connected are left out and listed in
+        ``unconnected_views``. Returns the ordered list."""
+        views = [v for v in unordered_viewpoints]
+        t0 = time.perf_counter()
+        for view in views:
+            if not getattr(view, "mechanics_verified", False) or view.get_trajectory_for_measurement() is None:
+                if not self._verify_mechanics(view):
+                    raise PlanningError(f"{view} has no executable measurement trajectory")
+        if not views:
+            return []
+        starts = np.array([v.get_trajectory_for_measurement().start for v in views])
+        ends = np.array([v.get_trajectory_for_measurement().end for v in views])
+        order, flips = self._order_views(self.current_state, starts, ends)
+        ordered, unconnected = [], []
+        state = self.current_state.copy()
+        for k, (i, flip) in enumerate(zip(order, flips, strict=True)):
+            view = views[i]
+            if flip != view.reversed:
+                view.reverse_trajectory_for_measurement()
+            view.set_trajectory_for_measurement(self._unwrapped_towards(view.get_trajectory_for_measurement(), state))
+            entry = view.get_trajectory_for_measurement().start
+            self._report("connection", k / len(order), f"connecting view {k + 1} of {len(order)}")
+            connection = self._connect(state, entry, planning_time_s=min_planning_time)
+            if connection is None:
+                LOG.warning("view %d cannot be connected from the previous state: left out", i)
+                unconnected.append(view)
+                continue
+            view.set_trajectory_to_view(connection)
+            ordered.append(view)
+            state = view.get_trajectory_for_measurement().end.copy()
+        self.unconnected_views = unconnected
+        self.last_ordered = ordered
+        self.timings_s["connection"] = time.perf_counter() - t0
+        self._report("connection", 1.0, f"{len(ordered)} views connected, {len(unconnected)} left out")
+        return ordered
+
+    def _wrapping_joints(self) -> np.ndarray:
+        return (self.limits.upper - self.limits.lower) >= 2 * np.pi - 1e-6
+
+    def _unwrapped_towards(self, trajectory: JointTrajectory, reference: np.ndarray) -> JointTrajectory:
+        """The same motion with its wide joints shifted by multiples of 2 pi so that it starts as near
+        ``reference`` as the joint limits allow (a revolute joint reaches the same pose at q and q + 2 pi)."""
+        wraps = self._wrapping_joints()
+        turns = np.where(wraps, np.round((reference - trajectory.start) / (2 * np.pi)), 0.0)
+        for _ in range(3):
+            shift = 2 * np.pi * turns
+            moved = trajectory.positions + shift
+            low = moved.min(axis=0) < self.limits.lower - 1e-9
+            high = moved.max(axis=0) > self.limits.upper + 1e-9
+            if not (low.any() or high.any()):
+                if not np.any(shift):
+                    return trajectory
+                shifted = trajectory.copy()
+                shifted.positions = moved
+                return shifted
+            turns = turns + low - high  # step back towards the limits
+        return trajectory
+
+    def _order_views(self, current: np.ndarray, starts: np.ndarray, ends: np.ndarray):
+        """Greedy order + 2-opt on estimated connection times; returns (order, flipped per position)."""
+        n = len(starts)
+        vmax, amax = self.limits.max_velocity, self.limits.max_acceleration
+        # entries[2i] = start of view i (forward), entries[2i+1] = end of view i (reversed scan)
+        entries = np.empty((2 * n, starts.shape[1]))
+        entries[0::2], entries[1::2] = starts, ends
+        exits = np.empty_like(entries)
+        exits[0::2], exits[1::2] = ends, starts
+        wraps = self._wrapping_joints()
+        from_current = p2p_durations(current[None], entries, vmax, amax, wraps)[0]
+        between = p2p_durations(exits, entries, vmax, amax, wraps)  # exit of (i, dir) -> entry of (j, dir')
+        remaining = set(range(n))
+        tour = []
+        cost = from_current.copy()
+        while remaining:
+            candidates = [(cost[2 * i + d], i, d) for i in remaining for d in (0, 1)]
+            _, i, d = min(candidates)
+            tour.append((i, d))
+            remaining.remove(i)
+            cost = between[2 * i + d]
+
+        def tour_cost(t):
+            total = from_current[2 * t[0][0] + t[0][1]]
+            for (a, da), (b, db) in itertools.pairwise(t):
+                total += between[2 * a + da, 2 * b + db]
+            return total
+
+        best = tour_cost(tour)
+        improved = True
+        passes = 0
+        while improved and passes < 50:
+            improved = False
+            passes += 1
+            for i in range(n):
+                for j in range(i, n):
+                    # reverse the block i..j: order flips and so does each view's scan direction
+                    candidate = tour[:i] + [(v, 1 - d) for v, d in reversed(tour[i : j + 1])] + tour[j + 1 :]
+                    value = tour_cost(candidate)
+                    if value < best - 1e-9:
+                        tour, best, improved = candidate, value, True
+        return [v for v, _ in tour], [bool(d) for _, d in tour]
+
+    # ----------------------------------------------------------------------------------- plans
+    def convert_viewpointlist_to_execution_plan(self, viewpointlist) -> list[PlanSegment]:
+        """Two segments per view: the connection to it ('connect') and its measurement ('measure')."""
+        segments = []
+        for view in viewpointlist:
+            connection = view.get_trajectory_to_view()
+            measurement = view.get_trajectory_for_measurement()
+            if connection is None or measurement is None:
+                raise PlanningError(f"{view} lacks its trajectories: connect_viewpoints first")
+            segments.append(PlanSegment("connect", connection))
+            segments.append(PlanSegment("measure", measurement))
+        return segments
+
+    def store_execution_plan(self, file_path, execution_plan, metadata={}):  # noqa: B006 (documented default)
+        """Store the plan as YAML (the original's format; atomic write, ``.yaml`` appended once if missing).
+        Returns True (documented); the path written is in ``last_plan_path``."""
+        info = {
+            "Timestamp": time.strftime("%a %b %d %H:%M:%S %Y"),
+            "robot": self.station.robot.name,
+            "joint_names": list(self.limits.names),
+            "planner": "agiprobot_measurement",
+        }
+        info.update(self.plan_metadata())
+        info.update(dict(metadata))
+        self.last_plan_path = plan_io.store_execution_plan(file_path, execution_plan, info)
+        return True
+
+    def plan_metadata(self) -> dict:
+        """Parameters, coverage and timings of the last planning run (for the plan file)."""
+        import agiprobot_measurement
+
+        meta = {"parameters": {k: v for k, v in self.parameters.items()}, "version": agiprobot_measurement.__version__}
+        if self.last_set_cover is not None and self.samples is not None:
+            report = self.coverage_report()
+            meta["coverage"] = {
+                "samples": report.n_samples,
+                "coverable": report.n_coverable,
+                "covered": report.n_covered,
+                "views": report.n_views,
+                "estimated_execution_time_s": round(report.estimated_execution_time_s, 3),
+                "mean_uncertainty_mm": round(report.mean_uncertainty_mm, 6),
+                "max_uncertainty_mm": round(report.max_uncertainty_mm, 6),
+                "solver_gap": report.solver_gap,
+            }
+            meta["planning_time_s"] = {k: round(v, 3) for k, v in self.timings_s.items()}
+        return meta
+
+    def load_execution_plan(self, file_path, adapt_to_current_start_pose=True):
+        """Load a stored plan (validated against this robot's joints and limits). With
+        ``adapt_to_current_start_pose`` a planned motion from the current state to the plan's first point is
+        merged into the first connection. Returns the list of segments (connect, measure, ...)."""
+        plan = plan_io.load_execution_plan(file_path)
+        verdict = plan_io.validate_execution_plan(plan, self.limits, list(self.limits.names))
+        if not verdict.ok:
+            raise PlanningError(f"{file_path}: {verdict.reason}")
+        if adapt_to_current_start_pose:
+
+            def planner_fn(start, goal):
+                trajectory = self._connect(np.asarray(start), np.asarray(goal), planning_time_s=1.0)
+                if trajectory is None:
+                    raise PlanningError("no collision-free motion from the current state to the plan's start")
+                return trajectory
+
+            plan = plan_io.adapt_to_current_start_pose(plan, self.current_state, planner_fn)
+        self.loaded_plan = plan
+        return list(plan.segments)
+
+    def postprocess_trajectory(self, trajectory) -> bool:
+        """Whether a trajectory meets the joint limits (positions, velocities, accelerations) and its time is
+        strictly increasing (the documented check)."""
+        if isinstance(trajectory, PlanSegment):
+            trajectory = trajectory.trajectory
+        elif isinstance(trajectory, dict):
+            trajectory = JointTrajectory.from_dict(trajectory.get("joint_trajectory", trajectory))
+        elif hasattr(trajectory, "joint_trajectory"):
+            trajectory = JointTrajectory.from_msg(trajectory.joint_trajectory)
+        elif not isinstance(trajectory, JointTrajectory):
+            trajectory = JointTrajectory.from_msg(trajectory)
+        verdict = check_trajectory(trajectory, self.limits)
+        if not verdict.ok:
+            LOG.warning("trajectory rejected: %s", verdict.reason)
+        return verdict.ok
+
+    # ------------------------------------------------------------------------------------ execution
+    def execute(self, execution_list, surface_points=None, executor=None):
+        """Execute segments (or ViewPoints) one after the other through ``executor`` (default: an instant
+        simulated robot). A failing segment stops execution and raises :class:`ExecutionError`."""
+        executor = executor or SimulatedExecutor(self.current_state, self.limits)
+        items = list(execution_list)
+        if items and isinstance(items[0], ViewPoint):
+            segments = []
+            for view in items:
+                segments.append(("connect", view.get_trajectory_to_view(), view))
+                segments.append(("measure", view.get_trajectory_for_measurement(), view))
+        else:
+            segments = []
+            for index, item in enumerate(items):
+                if isinstance(item, PlanSegment):
+                    segments.append((item.kind, item.trajectory, None))
+                elif isinstance(item, JointTrajectory):
+                    segments.append(("connect" if index % 2 == 0 else "measure", item, None))
+                else:
+                    raise TypeError(f"cannot execute a {type(item).__name__}")
+        for kind, trajectory, view in segments:
+            if trajectory is None:
+                raise ExecutionError(f"a {kind} segment has no trajectory")
+            executor.execute_segment(trajectory, kind, view)
+        self.current_state = executor.current_state()
+        return True
+
+    # ------------------------------------------------------------------------------------ reports
+    def coverage_report(self, views: Iterable[ViewPoint] | None = None) -> CoverageReport:
+        """Coverage, view count, execution time and uncertainties of the chosen (or given) views."""
+        if self.samples is None:
+            raise PlanningError("nothing planned yet")
+        chosen = list(views) if views is not None else (self.last_ordered or [])
+        n = len(self.samples)
+        coverable = np.zeros(n, dtype=bool)
+        for view in self.last_viewpoints:
+            if getattr(view, "mechanics_valid", True):
+                coverable[view.measurable_indices] = True
+        best_u = np.full(n, np.inf)
+        for view in chosen:
+            np.minimum.at(best_u, view.measurable_indices, view.measurable_uncertainties)
+        covered = np.isfinite(best_u)
+        coverable |= covered
+        measure = sum(v.get_trajectory_for_measurement().duration for v in chosen if v.get_trajectory_for_measurement())
+        connect = sum(v.get_trajectory_to_view().duration for v in chosen if v.get_trajectory_to_view())
+        result = self.last_set_cover
+        return CoverageReport(
+            n_samples=n,
+            n_coverable=int(coverable.sum()),
+            n_covered=int(covered.sum()),
+            n_views=len(chosen),
+            n_candidates=0 if self.candidates is None else len(self.candidates.poses),
+            n_valid_candidates=len(self.last_viewpoints),
+            estimated_execution_time_s=float(measure + connect),
+            measurement_time_s=float(measure),
+            connection_time_s=float(connect),
+            mean_uncertainty_mm=float(best_u[covered].mean()) if covered.any() else float("nan"),
+            max_uncertainty_mm=float(best_u[covered].max()) if covered.any() else float("nan"),
+            solver=self.parameters.get("solver_type", ""),
+            solver_gap=None if result is None else result.gap,
+            timings_s=dict(self.timings_s),
+            unconnected_views=len(self.unconnected_views),
+        )
+
+    def point_uncertainties(self, views: Iterable[ViewPoint] | None = None) -> np.ndarray:
+        """Best predicted uncertainty (mm) per sample over the given views (default: the plan); inf = unmeasured."""
+        chosen = list(views) if views is not None else (self.last_ordered or [])
+        best_u = np.full(len(self.samples), np.inf)
+        for view in chosen:
+            np.minimum.at(best_u, view.measurable_indices, view.measurable_uncertainties)
+        return best_u
+
+    def scan_lines_mm(self, views: Iterable[ViewPoint] | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
+        """(start, end) positions (mm) of the laser_emitter_frame's scan lines of the given views (default: plan)."""
+        chosen = list(views) if views is not None else (self.last_ordered or [])
+        lines = []
+        for view in chosen:
+            trajectory = view.get_trajectory_for_measurement()
+            if trajectory is not None:
+                ends = self.kinematics.fk_batch(np.vstack([trajectory.start, trajectory.end]))[:, :3, 3] * 1000.0
+                lines.append((ends[0], ends[1]))
+        return lines
+
+    # ------------------------------------------------------------------------------------ everything
+    def plan(
+        self,
+        sampling_density=0.03,
+        uncertainty_threshold=0.1,
+        orientations_around_boresight=12,
+        viewpoint_tilt_mode="none",
+        solver_type="IP_basic",
+        set_cover_time_limit_s=60.0,
+        min_planning_time=0.2,
+        **generation,
+    ) -> list[ViewPoint]:
+        """The whole pipeline on the loaded part: generate, solve the set cover, connect. Returns the ordered
+        views (also in ``last_ordered``)."""
+        t0 = time.perf_counter()
+        _, views = self.generate_samples_and_viewpoints(
+            sampling_density, uncertainty_threshold, orientations_around_boresight, viewpoint_tilt_mode, **generation
+        )
+        chosen = self.solve_scp(views, solver_type, time_limit_s=set_cover_time_limit_s)
+        ordered = self.connect_viewpoints(chosen, min_planning_time=min_planning_time)
+        self.timings_s["total"] = time.perf_counter() - t0
+        return ordered

@@ -1,0 +1,1 @@
+"""Helpers for tests and benchmarks (generated instances); not used by the product."""

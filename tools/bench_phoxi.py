@@ -1,0 +1,115 @@
+#!/usr/bin/env python3
+"""Benchmark: the simulated PhoXi scanner rendering the station scene with the robot (frames/s per resolution).
+
+Each frame is what the node does per trigger without ROS: the robot's links posed by FK at a different joint state
+every frame, the scene (objects, part, robot) concatenated into one mesh, a fresh Embree scene, camera rays, shadow
+rays, noise, normals and texture. ``--messages`` adds building the driver's messages (cloud, images, camera info).
+Targets of the issue: high resolution <= 2 s per frame, low resolution <= 0.6 s per frame (2-core machine).
+
+  python3 tools/bench_phoxi.py                  # 5 frames each of high and low resolution, model of the config
+  python3 tools/bench_phoxi.py --frames 10 --model M --messages
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+try:
+    import agiprobot_measurement  # noqa: F401
+except ImportError:  # run from a checkout without the catkin environment
+    sys.path.insert(0, str(ROOT / "src"))
+
+import numpy as np  # noqa: E402
+
+from agiprobot_measurement.motion.kinematics import KinematicModel  # noqa: E402
+from agiprobot_measurement.sensors.phoxi.device import frame_output, load_camera_config  # noqa: E402
+from agiprobot_measurement.sensors.phoxi.renderer import (  # noqa: E402
+    RESOLUTION_HIGH,
+    RESOLUTION_LOW,
+    RayCaster,
+    RobotGeometry,
+    ScanSettings,
+    SceneGeometry,
+    StructuredLightScanner,
+    load_scanner_model,
+    scene_geometry,
+)
+from agiprobot_measurement.station import Station  # noqa: E402
+from agiprobot_measurement.station.urdf_model import UrdfModel  # noqa: E402
+
+
+def build_messages(frame) -> None:
+    from std_msgs.msg import Header
+
+    from agiprobot_measurement.ros import phoxi_messages
+
+    header = Header(frame_id="PhoXi3Dscanner_sensor")
+    points, normals = frame_output(frame)
+    phoxi_messages.pointcloud2(points, normals, frame.valid, header, organized=True)
+    phoxi_messages.image(frame.depth_mm, "32FC1", header)
+    phoxi_messages.image(normals, "32FC3", header)
+    phoxi_messages.image(frame.confidence, "32FC1", header)
+    phoxi_messages.image(frame.texture, "32FC1", header)
+    phoxi_messages.image(frame.rgb_texture(), "rgb8", header)
+    phoxi_messages.camera_info(frame.intrinsics, header)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--frames", type=int, default=5, help="timed frames per resolution (after one warm-up)")
+    parser.add_argument("--model", default=None, help="PhoXi model (default: config/phoxi_camera.yaml's)")
+    parser.add_argument("--messages", action="store_true", help="also build the ROS messages of each frame")
+    parser.add_argument("--workers", type=int, default=None, help="render threads (default: CPUs, at most 4)")
+    args = parser.parse_args(argv)
+
+    station = Station.load()
+    config = load_camera_config()
+    model = load_scanner_model(args.model or config.model)
+    scanner = StructuredLightScanner(model, workers=args.workers)
+    scene = scene_geometry(station.scene)
+    robot = RobotGeometry(UrdfModel(station.urdf_xml))
+    kinematics = KinematicModel.from_station(station)
+    rng = np.random.default_rng(0)
+    print(
+        f"PhoXi {model.name} at {np.round(config.pose[:3, 3], 3).tolist()} in world; scene {len(scene)} triangles, "
+        f"robot {sum(len(g) for g in robot.links.values())} triangles; {os.cpu_count()} CPUs, "
+        f"{scanner.workers} render threads, load average {os.getloadavg()[0]:.1f}"
+        + ("; with messages" if args.messages else "")
+    )
+    results = {}
+    for resolution, label, target in ((RESOLUTION_HIGH, "high", 2.0), (RESOLUTION_LOW, "low", 0.6)):
+        settings = ScanSettings(resolution=resolution)
+        times, cpu, valid = [], [], []
+        for i in range(args.frames + 1):
+            q = rng.uniform(kinematics.lower, kinematics.upper) * 0.3
+            start, start_cpu = time.perf_counter(), time.process_time()
+            links = {name: pose[0] for name, pose in kinematics.link_poses_batch(q[None]).items()}
+            geometry = SceneGeometry.concatenate([scene, robot.posed(links)])
+            frame = scanner.capture(geometry, config.pose, settings, i, RayCaster(geometry))
+            if args.messages:
+                build_messages(frame)
+            elapsed, elapsed_cpu = time.perf_counter() - start, time.process_time() - start_cpu
+            if i:  # the first frame fills caches (pixel rays, page tables)
+                times.append(elapsed)
+                cpu.append(elapsed_cpu)
+                valid.append(frame.stats["valid"])
+        mean = statistics.mean(times)
+        results[label] = mean
+        intr = model.intrinsics(resolution)
+        print(
+            f"{label:>4} {intr.width}x{intr.height}: {mean:.3f} s/frame ({1.0 / mean:.2f} frames/s), "
+            f"min {min(times):.3f} s, max {max(times):.3f} s, CPU {statistics.mean(cpu):.3f} s/frame, "
+            f"{statistics.mean(valid):,.0f} valid points; "
+            f"target <= {target} s: {'ok' if mean <= target else 'MISSED'}"
+        )
+    return 0 if results["high"] <= 2.0 and results["low"] <= 0.6 else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
