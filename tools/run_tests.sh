@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Runs every check: ruff (lint + format), pytest on the ROS-free core, and every rostest in test/*.test.
+# Runs every check: ruff (lint + format), pytest on the ROS-free core, and every rostest in test/ros/*.test.
 # Prints one summary line `N passed, M failed` and exits non-zero when anything failed.
 # Expects the environment of tools/env.sh (the Makefile sources it).
 set -uo pipefail
@@ -31,5 +31,5 @@ grep -E "^\[ROSTEST\]|^\[ROSUNIT\]|SUMMARY|^ \* RESULT|FAILURE|ERROR|^\[Testcase
 # catkin_make run_tests exits 0 even when tests fail: the verdict comes from catkin_test_results.
 if ! catkin_test_results "$AGIPROBOT_WS/build/test_results"; then status=1; fi
 
-python3 "$ROOT/tools/test_summary.py" "$RESULTS" "$AGIPROBOT_WS/build/test_results" "$ROOT/test" || status=1
+python3 "$ROOT/tools/test_summary.py" "$RESULTS" "$AGIPROBOT_WS/build/test_results" "$ROOT/test/ros" || status=1
 exit $status

@@ -45,7 +45,7 @@ mkdir -p "$WS/src"
 mkdir -p "$WS/devel/lib/python3/dist-packages"
 
 # Rebuild only when something that the build consumes changed (interfaces, CMake, package, entry points).
-BUILD_HASH="$( { ls nodes scripts tools; cat CMakeLists.txt package.xml setup.py msg/* srv/* action/* test/*.test 2>/dev/null || true; } \
+BUILD_HASH="$( { ls nodes scripts tools; cat CMakeLists.txt package.xml setup.py msg/* srv/* action/* test/ros/*.test 2>/dev/null || true; } \
   | sha256sum | cut -d' ' -f1)"
 if [ "$(cat "$WS/.build.sha256" 2>/dev/null)" != "$BUILD_HASH" ] || [ ! -f "$WS/devel/setup.bash" ]; then
   log "building the catkin workspace $WS"

@@ -1,0 +1,1 @@
+"""Node classes: each file in nodes/ imports one of these and runs it."""
