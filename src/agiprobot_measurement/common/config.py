@@ -13,23 +13,123 @@ import yaml
 
 from agiprobot_measurement.errors import InputError
 
-__all__ = ["ConfigError", "positive", "read_yaml", "require", "vector"]
+__all__ = [
+    "YAML_MAX_BYTES",
+    "YAML_MAX_DEPTH",
+    "YAML_MAX_EXPANDED_NODES",
+    "ConfigError",
+    "load_yaml_text",
+    "positive",
+    "read_yaml",
+    "require",
+    "vector",
+]
 
 
 class ConfigError(InputError):
     """A configuration file is missing, malformed, or has a bad or missing key."""
 
 
-def read_yaml(path: str | Path) -> object:
-    """Read a YAML file with ``safe_load``; errors name the file."""
+#: YAML read from outside (files, requests) is refused beyond these: a file of this many bytes, nesting this deep,
+#: or this many nodes once every alias is expanded (an alias bomb is a few KB that expand to billions of nodes).
+YAML_MAX_BYTES = 64 * 1024 * 1024
+YAML_MAX_DEPTH = 64
+YAML_MAX_EXPANDED_NODES = 20_000_000
+
+
+def _expanded_node_count(root: yaml.Node, limit: int, where: str) -> int:
+    """Nodes of ``root`` counted with every alias expanded, without expanding anything (memoised per node)."""
+    sizes: dict[int, int] = {}
+    stack: list[tuple[yaml.Node, bool]] = [(root, False)]
+    while stack:
+        node, children_done = stack.pop()
+        if id(node) in sizes:
+            continue
+        if isinstance(node, yaml.ScalarNode):
+            sizes[id(node)] = 1
+            continue
+        children = (
+            [child for pair in node.value for child in pair] if isinstance(node, yaml.MappingNode) else list(node.value)
+        )
+        if not children_done:
+            stack.append((node, True))
+            stack.extend((child, False) for child in children if id(child) not in sizes)
+            continue
+        total = 1 + sum(sizes.get(id(child), 1) for child in children)
+        if total > limit:
+            raise ConfigError(f"{where}: YAML expands to more than {limit:,} nodes (aliases/anchors); refused")
+        sizes[id(node)] = total
+    return sizes[id(root)]
+
+
+def _check_depth(root: yaml.Node, limit: int, where: str) -> None:
+    stack, seen = [(root, 1)], set()
+    while stack:
+        node, depth = stack.pop()
+        if depth > limit:
+            raise ConfigError(f"{where}: YAML nested deeper than {limit} levels; refused")
+        if isinstance(node, yaml.ScalarNode) or id(node) in seen:
+            continue
+        seen.add(id(node))
+        children = (
+            [child for pair in node.value for child in pair] if isinstance(node, yaml.MappingNode) else node.value
+        )
+        stack.extend((child, depth + 1) for child in children)
+
+
+def load_yaml_text(
+    text: str | bytes,
+    where: str = "YAML",
+    max_bytes: int = YAML_MAX_BYTES,
+    max_depth: int = YAML_MAX_DEPTH,
+    max_expanded_nodes: int = YAML_MAX_EXPANDED_NODES,
+    loader: type = yaml.SafeLoader,
+) -> object:
+    """``safe_load`` with bounds: size, nesting depth and alias-expanded node count are checked on the composed
+    node graph before any Python object is built, so hostile YAML is refused in bounded time and memory.
+
+    ``loader`` may be a subclass of ``yaml.SafeLoader`` (e.g. one that adds constructors for a file format).
+    Errors are :class:`ConfigError` naming ``where``.
+    """
+    size = len(text)
+    if size > max_bytes:
+        raise ConfigError(f"{where}: {size:,} bytes of YAML, more than the limit of {max_bytes:,}")
+    if isinstance(text, bytes):
+        try:
+            text = text.decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise ConfigError(f"{where}: not a UTF-8 text file ({exc.reason} at byte {exc.start})") from exc
+    instance = loader(text)
+    try:
+        root = instance.get_single_node()
+        if root is None:
+            return None
+        _check_depth(root, max_depth, where)
+        _expanded_node_count(root, max_expanded_nodes, where)
+        return instance.construct_document(root)
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{where}: malformed YAML: {exc}") from exc
+    except RecursionError as exc:
+        raise ConfigError(f"{where}: YAML nested too deeply; refused") from exc
+    finally:
+        instance.dispose()
+
+
+def read_yaml(path: str | Path, max_bytes: int = YAML_MAX_BYTES, loader: type = yaml.SafeLoader) -> object:
+    """Read a YAML file with :func:`load_yaml_text`'s bounds; errors name the file."""
     path = Path(path)
+    if path.is_dir():
+        raise ConfigError(f"{path}: is a directory, not a file")
     if not path.is_file():
         raise ConfigError(f"{path}: file not found")
     try:
-        with path.open() as stream:
-            return yaml.safe_load(stream)
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: malformed YAML: {exc}") from exc
+        size = path.stat().st_size
+        if size > max_bytes:
+            raise ConfigError(f"{path}: {size:,} bytes of YAML, more than the limit of {max_bytes:,}")
+        data = path.read_bytes()
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read: {exc.strerror or exc}") from exc
+    return load_yaml_text(data, str(path), max_bytes=max_bytes, loader=loader)
 
 
 def require(mapping: object, key: str, where: str) -> object:

@@ -10,9 +10,12 @@ from __future__ import annotations
 import os
 import tempfile
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["atomic_write", "atomic_write_bytes", "atomic_write_text", "current_umask"]
+from agiprobot_measurement.errors import InputError
+
+__all__ = ["FileRoot", "PathPolicyError", "atomic_write", "atomic_write_bytes", "atomic_write_text", "current_umask"]
 
 
 def current_umask() -> int:
@@ -60,3 +63,69 @@ def atomic_write_bytes(path: str | Path, data: bytes, make_parents: bool = False
 def atomic_write_text(path: str | Path, text: str, encoding: str = "utf-8", make_parents: bool = False) -> Path:
     """Write ``text`` to ``path`` atomically."""
     return atomic_write_bytes(path, text.encode(encoding), make_parents=make_parents)
+
+
+class PathPolicyError(InputError):
+    """A requested file name breaks the file policy: outside the allowed roots, ``..``, ``~``, or an existing file
+    that the request did not ask to overwrite."""
+
+
+@dataclass(frozen=True)
+class FileRoot:
+    """The file policy of one writer or reader: relative names resolve under ``root``; absolute names are accepted
+    only inside ``root`` or one of ``extra_roots``; ``..`` and ``~`` are refused; symlinks are resolved before the
+    check, so a link cannot lead outside. Writing refuses to replace an existing file unless ``overwrite``."""
+
+    root: Path
+    extra_roots: tuple[Path, ...] = ()
+    purpose: str = "files"
+
+    def __post_init__(self):
+        object.__setattr__(self, "root", Path(self.root).expanduser().resolve())
+        object.__setattr__(self, "extra_roots", tuple(Path(r).expanduser().resolve() for r in self.extra_roots))
+
+    @property
+    def roots(self) -> tuple[Path, ...]:
+        return (self.root, *self.extra_roots)
+
+    def _describe_roots(self) -> str:
+        return " or ".join(str(r) for r in self.roots)
+
+    def resolve(self, name: str | Path, suffix: str | None = None) -> Path:
+        """The confined absolute path of ``name``; ``suffix`` (e.g. ``.yaml``) is appended when the name has none."""
+        text = str(name).strip() if name is not None else ""
+        if not text or "\x00" in text:
+            raise PathPolicyError(f"{self.purpose}: empty or invalid file name {name!r}")
+        if text.startswith("~"):
+            raise PathPolicyError(f"{self.purpose}: '~' is not expanded ({text}); names resolve under {self.root}")
+        path = Path(text)
+        if ".." in path.parts:
+            raise PathPolicyError(f"{self.purpose}: '..' is not allowed in {text}; names resolve under {self.root}")
+        if suffix and not path.suffix:
+            path = path.with_name(path.name + suffix)
+        candidate = (path if path.is_absolute() else self.root / path).resolve()
+        if not any(candidate == r or candidate.is_relative_to(r) for r in self.roots):
+            raise PathPolicyError(f"{self.purpose}: {text} is outside the allowed folder {self._describe_roots()}")
+        return candidate
+
+    def for_reading(self, name: str | Path, suffix: str | None = None) -> Path:
+        """A confined path to an existing regular file (else :class:`PathPolicyError` / ``FileNotFoundError``)."""
+        path = self.resolve(name, suffix)
+        if path.is_dir():
+            raise PathPolicyError(f"{self.purpose}: {path} is a directory, not a file")
+        if not path.is_file() and suffix and not str(name).endswith(suffix):
+            plain = self.resolve(name)
+            if plain.is_file():
+                return plain
+        if not path.is_file():
+            raise FileNotFoundError(f"{self.purpose}: {path} not found (names resolve under {self.root})")
+        return path
+
+    def for_writing(self, name: str | Path, overwrite: bool = False, suffix: str | None = None) -> Path:
+        """A confined path to write; an existing file is refused unless ``overwrite``; the folder must exist."""
+        path = self.resolve(name, suffix)
+        if path.is_dir():
+            raise PathPolicyError(f"{self.purpose}: {path} is a directory")
+        if path.exists() and not overwrite:
+            raise PathPolicyError(f"{self.purpose}: {path} exists; ask for overwrite to replace it")
+        return path
