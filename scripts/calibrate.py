@@ -6,7 +6,7 @@
     scripts/calibrate.py calibration_data.txt -o result.yaml --truth-yaml true_camera.yaml
 
 Prints H (camera -> robot base, metres), the residual per sample and in total (mm) and the rejected samples.
-Bad input: an 'error:' line and exit status 2.
+Bad input (a missing or malformed file, an unwritable output): an 'error:' line and exit status 2.
 """
 
 import argparse
@@ -27,21 +27,21 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
 
     from agiprobot_measurement.calibration.registration import (
-        CalibrationError,
         calibrate_data,
         pose_error,
         read_data_file,
         read_result_yaml,
         write_result_yaml,
     )
+    from agiprobot_measurement.errors import AgiprobotError, is_input_error
 
     try:
         data = read_data_file(args.data_file)
         result = calibrate_data(data, args.mode, threshold_m=args.threshold_mm / 1000.0)
         truth = read_result_yaml(args.truth_yaml) if args.truth_yaml else None
-    except CalibrationError as exc:
+    except AgiprobotError as exc:
         print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return 2 if is_input_error(exc) else 1
     np.set_printoptions(precision=6, suppress=True)
     print(f"{args.mode}: {len(result.inliers)} samples, {result.method}")
     print(f"H ({args.base_frame} <- {args.camera_frame}, metres):\n{result.transform}")
@@ -50,7 +50,11 @@ def main(argv=None) -> int:
         t_mm, r_deg = pose_error(result.transform, truth)
         print(f"error against the truth: translation {t_mm:.3f} mm, rotation {r_deg:.4f} deg")
     if args.output:
-        path = write_result_yaml(args.output, result, args.base_frame, args.camera_frame, args.mode)
+        try:
+            path = write_result_yaml(args.output, result, args.base_frame, args.camera_frame, args.mode)
+        except OSError as exc:  # the folder cannot be created or written
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
         print(f"result: {path}")
     return 0
 

@@ -18,6 +18,7 @@ from sensor_msgs.msg import JointState
 from agiprobot_measurement.motion.point_to_point import point_to_point
 from agiprobot_measurement.msg import ExecuteJointTrajectoryAction, ExecuteJointTrajectoryGoal
 from agiprobot_measurement.ros.action_client import ActionClient
+from agiprobot_measurement.ros.conversions import joint_trajectory_to_msg
 from agiprobot_measurement.station import ConfigError, load_joint_limits, load_named_states
 
 
@@ -53,7 +54,7 @@ def main() -> int:
         start = current_state(list(limits.names))
         trajectory = point_to_point(start, named[name], limits, args.velocity_scaling, args.acceleration_scaling)
         rospy.loginfo("moving to '%s' (%.2f s)", name, trajectory.duration)
-        client.send_goal(ExecuteJointTrajectoryGoal(trajectory=trajectory.to_msg()))
+        client.send_goal(ExecuteJointTrajectoryGoal(trajectory=joint_trajectory_to_msg(trajectory)))
         client.wait_for_result(rospy.Duration(trajectory.duration + 10.0))
         result = client.get_result()
         if result is None or not result.success:

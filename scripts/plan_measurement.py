@@ -16,7 +16,7 @@ exit status: 0 planned; 2 bad input or nothing plannable (one 'error: ...' line)
 from __future__ import annotations
 
 import argparse
-import difflib
+import dataclasses
 import logging
 import math
 import os
@@ -35,12 +35,27 @@ import numpy as np  # noqa: E402
 
 # Only light modules here: bad input is reported before trimesh, FCL and OMPL are loaded (about 1 s).
 from agiprobot_measurement.common.files import atomic_write_text  # noqa: E402
+from agiprobot_measurement.common.geometry import pose_matrix  # noqa: E402
+from agiprobot_measurement.common.units import UNIT_SCALES_TO_M  # noqa: E402
+from agiprobot_measurement.planning.progress import STAGES  # noqa: E402
+from agiprobot_measurement.planning.request import PlanRequest, PlanRequestError  # noqa: E402
 from agiprobot_measurement.planning.set_cover import SOLVER_TYPES  # noqa: E402
 from agiprobot_measurement.planning.viewpoint import TILT_MODES  # noqa: E402
-from agiprobot_measurement.station import UNIT_SCALES_TO_M, pose_matrix  # noqa: E402
 
 EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
-STAGE_ORDER = ("sampling", "metrology", "mechanics", "set cover", "connection")
+#: how the request's fields are named in messages: by their options
+OPTION_LABELS = {
+    "part_file": "part",
+    "units": "unit",
+    "viewpoint_tilt_mode": "tilt mode",
+    "solver_type": "solver",
+    "sampling_density": "--density (points/mm^2)",
+    "uncertainty_threshold_mm": "--threshold (mm)",
+    "scan_speed_mm_s": "--scan-speed (mm/s)",
+    "set_cover_time_limit_s": "--time-limit (s)",
+    "orientations_around_boresight": "--orientations",
+    "part_transform_mm": "--transform",
+}
 BAR_FORMAT = "{desc} {percentage:3.0f}%|{bar:30}| "
 
 
@@ -58,14 +73,36 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="plan_measurement.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
+    d = PlanRequest.from_defaults()  # config/trajectory_manager.yaml, as for the node
     parser.add_argument("part", help="mesh file of the part (STL, OBJ, PLY, STEP, ...)")
-    parser.add_argument("--units", default="mm", help=f"length unit of the file: {', '.join(UNIT_SCALES_TO_M)}")
-    parser.add_argument("--density", type=float, default=0.03, help="samples per mm^2 (default 0.03)")
-    parser.add_argument("--orientations", type=int, default=12, help="orientations around the boresight (12)")
-    parser.add_argument("--tilt", default="none", help=f"viewpoint tilt mode: {', '.join(TILT_MODES)} (none)")
-    parser.add_argument("--solver", default="IP_basic", help=f"set cover solver: {', '.join(SOLVER_TYPES)}")
-    parser.add_argument("--threshold", type=float, default=0.1, help="uncertainty threshold in mm (0.1)")
-    parser.add_argument("--time-limit", type=float, default=60.0, help="time limit of one IP solve in s (60)")
+    parser.add_argument("--units", default=d.units, help=f"length unit of the file: {', '.join(UNIT_SCALES_TO_M)}")
+    parser.add_argument(
+        "--density", type=float, default=d.sampling_density, help=f"samples per mm^2 (default {d.sampling_density:g})"
+    )
+    parser.add_argument(
+        "--orientations",
+        type=int,
+        default=d.orientations_around_boresight,
+        help=f"orientations around the boresight ({d.orientations_around_boresight})",
+    )
+    parser.add_argument(
+        "--tilt",
+        default=d.viewpoint_tilt_mode,
+        help=f"viewpoint tilt mode: {', '.join(TILT_MODES)} ({d.viewpoint_tilt_mode})",
+    )
+    parser.add_argument("--solver", default=d.solver_type, help=f"set cover solver: {', '.join(SOLVER_TYPES)}")
+    parser.add_argument(
+        "--threshold",
+        type=float,
+        default=d.uncertainty_threshold_mm,
+        help=f"uncertainty threshold in mm ({d.uncertainty_threshold_mm:g})",
+    )
+    parser.add_argument(
+        "--time-limit",
+        type=float,
+        default=d.set_cover_time_limit_s,
+        help=f"time limit of one IP solve in s ({d.set_cover_time_limit_s:g})",
+    )
     parser.add_argument(
         "--transform",
         nargs=6,
@@ -75,28 +112,19 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--scene", help="scene file (default: config/scene.yaml)")
     parser.add_argument("--no-mirrors", action="store_true", help="leave out the scene's wbk_mirrors obstacles")
-    parser.add_argument("--scan-speed", type=float, default=50.0, help="tip speed while measuring in mm/s (50)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of sampling and planning (0)")
+    parser.add_argument(
+        "--scan-speed",
+        type=float,
+        default=d.scan_speed_mm_s,
+        help=f"tip speed while measuring in mm/s ({d.scan_speed_mm_s:g})",
+    )
+    parser.add_argument("--seed", type=int, default=d.seed, help=f"seed of sampling and planning ({d.seed})")
     parser.add_argument("-o", "--output", help="write the execution plan here (.yaml is appended if missing)")
     parser.add_argument("--report", help="write a coverage picture here (.png)")
     parser.add_argument("--summary", help="write the summary here (.yaml/.yml: YAML, else text)")
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress output")
     parser.add_argument("--debug", action="store_true", help="show tracebacks of internal errors")
     return parser
-
-
-def _choice(value: str, valid, what: str) -> str:
-    if value in valid:
-        return value
-    hint = difflib.get_close_matches(value, list(valid), n=1)
-    suggestion = f"; did you mean {hint[0]!r}?" if hint else ""
-    raise UsageError(f"unknown {what} {value!r}; valid: {', '.join(valid)}{suggestion}")
-
-
-def _positive(value: float, what: str) -> float:
-    if not (math.isfinite(value) and value > 0):
-        raise UsageError(f"{what} must be a positive number, got {value}")
-    return value
 
 
 def _output(path: str | None, what: str, suffixes: tuple[str, ...] = ()) -> Path | None:
@@ -115,35 +143,42 @@ def _output(path: str | None, what: str, suffixes: tuple[str, ...] = ()) -> Path
     return target
 
 
-def validate(args: argparse.Namespace) -> np.ndarray:
-    """Check every argument before any work starts; returns the part transform (4x4, mm)."""
-    part = Path(args.part)
-    if not part.exists():
-        raise UsageError(f"part file not found: {part}")
-    if not part.is_file():
-        raise UsageError(f"part is not a file: {part}")
-    _choice(args.units, tuple(UNIT_SCALES_TO_M), "unit")
-    _choice(args.tilt, TILT_MODES, "tilt mode")
-    _choice(args.solver, SOLVER_TYPES, "solver")
-    _positive(args.density, "--density (points/mm^2)")
-    _positive(args.threshold, "--threshold (mm)")
-    _positive(args.scan_speed, "--scan-speed (mm/s)")
-    _positive(args.time_limit, "--time-limit (s)")
-    if args.orientations < 1:
-        raise UsageError(f"--orientations must be at least 1, got {args.orientations}")
+def validate(args: argparse.Namespace) -> PlanRequest:
+    """Check every argument before any work starts; returns the planning request (transform in mm)."""
+    transform = np.eye(4)
+    if args.transform is not None:
+        values = np.array(args.transform, dtype=float)
+        if not np.all(np.isfinite(values)):
+            raise UsageError(
+                f"--transform needs 6 finite numbers (x y z in mm, roll pitch yaw in deg), got {args.transform}"
+            )
+        transform = pose_matrix(values[:3], np.deg2rad(values[3:]))
+    # every option has its value (its default is the configured one): 0 is a value here, not 'not given'
+    request = dataclasses.replace(
+        PlanRequest.from_defaults(),
+        part_file=args.part,
+        units=args.units,
+        sampling_density=args.density,
+        orientations_around_boresight=args.orientations,
+        viewpoint_tilt_mode=args.tilt,
+        solver_type=args.solver,
+        uncertainty_threshold_mm=args.threshold,
+        set_cover_time_limit_s=args.time_limit,
+        scan_speed_mm_s=args.scan_speed,
+        seed=args.seed,
+        add_wbk_mirrors=not args.no_mirrors,
+        part_transform_mm=transform,
+    )
+    try:
+        request = request.validate(labels=OPTION_LABELS)
+    except PlanRequestError as exc:
+        raise UsageError(str(exc)) from exc
     if args.scene is not None and not Path(args.scene).is_file():
         raise UsageError(f"scene file not found: {args.scene}")
     args.output = _output(args.output, "plan")
     args.report = _output(args.report, "report", (".png",))
     args.summary = _output(args.summary, "summary")
-    if args.transform is None:
-        return np.eye(4)
-    values = np.array(args.transform, dtype=float)
-    if not np.all(np.isfinite(values)):
-        raise UsageError(
-            f"--transform needs 6 finite numbers (x y z in mm, roll pitch yaw in deg), got {args.transform}"
-        )
-    return pose_matrix(values[:3], np.deg2rad(values[3:]))
+    return request
 
 
 class StageProgress:
@@ -261,7 +296,7 @@ def summarise(args, manager, report, times: dict, total_s: float, outputs: dict)
         ),
         ("solver gap", gap_text),
     ]
-    for stage in STAGE_ORDER:
+    for stage in STAGES:
         rows.append((f"time: {stage}", f"{times[stage]:.2f} s"))
     rows.append(("time: total", f"{total_s:.2f} s"))
     for what, path in outputs.items():
@@ -310,7 +345,7 @@ def format_table(rows: list[tuple[str, str]]) -> str:
     return "\n".join([rule, *(f"{label:<{width}}  {value}" for label, value in rows), rule])
 
 
-def run(args: argparse.Namespace, transform: np.ndarray, progress: StageProgress) -> int:
+def run(args: argparse.Namespace, request: PlanRequest, progress: StageProgress) -> int:
     from agiprobot_measurement.planning.part_loading import PartWarning
     from agiprobot_measurement.planning.trajectory_manager import PlanningError, TrajectoryManager
     from agiprobot_measurement.station import Station
@@ -320,11 +355,8 @@ def run(args: argparse.Namespace, transform: np.ndarray, progress: StageProgress
 
     t0 = time.perf_counter()
     station = Station.load(scene=args.scene)
-    manager = TrajectoryManager(station, scan_speed_mm_s=args.scan_speed, progress=progress, seed=args.seed)
-    manager.load_target_mesh(args.part, transform=transform, add_wbk_mirrors=not args.no_mirrors, units=args.units)
-    _, views = manager.generate_samples_and_viewpoints(args.density, args.threshold, args.orientations, args.tilt)
-    chosen = manager.solve_scp(views, args.solver, time_limit_s=args.time_limit)
-    ordered = manager.connect_viewpoints(chosen)
+    manager = TrajectoryManager.for_request(request, station, progress=progress)
+    ordered = manager.plan_request(request)
     total_s = time.perf_counter() - t0
     manager.timings_s["total"] = total_s
     progress.close()
@@ -379,12 +411,12 @@ def main(argv=None) -> int:
     try:
         args = build_parser().parse_args(argv)
         debug = args.debug
-        transform = validate(args)
+        request = validate(args)
         terminal = sys.stderr.isatty()
         progress = StageProgress(enabled=not args.quiet, terminal=terminal)
         logging.getLogger("agiprobot_measurement").addHandler(_ProgressLogHandler(progress))
         logging.getLogger("agiprobot_measurement").propagate = False
-        return run(args, transform, progress)
+        return run(args, request, progress)
     except UsageError as exc:
         _fail(progress, f"error: {exc}")
         return EXIT_USAGE

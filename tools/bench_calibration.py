@@ -74,6 +74,7 @@ def chessboard_test(sim, h_base_camera, cfg):
 
 def run_seed(args):
     seed, spoil_fraction, fractions, chessboard = args
+    from agiprobot_measurement.calibration.config import load_calibration_config, tool_rotation
     from agiprobot_measurement.calibration.flange_detection import detect_flange, detect_flange_candidates
     from agiprobot_measurement.calibration.registration import (
         CalibrationError,
@@ -82,13 +83,7 @@ def run_seed(args):
         zigzag_path,
     )
     from agiprobot_measurement.calibration.session import CalibrationSession, detector_config
-    from agiprobot_measurement.calibration.simulation import (
-        SimulatedStation,
-        load_calibration_config,
-        nominal_camera_pose,
-        perturbed_pose,
-        tool_rotation,
-    )
+    from agiprobot_measurement.calibration.simulation import SimulatedStation, nominal_camera_pose, perturbed_pose
     from agiprobot_measurement.station import CONFIG_DIR
 
     started = time.monotonic()

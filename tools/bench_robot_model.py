@@ -23,7 +23,9 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from agiprobot_measurement.common.geometry import wrap_to_pi
-from agiprobot_measurement.mild.robot_model import MildRobotModel, RobotState, load_settings, view_directions
+from agiprobot_measurement.mild.config import load_settings
+from agiprobot_measurement.mild.robot_model import MildRobotModel
+from agiprobot_measurement.mild.state import RobotState, view_directions
 
 
 def reachable_poses(model: MildRobotModel, count: int, rng: np.random.Generator):

@@ -6,8 +6,9 @@ import numpy as np
 import rospy
 import tf2_ros
 
-from agiprobot_measurement.mild.robot_model import RobotState
-from agiprobot_measurement.ros.mild_messages import state_to_msg, transform_to_matrix
+from agiprobot_measurement.mild.state import RobotState
+from agiprobot_measurement.ros.conversions import transform_to_matrix
+from agiprobot_measurement.ros.mild_messages import state_to_msg
 from agiprobot_measurement.srv import (
     CalculateCameraPose,
     CalculateCameraPoseCorrection,

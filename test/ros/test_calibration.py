@@ -136,8 +136,8 @@ class CalibrationNodeTest(unittest.TestCase):
         rospy.sleep(0.5)  # tf of the new pose reaches the camera
 
     def test_5_manual_flag_points_samples_save_and_load(self):
+        from agiprobot_measurement.calibration.config import load_calibration_config, tool_rotation
         from agiprobot_measurement.calibration.registration import read_data_file, read_flag_points
-        from agiprobot_measurement.calibration.simulation import load_calibration_config, tool_rotation
         from agiprobot_measurement.motion.ik import make_ik_solver
         from agiprobot_measurement.motion.kinematics import KinematicModel
         from agiprobot_measurement.station import Station

@@ -26,8 +26,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from mild_test_utils import NS, SERVICE_TYPES, facing_error_deg, place, proxies, wait_for_camera
 
 from agiprobot_measurement.common.geometry import matrix_to_quaternion
-from agiprobot_measurement.mild.robot_model import RobotState
-from agiprobot_measurement.ros.mild_messages import pose_to_matrix, state_to_msg, yaw_of
+from agiprobot_measurement.mild.state import RobotState
+from agiprobot_measurement.ros.conversions import pose_to_matrix
+from agiprobot_measurement.ros.mild_messages import state_to_msg, yaw_of
 
 EXPECTED_TYPES = {
     "CalculateCameraPose": "agiprobot_measurement/CalculateCameraPose",
@@ -109,6 +110,37 @@ class RobotModelServicesTest(unittest.TestCase):
         out = rosservice_call(f"{NS}/CalculateRobotState", "[0, 0, 0, 1, 1]", "[0, 0, 0, 0]", "[2, 2, 1.3]")
         self.assertIn("zero quaternion", out)
         self._assert_still_serving()
+
+    def test_states_outside_the_ptu_limits_are_refused_like_mild_sim_does(self):
+        pan_max = math.radians(rospy.get_param(f"{NS}/panMax"))
+        tilt_max = math.radians(rospy.get_param(f"{NS}/tiltMax"))
+        here, view = Vector3(2, 2, 1.3), Quaternion(0, 0, 0, 1)
+        for state, words in (
+            (RobotState(1e12, 0.0, 0.0, 1.0, 1.0), ["pan", "deg outside", f"{math.degrees(pan_max):.1f}]"]),
+            (RobotState(0.0, tilt_max + 0.1, 0.0, 1.0, 1.0), ["tilt", "deg outside", f"{math.degrees(tilt_max):.1f}]"]),
+            (RobotState(0.0, 0.0, 1e12, 1.0, 1.0), ["rotation", "1e+12 rad"]),
+            (RobotState(0.0, 0.0, 0.0, 1e12, 1.0), ["x", "1e+12 m"]),
+            (RobotState(0.0, math.inf, 0.0, 1.0, 1.0), ["tilt", "not finite"]),
+        ):
+            msg = state_to_msg(state)
+            for call in (
+                lambda msg=msg: self.srv["CalculateCameraPose"](msg),
+                lambda msg=msg: self.srv["CalculateCameraPoseCorrection"](msg, view, here),
+                lambda msg=msg: self.srv["CalculateRobotState"](msg, view, here),
+            ):
+                with self.assertRaises(rospy.ServiceException) as caught:
+                    call()
+                for word in words:
+                    self.assertIn(word, str(caught.exception))
+            self._assert_still_serving()
+        with self.assertRaises(rospy.ServiceException) as caught:
+            self.srv["GetDistance"](Point(0, 0, 0), Point(1e300, 0, 0))
+        self.assertIn("beyond", str(caught.exception))
+        with self.assertRaises(rospy.ServiceException) as caught:
+            self.srv["IsPositionAllowed"](Point(-1e12, 0, 0))
+        self.assertIn("beyond", str(caught.exception))
+        # the limit itself is a state the MILD can take
+        self.srv["CalculateCameraPose"](state_to_msg(RobotState(pan_max, tilt_max, 0.0, 1.0, 1.0)))
 
     def test_robot_and_camera_pose_come_from_tf(self):
         state = RobotState(0.3, -0.2, 2.0, 2.5, 1.5)

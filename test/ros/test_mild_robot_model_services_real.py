@@ -18,7 +18,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from mild_test_utils import NS, proxies
 
 from agiprobot_measurement.common.geometry import wrap_to_pi
-from agiprobot_measurement.mild.robot_model import RobotState
+from agiprobot_measurement.mild.state import RobotState
 from agiprobot_measurement.ros.mild_messages import state_to_msg
 
 

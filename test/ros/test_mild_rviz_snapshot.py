@@ -18,7 +18,7 @@ import rostest
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from mild_test_utils import place, proxies
 
-from agiprobot_measurement.mild.robot_model import RobotState
+from agiprobot_measurement.mild.state import RobotState
 from agiprobot_measurement.ros.rviz_snapshot import OffscreenRviz
 from agiprobot_measurement.station import PACKAGE_ROOT
 

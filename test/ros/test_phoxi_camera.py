@@ -4,7 +4,8 @@
 Interfaces as the driver's own tests check them (every service, topic and parameter of the reference, by name and
 type), then behaviour: every service answers Ok, get_frame(-1) publishes on every enabled topic with seq = frame
 index, an unknown frame id fails, save_frame writes a PLY that reloads with the published points, a refused path
-writes nothing, the command-line form works, diagnostics, the custom space and free run.
+(``..``, ``~``, outside the allowed folders, a symlink out, ``.praw``) writes nothing, an absurd transformation is
+refused and later frames stay finite, the command-line form works, diagnostics, the custom space and free run.
 """
 
 import os
@@ -28,8 +29,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from phoxi_test_utils import NODE, FrameRecorder, reconfigure, service
 
 from agiprobot_measurement.ros import phoxi_messages
+from agiprobot_measurement.sensors.phoxi.models import RESOLUTION_LOW, load_scanner_model
 from agiprobot_measurement.sensors.phoxi.point_cloud_io import read_ply
-from agiprobot_measurement.sensors.phoxi.renderer import RESOLUTION_LOW, load_scanner_model
 from agiprobot_measurement.srv import (
     ConnectCamera,
     Empty,
@@ -275,16 +276,74 @@ class PhoxiCameraTest(unittest.TestCase):
         before = sorted(str(p) for p in self.output_dir.rglob("*"))
         outside = Path(f"/tmp/phoxi_escape_{os.getpid()}.ply")
         first = self._trigger()
-        for path in ("../escape.ply", str(outside), "a/../../escape.ply"):
+        for path in ("../escape.ply", str(outside), "a/../../escape.ply", "/etc/x.ply", "~/escape.ply"):
             reply = self.save(in_=-1, path=path)
             self.assertFalse(reply.success, path)
-            self.assertIn("outside the output directory", reply.message)
+            self.assertRegex(reply.message, r"is not allowed in|outside the allowed folder|is not expanded", path)
+            self.assertIn(str(self.output_dir), reply.message, "the refusal names the root")
+        reply = self.save(in_=-1, path="frame.praw")
+        self.assertFalse(reply.success)
+        self.assertIn("not supported by the simulator", reply.message)
         self.assertFalse(outside.exists())
         self.assertFalse((self.output_dir.parent / "escape.ply").exists())
         self.assertEqual(sorted(str(p) for p in self.output_dir.rglob("*")), before)
         self.assertEqual(self._trigger(), first + 1, "a refused save must not take a frame")
         reply = service("V2/save_last_frame", SaveLastFrame)(file_path="last.pcd")
         self.assertEqual((reply.success, reply.message), (False, "Wrong extension."))
+
+    def test_a_symlink_out_of_the_root_is_refused_and_allowed_folders_accept_absolute_names(self):
+        outside = Path(f"/tmp/phoxi_link_target_{os.getpid()}")
+        outside.mkdir(exist_ok=True)
+        link = self.output_dir / f"link_{os.getpid()}"
+        self.output_dir.mkdir(parents=True, exist_ok=True)
+        link.symlink_to(outside, target_is_directory=True)
+        try:
+            reply = self.save(in_=-1, path=f"{link.name}/x.ply")
+            self.assertFalse(reply.success)
+            self.assertIn("outside the allowed folder", reply.message)
+            self.assertEqual(list(outside.iterdir()), [])
+        finally:
+            link.unlink()
+            outside.rmdir()
+        allowed = self.output_dir.parent / f"phoxi_allowed_{os.getpid()}.ply"  # ~allowed_save_dirs of the .test
+        reply = self.save(in_=-1, path=str(allowed))
+        self.assertTrue(reply.success, reply.message)
+        self.assertTrue(allowed.is_file())
+        allowed.unlink()
+
+    def test_absurd_transformations_are_refused_and_later_frames_stay_finite(self):
+        set_transformation = service("set_transformation_matrix", SetTransformationMatrix)
+        try:
+            huge = _identity()
+            huge.translation.x = 1e308
+            bad_rotation = _identity()
+            bad_rotation.rotation.x = bad_rotation.rotation.y = bad_rotation.rotation.z = float("nan")
+            for transform, words in ((huge, "translation"), (bad_rotation, "finite")):
+                reply = set_transformation(
+                    transform=transform, coordinates_space=5, set_space=True, save_settings=False
+                )
+                self.assertFalse(reply.success)
+                self.assertIn(words, reply.message)
+            self.assertEqual(rospy.get_param(f"{NODE}/coordinate_space"), 1, "a refusal changes no space")
+            reply = set_transformation(
+                transform=_identity(z=0.5), coordinates_space=5, set_space=True, save_settings=False
+            )
+            self.assertTrue(reply.success, reply.message)
+            frame_id = self._trigger()  # the node still serves, and its frames are finite
+            points, normals, _ = phoxi_messages.pointcloud2_arrays(
+                self.recorder.wait_for(frame_id, ["pointcloud"])["pointcloud"]
+            )
+            self.assertTrue(np.all(np.isfinite(points)) and np.all(np.isfinite(normals)))
+            self.assertGreater(np.count_nonzero(points[:, :, 2]), 0)
+        finally:
+            service("V2/set_coordinate_space", SetCoordinatesSpace)(coordinates_space=1)
+
+    def test_a_reconfigured_number_that_is_not_finite_is_put_back(self):
+        before = rospy.get_param(f"{NODE}/confidence")
+        result = reconfigure(confidence=float("nan"))
+        self.assertEqual(result["confidence"], before)
+        self.assertEqual(rospy.get_param(f"{NODE}/confidence"), before)
+        self.assertGreaterEqual(self._trigger(), 0, "the node keeps serving")
 
     def test_get_frame_from_the_command_line(self):
         result = subprocess.run(

@@ -18,15 +18,9 @@ from station_test_utils import place_robot
 from agiprobot_measurement.motion.kinematics import KinematicModel
 from agiprobot_measurement.ros import phoxi_messages
 from agiprobot_measurement.sensors.phoxi.device import load_camera_config, transform_from_quaternion
-from agiprobot_measurement.sensors.phoxi.renderer import (
-    RESOLUTION_LOW,
-    RobotGeometry,
-    ScanSettings,
-    SceneGeometry,
-    StructuredLightScanner,
-    load_scanner_model,
-    scene_geometry,
-)
+from agiprobot_measurement.sensors.phoxi.models import RESOLUTION_LOW, load_scanner_model
+from agiprobot_measurement.sensors.phoxi.renderer import ScanSettings, StructuredLightScanner
+from agiprobot_measurement.sensors.phoxi.scene_geometry import RobotGeometry, SceneGeometry, scene_geometry
 from agiprobot_measurement.srv import SetJointState, TriggerImage
 from agiprobot_measurement.station import Station
 from agiprobot_measurement.station.urdf_model import UrdfModel

@@ -17,7 +17,7 @@ from geometry_msgs.msg import PointStamped
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from mild_test_utils import facing_error_deg
 
-from agiprobot_measurement.ros.mild_messages import transform_to_matrix
+from agiprobot_measurement.ros.conversions import transform_to_matrix
 
 
 class SetFocusPointTest(unittest.TestCase):

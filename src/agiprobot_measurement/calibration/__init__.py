@@ -1,1 +1,2 @@
-"""Flange-based robot-camera calibration of the PhoXi: detection, registration, session, simulation, test mode."""
+"""Flange-based robot-camera calibration of the PhoXi: config, flange detection, registration, session, flange
+motion, the procedures (collection, test mode) behind the robot/camera interfaces, chessboard test, simulation."""

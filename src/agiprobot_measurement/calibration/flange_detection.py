@@ -32,7 +32,6 @@ __all__ = [
     "estimate_normals",
     "euclidean_clusters",
     "flange_candidates",
-    "locate_flange",
     "planar_segments",
     "ransac_plane",
     "refine_flange",
@@ -225,12 +224,6 @@ def flange_candidates(points_m: np.ndarray, config: FlangeDetectorConfig) -> lis
         if all(np.linalg.norm(centre - u) > 0.5 * config.radius_m for u in unique):
             unique.append(centre)
     return unique
-
-
-def locate_flange(points_m: np.ndarray, config: FlangeDetectorConfig, rng=None) -> np.ndarray | None:
-    """The most likely approximate flange centre (see :func:`flange_candidates`), None when there is none."""
-    candidates = flange_candidates(points_m, config)
-    return candidates[0] if candidates else None
 
 
 def _angular_coverage_deg(points_2d: np.ndarray, centre: np.ndarray, bins: int = 36) -> float:

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from agiprobot_measurement.common.files import atomic_write_text
 from agiprobot_measurement.common.geometry import matrix_to_quaternion, transform_points
@@ -597,8 +598,6 @@ def result_dict(result: CalibrationResult, parent_frame: str, child_frame: str, 
 
 
 def write_result_yaml(path: str | Path, result: CalibrationResult, parent_frame: str, child_frame: str, mode: str):
-    import yaml
-
     text = yaml.safe_dump(result_dict(result, parent_frame, child_frame, mode), sort_keys=False)
     return atomic_write_text(
         path, "# robot-camera calibration (p_parent = matrix * p_child, metres)\n" + text, make_parents=True
@@ -607,8 +606,6 @@ def write_result_yaml(path: str | Path, result: CalibrationResult, parent_frame:
 
 def read_result_yaml(path: str | Path) -> np.ndarray:
     """The 4x4 matrix of a result YAML (safe_load)."""
-    import yaml
-
     path = Path(path)
     if not path.is_file():
         raise CalibrationError(f"{path}: calibration result not found")

@@ -1,67 +1,49 @@
 """The calibration on the simulated station without ROS: robot with the bare flange disc, scene, PhoXi renderer.
 
-Used by ``tools/bench_calibration.py`` and the tests: poses the robot by closed-form IK at each target
-(flange centre in the robot base frame, tool orientation from the config), renders one scanner frame with
-:mod:`agiprobot_measurement.sensors.phoxi.renderer` and detects the flange in it. Metres and rad throughout.
+:class:`SimulatedStation` poses the robot by closed-form IK at each target (flange centre in the robot base frame,
+tool orientation from the config) and renders one scanner frame with
+:mod:`agiprobot_measurement.sensors.phoxi.renderer` from a camera pose kept from the calibration (the hidden
+truth). :class:`SimulatedJointDriver` and :class:`SimulatedCamera` are the ROS node's robot and camera over it, so
+that :mod:`~agiprobot_measurement.calibration.procedure` runs in pytest; ``tools/bench_calibration.py`` uses the
+station directly. Metres and rad throughout.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from agiprobot_measurement.station import CONFIG_DIR, read_yaml
+from agiprobot_measurement._paths import CONFIG_DIR
+from agiprobot_measurement.calibration.config import flange_station_urdf
+from agiprobot_measurement.calibration.flange_motion import PlannedFlangeRobot, flange_collision_checker
+from agiprobot_measurement.calibration.interfaces import CameraFrame, StepError
+from agiprobot_measurement.common.config import read_yaml
+from agiprobot_measurement.common.geometry import look_at
+from agiprobot_measurement.motion.ik import make_ik_solver
+from agiprobot_measurement.motion.kinematics import KinematicModel
+from agiprobot_measurement.motion.trajectory import JointTrajectory
+from agiprobot_measurement.sensors.phoxi.renderer import (
+    RobotGeometry,
+    ScanSettings,
+    SceneGeometry,
+    StructuredLightScanner,
+    load_scanner_model,
+    scene_geometry,
+)
+from agiprobot_measurement.station import Station, load_joint_limits
+from agiprobot_measurement.station.urdf_model import UrdfModel
 
 __all__ = [
-    "CALIBRATION_CONFIG",
+    "SimulatedCamera",
+    "SimulatedJointDriver",
     "SimulatedStation",
-    "flange_station_urdf",
-    "load_calibration_config",
     "nominal_camera_pose",
     "perturbed_pose",
-    "tool_rotation",
+    "simulated_robot_and_camera",
 ]
-
-CALIBRATION_CONFIG = CONFIG_DIR / "calibration.yaml"
-
-
-def load_calibration_config(path: str | Path | None = None) -> dict:
-    """``config/calibration.yaml`` (safe_load) with the flag point file resolved to an absolute path."""
-    path = Path(path or CALIBRATION_CONFIG)
-    config = read_yaml(path) or {}
-    flag = Path(config.get("flag_points_file", "calibration_flag_points.txt"))
-    config["flag_points_file"] = str(flag if flag.is_absolute() else path.parent / flag)
-    return config
-
-
-def tool_rotation(z_towards_m: np.ndarray, position_m: np.ndarray) -> np.ndarray:
-    """Rotation (3x3) whose z axis points from ``position_m`` towards ``z_towards_m`` (x kept horizontal; for a
-    vertical z, x is the frame's x axis)."""
-    z = np.asarray(z_towards_m, dtype=float) - np.asarray(position_m, dtype=float)
-    length = np.linalg.norm(z)
-    if not length > 1e-9:
-        raise ValueError("tool_rotation: the point to face coincides with the position")
-    z /= length
-    x = np.cross([0.0, 0.0, 1.0], z)
-    if np.linalg.norm(x) < 1e-6:  # straight up or down: no horizontal direction is singled out
-        x = np.array([1.0, 0.0, 0.0]) - z[0] * z
-    x /= np.linalg.norm(x)
-    return np.column_stack([x, np.cross(z, x), z])
-
-
-def flange_station_urdf(scene: str | Path | None = None) -> str:
-    """The station URDF with ``tool:=flange_disc`` (xacro in-process); ``scene``: a scene file (default
-    config/scene.yaml) for the robot's mounting."""
-    import xacro
-
-    from agiprobot_measurement.station import URDF_DIR
-
-    mappings = {"tool": "flange_disc"}
-    if scene:
-        mappings["scene"] = str(Path(scene).resolve())
-    return xacro.process_file(str(URDF_DIR / "station.urdf.xacro"), mappings=mappings).toprettyxml()
 
 
 @dataclass
@@ -74,17 +56,6 @@ class SimulatedStation:
     scene_path: str | Path | None = None  # None: config/scene.yaml
 
     def __post_init__(self):
-        from agiprobot_measurement.motion.ik import make_ik_solver
-        from agiprobot_measurement.motion.kinematics import KinematicModel
-        from agiprobot_measurement.sensors.phoxi.renderer import (
-            RobotGeometry,
-            StructuredLightScanner,
-            load_scanner_model,
-            scene_geometry,
-        )
-        from agiprobot_measurement.station import Station
-        from agiprobot_measurement.station.urdf_model import UrdfModel
-
         self.station = Station.load(scene=self.scene_path)
         self.kinematics = KinematicModel.from_station(self.station, tip_frame="tool0", base_frame="base_link")
         self.world_kinematics = KinematicModel.from_station(self.station, tip_frame="tool0", base_frame="world")
@@ -94,6 +65,7 @@ class SimulatedStation:
         self.scene = scene_geometry(self.station.scene, exclude_groups=("wbk_mirrors",))
         self.scanner = StructuredLightScanner(load_scanner_model(self.model_name))
         self.world_from_base = self.urdf.fixed_transform("world", "base_link")
+        self.limits = load_joint_limits()
         self.seed_q = np.array([0.0, -1.5707, 1.5707, -1.5707, -1.5707, 0.0])
 
     @property
@@ -115,9 +87,7 @@ class SimulatedStation:
         return out
 
     def capture(self, q: np.ndarray, frame_index: int, extra=None):
-        """One frame (structured_light.Frame) with the robot at ``q``; ``extra``: more SceneGeometry (world)."""
-        from agiprobot_measurement.sensors.phoxi.renderer import ScanSettings, SceneGeometry
-
+        """One frame (renderer.Frame) with the robot at ``q``; ``extra``: more SceneGeometry (world)."""
         parts = [self.scene, self.robot.posed(self.link_poses(q))]
         if extra is not None:
             parts.append(extra)
@@ -128,7 +98,7 @@ class SimulatedStation:
 
 def perturbed_pose(pose: np.ndarray, rng, translation_m: float = 0.05, rotation_rad: float = 0.05) -> np.ndarray:
     """``pose`` moved by a uniform random offset (per axis) and turned by a random small rotation."""
-    from scipy.spatial.transform import Rotation
+    from scipy.spatial.transform import Rotation  # lazily: scipy.spatial takes a quarter of a second to load
 
     out = np.array(pose, dtype=float)
     out[:3, 3] += rng.uniform(-translation_m, translation_m, 3)
@@ -138,7 +108,71 @@ def perturbed_pose(pose: np.ndarray, rng, translation_m: float = 0.05, rotation_
 
 def nominal_camera_pose() -> np.ndarray:
     """world <- camera from config/phoxi_camera.yaml (xyz_m + look_at_m)."""
-    from agiprobot_measurement.common.geometry import look_at
-
     cfg = read_yaml(CONFIG_DIR / "phoxi_camera.yaml")
     return look_at(cfg["pose"]["xyz_m"], cfg["pose"]["look_at_m"])
+
+
+class SimulatedJointDriver:
+    """The :class:`~agiprobot_measurement.calibration.interfaces.JointDriver` of the simulation: the robot is where
+    the last trajectory ended (no dynamics, no waiting); ``trajectories`` keeps every one it ran."""
+
+    def __init__(self, joints_rad: np.ndarray):
+        self.joints_rad = np.array(joints_rad, dtype=float)
+        self.trajectories: list[JointTrajectory] = []
+
+    def current_joints(self) -> np.ndarray:
+        return self.joints_rad.copy()
+
+    def execute(self, trajectory: JointTrajectory, settle_s: float) -> None:
+        if np.abs(trajectory.start - self.joints_rad).max() > 1e-6:
+            raise StepError("robot motion failed: the trajectory does not start at the current joint state")
+        self.trajectories.append(trajectory)
+        self.joints_rad = np.array(trajectory.end, dtype=float)
+
+
+class SimulatedCamera:
+    """The :class:`~agiprobot_measurement.calibration.interfaces.Camera` of the simulation: a frame of ``station``
+    rendered with the robot where ``driver`` has it; frame indices (the noise draws) count up from
+    ``first_frame_index``."""
+
+    def __init__(self, station: SimulatedStation, driver: SimulatedJointDriver, first_frame_index: int = 0):
+        self.station = station
+        self.driver = driver
+        self.frame_index = first_frame_index
+
+    def capture(self, texture: bool = False) -> CameraFrame:
+        frame = self.station.capture(self.driver.current_joints(), self.frame_index)
+        self.frame_index += 1
+        points = frame.points_m()
+        if not texture:
+            return CameraFrame(points)
+        return CameraFrame(points, organized_m=points, texture=frame.texture)
+
+
+def simulated_robot_and_camera(
+    station: SimulatedStation,
+    tool_z_towards_m,
+    start_rad: np.ndarray | None = None,
+    check_collisions: bool = False,
+    velocity_scaling: float = 1.0,
+) -> tuple[PlannedFlangeRobot, SimulatedCamera]:
+    """The node's robot and camera over ``station``: a :class:`PlannedFlangeRobot` on a
+    :class:`SimulatedJointDriver` starting at ``start_rad`` (default the named state ``home``, as robot_sim), and a
+    :class:`SimulatedCamera` rendering where that robot is. ``check_collisions``: with the flange station's
+    collision checker (straight moves checked, blocked ones planned), as the node does by default."""
+    driver = SimulatedJointDriver(station.station.named_states["home"] if start_rad is None else start_rad)
+    collision = None
+    if check_collisions:
+        collision = flange_collision_checker(
+            dataclasses.replace(station.station, urdf_xml=flange_station_urdf(station.scene_path))
+        )
+    robot = PlannedFlangeRobot(
+        driver,
+        station.kinematics,
+        station.ik,
+        station.limits,
+        tool_z_towards_m,
+        collision=collision,
+        velocity_scaling=velocity_scaling,
+    )
+    return robot, SimulatedCamera(station, driver)

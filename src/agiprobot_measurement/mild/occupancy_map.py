@@ -379,8 +379,3 @@ class GridPlanner:
                 cells = self._mcp.traceback(goal)
                 out.append(self._polyline(cells, start_xy, goal_xy))
         return out
-
-    def path_length(self, start_xy_m, goal_xy_m, tolerance_m: float = 0.0) -> float | None:
-        """Length (m) of the planned path, or None when there is no path."""
-        path = self.plan(start_xy_m, goal_xy_m, tolerance_m)
-        return None if path is None else polyline_length(path)

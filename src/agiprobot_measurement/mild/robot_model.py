@@ -6,7 +6,10 @@ robot state is (pan, tilt, rotation, x, y) in that order (RobotStateMessage's fi
 of the camera mount frame in the map frame, the camera looking along its +x axis. The view centre of a camera pose is
 ``position + view * (ncp + fcp) / 2``.
 
-What is here (the reference's section asr_robot_model_services, see ../shared/reference/interfaces.md):
+What is here (the reference's section asr_robot_model_services, see ../shared/reference/interfaces.md), built on
+:mod:`~agiprobot_measurement.mild.state` (RobotState, angles), :mod:`~agiprobot_measurement.mild.config` (frames,
+kinematics, settings), :mod:`~agiprobot_measurement.mild.lp` (the turn-splitting LP) and
+:mod:`~agiprobot_measurement.mild.ratings` (the heuristics):
 
 - forward kinematics: :meth:`MildRobotModel.frame_poses`, :meth:`MildRobotModel.camera_poses` (vectorised);
 - inverse kinematics with base movement, exact geometric (``robotModelId: 1``, :meth:`MildRobotModel.exact_ik_batch`):
@@ -36,558 +39,43 @@ stopped when two samples straddling the optimum rated alike).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from agiprobot_measurement.common.config import vector
 from agiprobot_measurement.common.geometry import wrap_to_pi
+from agiprobot_measurement.errors import InputError, InternalError
+from agiprobot_measurement.mild.config import (
+    APPROXIMATED_IK,
+    MildKinematics,
+    RobotModelSettings,
+    load_kinematics,
+    load_map,
+    load_settings,
+)
+from agiprobot_measurement.mild.lp import solve_turn_lp, turn_split_closed_form
 from agiprobot_measurement.mild.occupancy_map import OccupancyMap, polyline_length
-from agiprobot_measurement.station import CONFIG_DIR, ConfigError, read_yaml
-
-__all__ = [
-    "FRAME_KEYS",
-    "LP_SOLVERS",
-    "RATING_BASE",
-    "RATING_NAMES",
-    "TWO_PI",
-    "FrameNames",
-    "IKBatch",
-    "IKSolution",
-    "MildKinematics",
-    "MildRobotModel",
-    "MovementCosts",
-    "PoseCorrection",
-    "RobotModelSettings",
-    "RobotState",
-    "angle_between",
-    "check_pose",
-    "load_frame_names",
-    "load_kinematics",
-    "load_map",
-    "load_settings",
-    "path_heading_change",
-    "rating_angle_approximation",
-    "rating_navigation_path",
-    "rating_simple",
-    "settings_from_mapping",
-    "solve_turn_lp",
-    "turn_split_closed_form",
-    "view_directions",
-    "wrap_to_2pi",
-]
-
-TWO_PI = 2.0 * math.pi
-RATING_BASE = 0.6  # every heuristic rates a total turn of a radians as 0.6 ** a, in (0, 1]
-RATING_NAMES = ("SIMPLE", "ANGLE_APPROXIMATION", "NAVIGATION_PATH")
-LP_SOLVERS = ("glpk", "highs", "closed_form")
-EXACT_IK, APPROXIMATED_IK = 1, 2
-
-
-# --------------------------------------------------------------------------------------------------- angles
-
-
-def wrap_to_2pi(angle_rad):
-    """Angles mapped to [0, 2 pi) (the original's convention for the base rotation)."""
-    return np.asarray(angle_rad) % TWO_PI
-
-
-def view_directions(q_xyzw: np.ndarray) -> np.ndarray:
-    """The +x axes (..., 3) of orientations (..., 4): where a camera with that orientation looks."""
-    x, y, z, w = np.moveaxis(np.asarray(q_xyzw, dtype=float), -1, 0)
-    return np.stack([1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)], -1)
-
-
-def angle_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Angles (rad) between unit vectors (..., 3); atan2 keeps them accurate near 0 where arccos is not."""
-    return np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.sum(a * b, axis=-1))
-
-
-def check_pose(position, orientation_xyzw, what: str = "pose") -> tuple[np.ndarray, np.ndarray]:
-    """A finite position and a normalised quaternion, or ValueError saying what is wrong."""
-    p = np.asarray(position, dtype=float).reshape(-1)
-    q = np.asarray(orientation_xyzw, dtype=float).reshape(-1)
-    if p.shape != (3,) or q.shape != (4,):
-        raise ValueError(f"{what}: expected a position (x, y, z) and a quaternion (x, y, z, w)")
-    if not np.all(np.isfinite(p)):
-        raise ValueError(f"{what}: position {p.tolist()} is not finite")
-    if not np.all(np.isfinite(q)):
-        raise ValueError(f"{what}: orientation {q.tolist()} is not finite")
-    norm = float(np.linalg.norm(q))
-    if norm < 1e-9:
-        raise ValueError(
-            f"{what}: orientation {q.tolist()} is a zero quaternion; expected a unit quaternion (x, y, z, w)"
-        )
-    return p, q / norm
-
-
-# --------------------------------------------------------------------------------------------------- robot state
-@dataclass(frozen=True)
-class RobotState:
-    """A MILD configuration: pan and tilt of the PTU (rad), base rotation (rad) and base position x, y (m, map)."""
-
-    pan: float = 0.0
-    tilt: float = 0.0
-    rotation: float = 0.0
-    x: float = 0.0
-    y: float = 0.0
-
-    def as_array(self) -> np.ndarray:
-        return np.array([self.pan, self.tilt, self.rotation, self.x, self.y])
-
-    @classmethod
-    def from_array(cls, values) -> RobotState:
-        v = np.asarray(values, dtype=float).reshape(5)
-        return cls(*(float(a) for a in v))
-
-    def checked(self, what: str = "robot state") -> RobotState:
-        for name in ("pan", "tilt", "rotation", "x", "y"):
-            if not math.isfinite(getattr(self, name)):
-                raise ValueError(f"{what}: {name} = {getattr(self, name)} is not finite")
-        return self
-
-
-# --------------------------------------------------------------------------------------------------- configuration
-FRAME_KEYS = (
-    "map_frame",
-    "base_frame",
-    "ptu_base_frame",
-    "ptu_pan_frame",
-    "ptu_pan_frame_rotated",
-    "ptu_tilt_frame",
-    "ptu_tilt_frame_rotated",
-    "camera_mount_frame",
-    "camera_left_frame",
-    "camera_right_frame",
+from agiprobot_measurement.mild.ratings import (
+    rating_angle_approximation,
+    rating_angle_approximation_offsets,
+    rating_navigation_path,
+    rating_simple,
+)
+from agiprobot_measurement.mild.state import (
+    TWO_PI,
+    RobotState,
+    angle_between,
+    check_pose,
+    check_position,
+    state_problem,
+    view_directions,
+    wrap_to_2pi,
 )
 
-
-@dataclass(frozen=True)
-class FrameNames:
-    """The chain's tf frame names, keyed by the original's parameter names (robot_model_frames.yaml)."""
-
-    map_frame: str = "map"
-    base_frame: str = "base_link"
-    ptu_base_frame: str = "ptu_base_link"
-    ptu_pan_frame: str = "ptu_pan_link"
-    ptu_pan_frame_rotated: str = "ptu_pan_link_rotated"
-    ptu_tilt_frame: str = "ptu_tilt_link"
-    ptu_tilt_frame_rotated: str = "ptu_tilted_link"
-    camera_mount_frame: str = "ptu_mount_link"
-    camera_left_frame: str = "camera_left_frame"
-    camera_right_frame: str = "camera_right_frame"
-
-    @classmethod
-    def from_mapping(cls, mapping: object, where: str) -> FrameNames:
-        if not isinstance(mapping, dict):
-            raise ConfigError(f"{where}: expected a mapping of frame names")
-        values = {}
-        for key in FRAME_KEYS:
-            if key not in mapping:
-                raise ConfigError(f"{where}: missing key '{key}'")
-            name = mapping[key]
-            if not isinstance(name, str) or not name.strip("/"):
-                raise ConfigError(f"{where}: '{key}' must be a frame name, got {name!r}")
-            values[key] = name.strip("/")  # tf2 frame ids carry no leading slash (the original's had one)
-        if len(set(values.values())) != len(values):
-            raise ConfigError(f"{where}: frame names must be distinct")
-        return cls(**values)
+__all__ = ["IKBatch", "IKSolution", "MildRobotModel", "MovementCosts", "PoseCorrection"]
 
 
-def load_frame_names(path: str | Path | None = None) -> FrameNames:
-    path = Path(path) if path else CONFIG_DIR / "mild_robot_model_frames.yaml"
-    return FrameNames.from_mapping(read_yaml(path), str(path))
-
-
-@dataclass(frozen=True)
-class MildKinematics:
-    """The MILD's fixed offsets (m) between the frames of its chain; see config/mild_kinematics.yaml."""
-
-    base_to_ptu_base_m: np.ndarray
-    ptu_base_to_pan_m: np.ndarray
-    pan_to_tilt_m: np.ndarray
-    tilt_to_mount_m: np.ndarray
-    camera_baseline_m: float
-    pan_joint: str = "ptu_pan_joint"
-    tilt_joint: str = "ptu_tilt_joint"
-    frames: FrameNames = field(default_factory=FrameNames)
-    # speed limits: pan and tilt (rad/s), base rotation (rad/s) and base translation (m/s)
-    max_velocity: tuple[float, float, float, float] = (1.0, 1.0, 0.8, 0.5)
-
-    @property
-    def base_to_pan_m(self) -> np.ndarray:
-        return self.base_to_ptu_base_m + self.ptu_base_to_pan_m
-
-    @property
-    def tilt_axis_height_m(self) -> float:
-        """Height of the tilt axis above the floor: constant, whatever the base pose and pan (the IK relies on it)."""
-        return float(self.base_to_pan_m[2] + self.pan_to_tilt_m[2])
-
-
-def load_kinematics(path: str | Path | None = None, frames: FrameNames | str | Path | None = None) -> MildKinematics:
-    path = Path(path) if path else CONFIG_DIR / "mild_kinematics.yaml"
-    where = str(path)
-    data = read_yaml(path)
-    if not isinstance(data, dict):
-        raise ConfigError(f"{where}: expected a mapping")
-
-    def vec(key: str) -> np.ndarray:
-        if key not in data:
-            raise ConfigError(f"{where}: missing key '{key}'")
-        return vector(data[key], 3, f"{where}: {key}")
-
-    if "camera_baseline_m" not in data:
-        raise ConfigError(f"{where}: missing key 'camera_baseline_m'")
-    try:
-        baseline = float(data["camera_baseline_m"])
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(f"{where}: camera_baseline_m must be a number") from exc
-    if not (math.isfinite(baseline) and baseline >= 0):
-        raise ConfigError(f"{where}: camera_baseline_m must be a non-negative number, got {baseline}")
-    joints = data.get("joint_names", {}) or {}
-    if not isinstance(joints, dict):
-        raise ConfigError(f"{where}: joint_names must be a mapping with 'pan' and 'tilt'")
-    if not isinstance(frames, FrameNames):
-        frames = load_frame_names(frames)
-    speeds = data.get("max_velocity", {}) or {}
-    if not isinstance(speeds, dict):
-        raise ConfigError(f"{where}: max_velocity must be a mapping")
-    max_velocity = tuple(
-        _number(speeds, key, f"{where}: max_velocity", default=default, strictly_positive=True)
-        for key, default in (
-            ("pan_rad_s", 1.0),
-            ("tilt_rad_s", 1.0),
-            ("base_angular_rad_s", 0.8),
-            ("base_linear_m_s", 0.5),
-        )
-    )
-    return MildKinematics(
-        base_to_ptu_base_m=vec("base_to_ptu_base_xyz_m"),
-        ptu_base_to_pan_m=vec("ptu_base_to_pan_xyz_m"),
-        pan_to_tilt_m=vec("pan_to_tilt_xyz_m"),
-        tilt_to_mount_m=vec("tilt_to_camera_mount_xyz_m"),
-        camera_baseline_m=baseline,
-        pan_joint=str(joints.get("pan", "ptu_pan_joint")),
-        tilt_joint=str(joints.get("tilt", "ptu_tilt_joint")),
-        frames=frames,
-        max_velocity=max_velocity,
-    )
-
-
-@dataclass(frozen=True)
-class RobotModelSettings:
-    """asr_robot_model_services' parameters, converted to SI units (radians, metres); names as in the YAML files."""
-
-    robot_model_id: int
-    pan_limits_rad: tuple[float, float]
-    tilt_limits_rad: tuple[float, float]
-    sigma_m: float
-    col_thresh: float
-    omega_pan: float
-    omega_tilt: float
-    omega_rot: float
-    omega_base: float
-    tolerance_m: float
-    use_global_planner: bool
-    ncp_m: float
-    fcp_m: float
-    visualize_ik: bool
-    ik_angle_rating: str
-    pan_sampling_steps: int
-    ik_iteration_accuracy: float
-    pan_sampling_max_iterations: int = 6
-    lp_solver: str = "glpk"
-    fovx_rad: float = math.radians(30.0)
-    fovy_rad: float = math.radians(20.0)
-    inscribed_radius_m: float = 0.30
-    inflation_radius_m: float = 0.60
-    cost_scaling_per_m: float = 5.0
-    ik_visualization_topic: str = "/asr_robot_model_services/IK_Visualization"
-    warnings: tuple[str, ...] = ()
-
-    @property
-    def view_distance_m(self) -> float:
-        """Distance from the camera to the view centre: the middle of the clipping planes."""
-        return 0.5 * (self.ncp_m + self.fcp_m)
-
-    def with_changes(self, **changes) -> RobotModelSettings:
-        from dataclasses import replace
-
-        return replace(self, **changes)
-
-
-_REQUIRED = object()
-
-
-def _number(mapping: dict, key: str, where: str, default=_REQUIRED, minimum=None, strictly_positive=False) -> float:
-    if key not in mapping:
-        if default is _REQUIRED:
-            raise ConfigError(f"{where}: missing key '{key}'")
-        return default
-    value = mapping[key]
-    if isinstance(value, bool):
-        raise ConfigError(f"{where}: '{key}' must be a number, got {value!r}")
-    try:
-        number = float(value)
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(f"{where}: '{key}' must be a number, got {value!r}") from exc
-    if not math.isfinite(number):
-        raise ConfigError(f"{where}: '{key}' must be finite, got {value!r}")
-    if strictly_positive and number <= 0:
-        raise ConfigError(f"{where}: '{key}' must be positive, got {value!r}")
-    if minimum is not None and number < minimum:
-        raise ConfigError(f"{where}: '{key}' must be >= {minimum}, got {value!r}")
-    return number
-
-
-def _flag(mapping: dict, key: str, where: str, default=_REQUIRED) -> bool:
-    if key not in mapping:
-        if default is _REQUIRED:
-            raise ConfigError(f"{where}: missing key '{key}'")
-        return default
-    value = mapping[key]
-    if isinstance(value, bool):
-        return value
-    if isinstance(value, str) and value.lower() in ("true", "false"):
-        return value.lower() == "true"
-    raise ConfigError(f"{where}: '{key}' must be true or false, got {value!r}")
-
-
-def settings_from_mapping(mapping: object, where: str) -> RobotModelSettings:
-    """Check and convert the parameters (a YAML file's or the node's private rosparams); errors name ``where``."""
-    if not isinstance(mapping, dict):
-        raise ConfigError(f"{where}: expected a mapping of parameters")
-    warnings: list[str] = []
-    model_id = mapping.get("robotModelId", _REQUIRED)
-    if model_id is _REQUIRED:
-        raise ConfigError(f"{where}: missing key 'robotModelId'")
-    if isinstance(model_id, bool) or model_id not in (EXACT_IK, APPROXIMATED_IK):
-        raise ConfigError(
-            f"{where}: robotModelId {model_id!r} is not a valid robot model id "
-            f"(1 = MILDRobotModelWithExactIK, 2 = MILDRobotModelWithApproximatedIK)"
-        )
-    limits = {key: _number(mapping, key, where) for key in ("panMin", "panMax", "tiltMin", "tiltMax")}
-    for low, high in (("panMin", "panMax"), ("tiltMin", "tiltMax")):
-        if limits[low] >= limits[high]:
-            raise ConfigError(f"{where}: need {low} < {high} (degrees), got {limits[low]} and {limits[high]}")
-    if limits["tiltMin"] <= -90 or limits["tiltMax"] >= 90:
-        raise ConfigError(f"{where}: tilt limits must lie within (-90, 90) degrees")
-    ncp = _number(mapping, "ncp", where, strictly_positive=True)
-    fcp = _number(mapping, "fcp", where, strictly_positive=True)
-    if ncp >= fcp:
-        raise ConfigError(f"{where}: need ncp < fcp (metres), got {ncp} and {fcp}")
-    rating = mapping.get("IKAngleRating", _REQUIRED)
-    if rating is _REQUIRED:
-        raise ConfigError(f"{where}: missing key 'IKAngleRating'")
-    if rating not in RATING_NAMES:
-        warnings.append(
-            f"'{rating}' is not a valid IK rating algorithm (IKAngleRating: one of {', '.join(RATING_NAMES)}); "
-            "using SIMPLE instead"
-        )
-        rating = "SIMPLE"
-    steps = _number(mapping, "panAngleSamplingStepsPerIteration", where, minimum=2)
-    iterations = _number(mapping, "panAngleSamplingMaxIterations", where, default=6, minimum=1)
-    if steps != int(steps) or iterations != int(iterations):
-        raise ConfigError(f"{where}: panAngleSamplingStepsPerIteration and panAngleSamplingMaxIterations are integers")
-    solver = str(mapping.get("lpSolver", "glpk"))
-    if solver not in LP_SOLVERS:
-        raise ConfigError(f"{where}: lpSolver must be one of {', '.join(LP_SOLVERS)}, got {solver!r}")
-    fovx = _number(mapping, "fovx_deg", where, default=30.0, strictly_positive=True)
-    fovy = _number(mapping, "fovy_deg", where, default=20.0, strictly_positive=True)
-    if fovx >= 180 or fovy >= 180:
-        raise ConfigError(f"{where}: fovx_deg and fovy_deg must be below 180")
-    col_thresh = _number(mapping, "colThresh", where, minimum=0)
-    if col_thresh > 100:
-        raise ConfigError(f"{where}: colThresh is an occupancy value in [0, 100], got {col_thresh}")
-    inscribed = _number(mapping, "inscribedRadius_m", where, default=0.30, minimum=0)
-    inflation = _number(mapping, "inflationRadius_m", where, default=0.60, minimum=0)
-    if inscribed > inflation:
-        raise ConfigError(f"{where}: need inscribedRadius_m <= inflationRadius_m, got {inscribed} and {inflation}")
-    return RobotModelSettings(
-        robot_model_id=int(model_id),
-        pan_limits_rad=(math.radians(limits["panMin"]), math.radians(limits["panMax"])),
-        tilt_limits_rad=(math.radians(limits["tiltMin"]), math.radians(limits["tiltMax"])),
-        sigma_m=_number(mapping, "mSigma", where, strictly_positive=True),
-        col_thresh=col_thresh,
-        omega_pan=_number(mapping, "mOmegaPan", where, minimum=0),
-        omega_tilt=_number(mapping, "mOmegaTilt", where, minimum=0),
-        omega_rot=_number(mapping, "mOmegaRot", where, minimum=0),
-        omega_base=_number(mapping, "mOmegaBase", where, minimum=0),
-        tolerance_m=_number(mapping, "tolerance", where, minimum=0),
-        use_global_planner=_flag(mapping, "useGlobalPlanner", where),
-        ncp_m=ncp,
-        fcp_m=fcp,
-        visualize_ik=_flag(mapping, "visualizeIK", where),
-        ik_angle_rating=str(rating),
-        pan_sampling_steps=int(steps),
-        ik_iteration_accuracy=_number(mapping, "inverseKinematicIterationAccuracy", where, strictly_positive=True),
-        pan_sampling_max_iterations=int(iterations),
-        lp_solver=solver,
-        fovx_rad=math.radians(fovx),
-        fovy_rad=math.radians(fovy),
-        inscribed_radius_m=inscribed,
-        inflation_radius_m=inflation,
-        cost_scaling_per_m=_number(mapping, "costScalingFactor_per_m", where, default=5.0, minimum=0),
-        ik_visualization_topic=str(mapping.get("IKVisualization", "/asr_robot_model_services/IK_Visualization")),
-        warnings=tuple(warnings),
-    )
-
-
-def load_settings(path: str | Path | None = None) -> RobotModelSettings:
-    """Settings file (default: config/mild_robot_model_services_real.yaml)."""
-    path = Path(path) if path else CONFIG_DIR / "mild_robot_model_services_real.yaml"
-    return settings_from_mapping(read_yaml(path), str(path))
-
-
-def load_map(path: str | Path | None, settings: RobotModelSettings) -> OccupancyMap:
-    """A map_server map inflated with the settings' radii (default: config/maps/mild_lab.yaml)."""
-    path = Path(path) if path else CONFIG_DIR / "maps" / "mild_lab.yaml"
-    return OccupancyMap.load(
-        path, settings.inscribed_radius_m, settings.inflation_radius_m, settings.cost_scaling_per_m
-    )
-
-
-# --------------------------------------------------------------------------------------------------- linear programme
-def turn_split_closed_form(alpha_rad, pan_up_rad, pan_down_rad, omega_pan: float, omega_rot: float):
-    """Optimum of the approximated IK's LP, vectorised: (pan change, rotation change) in rad.
-
-    The LP has one equality row (pan change + rotation change = alpha) and box bounds, so its optimum fills the
-    cheaper variable first: the pan up to its limit when omega_pan <= omega_rot, else all of the turn by rotation
-    (|alpha| <= pi fits the rotation's bound of pi).
-    """
-    alpha = np.asarray(alpha_rad, dtype=float)
-    if omega_pan <= omega_rot:
-        pan = np.clip(alpha, -np.asarray(pan_down_rad, dtype=float), np.asarray(pan_up_rad, dtype=float))
-    else:
-        pan = np.zeros_like(alpha)
-    return pan, alpha - pan
-
-
-def _solve_turn_lp_glpk(alpha: float, pan_up: float, pan_down: float, omega_pan: float, omega_rot: float):
-    import swiglpk as glp
-
-    lp = glp.glp_create_prob()
-    try:
-        glp.glp_set_obj_dir(lp, glp.GLP_MIN)
-        glp.glp_add_cols(lp, 4)
-        # x_pan+, x_pan-, x_rot+, x_rot-: all >= 0, pan bounded by the limits, rotation by pi each way
-        for column, (upper, weight) in enumerate(
-            ((pan_up, omega_pan), (pan_down, omega_pan), (math.pi, omega_rot), (math.pi, omega_rot)), start=1
-        ):
-            glp.glp_set_col_bnds(lp, column, glp.GLP_DB if upper > 0.0 else glp.GLP_FX, 0.0, max(upper, 0.0))
-            glp.glp_set_obj_coef(lp, column, weight)
-        glp.glp_add_rows(lp, 1)
-        glp.glp_set_row_bnds(lp, 1, glp.GLP_FX, alpha, alpha)
-        index, value = glp.intArray(5), glp.doubleArray(5)
-        for column, coefficient in enumerate((1.0, -1.0, 1.0, -1.0), start=1):
-            index[column], value[column] = column, coefficient
-        glp.glp_set_mat_row(lp, 1, 4, index, value)
-        parameters = glp.glp_smcp()
-        glp.glp_init_smcp(parameters)
-        parameters.msg_lev = glp.GLP_MSG_OFF
-        glp.glp_simplex(lp, parameters)
-        if glp.glp_get_status(lp) != glp.GLP_OPT:
-            raise RuntimeError(f"GLPK found no optimal solution (status {glp.glp_get_status(lp)})")
-        x = [glp.glp_get_col_prim(lp, column) for column in range(1, 5)]
-    finally:
-        glp.glp_delete_prob(lp)
-    return x[0] - x[1], x[2] - x[3]
-
-
-def _solve_turn_lp_highs(alpha: float, pan_up: float, pan_down: float, omega_pan: float, omega_rot: float):
-    import highspy
-
-    h = highspy.Highs()
-    h.setOptionValue("output_flag", False)
-    inf = highspy.kHighsInf
-    lp = highspy.HighsLp()
-    lp.num_col_, lp.num_row_ = 4, 1
-    lp.col_cost_ = np.array([omega_pan, omega_pan, omega_rot, omega_rot])
-    lp.col_lower_ = np.zeros(4)
-    lp.col_upper_ = np.array([max(pan_up, 0.0), max(pan_down, 0.0), math.pi, math.pi])
-    lp.row_lower_ = np.array([alpha])
-    lp.row_upper_ = np.array([alpha])
-    lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
-    lp.a_matrix_.start_ = np.array([0, 1, 2, 3, 4])
-    lp.a_matrix_.index_ = np.array([0, 0, 0, 0])
-    lp.a_matrix_.value_ = np.array([1.0, -1.0, 1.0, -1.0])
-    del inf
-    h.passModel(lp)
-    h.run()
-    if h.getModelStatus() != highspy.HighsModelStatus.kOptimal:
-        raise RuntimeError(f"HiGHS found no optimal solution ({h.modelStatusToString(h.getModelStatus())})")
-    x = list(h.getSolution().col_value)
-    return x[0] - x[1], x[2] - x[3]
-
-
-def solve_turn_lp(
-    alpha_rad: float, pan_up_rad: float, pan_down_rad: float, omega_pan: float, omega_rot: float, solver: str = "glpk"
-) -> tuple[float, float]:
-    """The approximated IK's linear programme (the original's, solved by GLPK there).
-
-    minimise   omega_pan (x_pan+ + x_pan-) + omega_rot (x_rot+ + x_rot-)
-    subject to x_pan+ - x_pan- + x_rot+ - x_rot- = alpha        (the azimuth still to turn, rad, in [-pi, pi])
-               0 <= x_pan+ <= pan_up, 0 <= x_pan- <= pan_down   (room to the pan limits, rad)
-               0 <= x_rot+, x_rot- <= pi
-
-    Returns (pan change, rotation change) in rad.
-    """
-    args = (float(alpha_rad), float(pan_up_rad), float(pan_down_rad), float(omega_pan), float(omega_rot))
-    if solver == "glpk":
-        return _solve_turn_lp_glpk(*args)
-    if solver == "highs":
-        return _solve_turn_lp_highs(*args)
-    if solver == "closed_form":
-        pan, rot = turn_split_closed_form(*args)
-        return float(pan), float(rot)
-    raise ValueError(f"unknown LP solver '{solver}' (one of {', '.join(LP_SOLVERS)})")
-
-
-# --------------------------------------------------------------------------------------------------- heuristics
-def rating_simple(source_rotation_rad, target_rotation_rad):
-    """SIMPLE: 0.6 ** |rotation change| (shortest way round, 0 .. pi)."""
-    return RATING_BASE ** np.abs(wrap_to_pi(np.asarray(target_rotation_rad) - source_rotation_rad))
-
-
-def rating_angle_approximation(source_xy_m, target_xy_m, source_rotation_rad, target_rotation_rad):
-    """ANGLE_APPROXIMATION: 0.6 ** (turn onto the straight line from source to target + turn from it to the target
-    heading); a turn in place (positions closer than 1 um) is rated by the turn itself."""
-    delta = np.asarray(target_xy_m, dtype=float) - np.asarray(source_xy_m, dtype=float)
-    return _angle_approximation(delta[..., 0], delta[..., 1], source_rotation_rad, target_rotation_rad)
-
-
-def _angle_approximation(dx, dy, source_rotation_rad, target_rotation_rad):
-    line = np.arctan2(dy, dx)
-    via_line = np.abs(wrap_to_pi(source_rotation_rad - line)) + np.abs(wrap_to_pi(target_rotation_rad - line))
-    in_place = np.abs(wrap_to_pi(np.asarray(target_rotation_rad) - source_rotation_rad))
-    moving = np.hypot(dx, dy) > 1e-6
-    return RATING_BASE ** np.where(moving, via_line, in_place)
-
-
-def path_heading_change(path_xy_m: np.ndarray, source_rotation_rad: float, target_rotation_rad: float) -> float:
-    """Total absolute heading change (rad) driving along a polyline: onto its first segment, at every corner, and
-    from its last segment to the target heading."""
-    segments = np.diff(np.asarray(path_xy_m, dtype=float).reshape(-1, 2), axis=0)
-    segments = segments[np.hypot(segments[:, 0], segments[:, 1]) > 1e-9]
-    if len(segments) == 0:
-        return float(abs(wrap_to_pi(target_rotation_rad - source_rotation_rad)))
-    headings = np.arctan2(segments[:, 1], segments[:, 0])
-    return float(
-        abs(wrap_to_pi(headings[0] - source_rotation_rad))
-        + np.abs(wrap_to_pi(np.diff(headings))).sum()
-        + abs(wrap_to_pi(target_rotation_rad - headings[-1]))
-    )
-
-
-def rating_navigation_path(path_xy_m: np.ndarray | None, source_rotation_rad: float, target_rotation_rad: float):
-    """NAVIGATION_PATH: 0.6 ** (sum of heading changes along the planned path); 0 when there is no path."""
-    if path_xy_m is None:
-        return 0.0
-    return RATING_BASE ** path_heading_change(path_xy_m, source_rotation_rad, target_rotation_rad)
-
-
-# --------------------------------------------------------------------------------------------------- results
 @dataclass(frozen=True)
 class IKSolution:
     """Result of an inverse kinematics request. ``state`` is None when there is no solution (``reason`` says why)."""
@@ -745,8 +233,20 @@ class MildRobotModel:
         return out
 
     def camera_pose(self, state: RobotState) -> np.ndarray:
-        """Camera mount pose (4x4, map frame) of a robot state: what CalculateCameraPose returns."""
+        """Camera mount pose (4x4, map frame) of a robot state (unchecked: see :meth:`calculate_camera_pose`)."""
         return self.camera_poses(state.as_array()[None])[0]
+
+    def check_state(self, state: RobotState, what: str = "robot state") -> RobotState:
+        """``state`` if the MILD can take it: finite, pan and tilt within the settings' PTU limits, rotation and
+        position within sane bounds; else InputError naming the value and the limit (as mild_sim/set_state)."""
+        problem = state_problem(state, self.pan_limits, self.tilt_limits, what)
+        if problem:
+            raise InputError(problem)
+        return state
+
+    def calculate_camera_pose(self, state: RobotState) -> np.ndarray:
+        """CalculateCameraPose: the camera mount pose (4x4, map frame) of a checked state (:meth:`check_state`)."""
+        return self.camera_pose(self.check_state(state, "sourceRobotState"))
 
     def view_centre(self, camera_pose: np.ndarray) -> np.ndarray:
         return camera_pose[:3, 3] + self.settings.view_distance_m * camera_pose[:3, 0]
@@ -769,7 +269,7 @@ class MildRobotModel:
         if name == "NAVIGATION_PATH" and self.map is not None:
             ratings = self._rate_navigation_path(source, np.stack([x, y], -1), rotations)
         elif name in ("ANGLE_APPROXIMATION", "NAVIGATION_PATH"):  # NAVIGATION_PATH without a map: straight line
-            ratings = _angle_approximation(x - source.x, y - source.y, source.rotation, rotations)
+            ratings = rating_angle_approximation_offsets(x - source.x, y - source.y, source.rotation, rotations)
         else:
             ratings = rating_simple(source.rotation, rotations)
         if self.map is not None:
@@ -940,7 +440,7 @@ class MildRobotModel:
 
     def approximated_ik(self, source: RobotState, position, orientation_xyzw) -> IKSolution:
         """Approximated IK for one pose, the LP solved by ``lpSolver`` (GLPK by default, as the original)."""
-        source = source.checked("sourceRobotState")
+        source = self.check_state(source, "sourceRobotState")
         p, q = check_pose(position, orientation_xyzw, "requested camera pose")
         views = view_directions(q[None])
         alpha, up, down, current_pan, elevation = self._approximated_setup(source, views)
@@ -958,11 +458,12 @@ class MildRobotModel:
         """Inverse kinematics with base movement by ``robotModelId`` (1 exact, 2 approximated).
 
         ``position`` (m, map) and ``orientation_xyzw`` are the requested camera pose, the camera looking along +x.
-        Raises ValueError for a non-finite state or pose or a zero quaternion.
+        Raises InputError (a ValueError) for a state the MILD cannot take (:meth:`check_state`), a non-finite or
+        absurd pose or a zero quaternion.
         """
         if self.settings.robot_model_id == APPROXIMATED_IK:
             return self.approximated_ik(source, position, orientation_xyzw)
-        source = source.checked("sourceRobotState")
+        source = self.check_state(source, "sourceRobotState")
         p, q = check_pose(position, orientation_xyzw, "requested camera pose")
         batch, samples = self._exact(source, p[None], q[None], record_samples)
         return self._solution(batch, 0, None if samples is None else samples[0] if len(samples) else None)
@@ -1009,8 +510,9 @@ class MildRobotModel:
     # ----------------------------------------------------------------------------------------- PTU pose correction
     def camera_pose_correction(self, state: RobotState, position, orientation_xyzw) -> PoseCorrection:
         """Pan and tilt (rad) that make the camera's view axis pass through the requested view centre without moving
-        the base (the distance to it is whatever results), clamped to the PTU limits."""
-        state = state.checked("sourceRobotState")
+        the base (the distance to it is whatever results), clamped to the PTU limits; ``state`` must be one the MILD
+        can take (:meth:`check_state`)."""
+        state = self.check_state(state, "sourceRobotState")
         p, q = check_pose(position, orientation_xyzw, "requested camera pose")
         centre = p + self.settings.view_distance_m * view_directions(q)
         c, s = math.cos(state.rotation), math.sin(state.rotation)
@@ -1059,18 +561,19 @@ class MildRobotModel:
         a = np.asarray(source_position_m, dtype=float).reshape(-1)[:2]
         b = np.asarray(target_position_m, dtype=float).reshape(-1)[:2]
         if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
-            raise ValueError(f"positions must be finite, got {a.tolist()} and {b.tolist()}")
+            raise InputError(f"positions must be finite, got {a.tolist()} and {b.tolist()}")
+        a, b = check_position(a, "sourcePosition"), check_position(b, "targetPosition")
         if not self.settings.use_global_planner:
             return float(np.hypot(*(b - a)))
         if self.map is None:
-            raise RuntimeError("useGlobalPlanner is set but the model has no map")
+            raise InternalError("useGlobalPlanner is set but the model has no map")
         path = self.map.planner(self.settings.col_thresh).plan(a, b, self.settings.tolerance_m)
         return -1.0 if path is None else polyline_length(path)
 
     def navigation_path(self, source_position_m, target_position_m) -> np.ndarray | None:
         """The planned path (k, 2) in metres on the map, None when there is none."""
         if self.map is None:
-            raise RuntimeError("the model has no map")
+            raise InternalError("the model has no map")
         a = np.asarray(source_position_m, dtype=float).reshape(-1)[:2]
         b = np.asarray(target_position_m, dtype=float).reshape(-1)[:2]
         return self.map.planner(self.settings.col_thresh).plan(a, b, self.settings.tolerance_m)
@@ -1080,9 +583,10 @@ class MildRobotModel:
         and points outside the map are not allowed."""
         p = np.asarray(position_m, dtype=float).reshape(-1)[:2]
         if not np.all(np.isfinite(p)):
-            raise ValueError(f"position {p.tolist()} is not finite")
+            raise InputError(f"position {p.tolist()} is not finite")
+        p = check_position(p, "targetPosition")
         if self.map is None:
-            raise RuntimeError("the model has no map")
+            raise InternalError("the model has no map")
         return bool(self.map.is_allowed(p, self.settings.col_thresh))
 
     def movement_costs(self, source: RobotState, target: RobotState) -> MovementCosts:

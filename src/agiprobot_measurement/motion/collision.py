@@ -548,13 +548,6 @@ class CollisionChecker:
             return self.config.is_allowed(shape.link, other.link, shape.element, other.element)
         return self.config.is_allowed(shape.link, other.name, shape.element, 0)
 
-    def checked_pairs(self) -> list[tuple[str, str]]:
-        """Every (link, link) and (link, object) pair the checker tests."""
-        pairs = {(self.shapes[i].link, self.shapes[j].link) for i, j in self._self_pairs}
-        for s, o in zip(*np.nonzero(self._env_checked), strict=True):
-            pairs.add((self.shapes[s].link, self._object_list[o].name))
-        return sorted(pairs)
-
     # -------------------------------------------------------------------------------------- posing
     def shape_poses(self, q: np.ndarray) -> np.ndarray:
         """World poses (N, S, 4, 4) of the (padded) robot collision shapes for (N, dof) joint values."""

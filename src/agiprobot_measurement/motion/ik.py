@@ -216,15 +216,6 @@ class URAnalyticIK:
         except ConfigError:
             return _rigid_inverse(model.urdf.fixed_transform(model.tip_frame, robot.flange_frame))
 
-    @classmethod
-    def is_applicable(cls, kinematic_model: KinematicModel, robot: RobotConfig | None = None) -> bool:
-        """Whether the closed form can serve this chain (else use :class:`KDLIK`)."""
-        try:
-            cls(kinematic_model, robot)
-        except ConfigError:
-            return False
-        return True
-
     def _verify_against_urdf(self) -> None:
         states = np.random.default_rng(0).uniform(self.model.lower, self.model.upper, (16, 6))
         position, angle = pose_errors(self.fk(states), self.model.fk_batch(states))

@@ -24,6 +24,9 @@ from ompl import geometric as og
 from ompl import util as ou
 
 from agiprobot_measurement.motion.collision import CollisionChecker
+from agiprobot_measurement.motion.point_to_point import point_to_point
+from agiprobot_measurement.motion.time_parameterization import time_optimal_trajectory
+from agiprobot_measurement.motion.trajectory import JointTrajectory
 
 __all__ = [
     "DEFAULT_PLANNER",
@@ -373,10 +376,6 @@ def collision_free_trajectory(
     limits (scaled by ``velocity_scaling``) and the sampled trajectory is checked once more. ``planner``: a
     :class:`MotionPlanner`, or a function returning one (called only when the straight move is blocked).
     """
-    from agiprobot_measurement.motion.point_to_point import point_to_point
-    from agiprobot_measurement.motion.time_parameterization import time_optimal_trajectory
-    from agiprobot_measurement.motion.trajectory import JointTrajectory
-
     start = np.asarray(start, dtype=float)
     goal = np.asarray(goal, dtype=float)
     if np.abs(goal - start).max() < 1e-9:

@@ -28,7 +28,9 @@ __all__ = [
     "TrajectoryError",
     "check_continuity",
     "check_trajectory",
+    "duration_to_seconds",
     "motion_peaks",
+    "seconds_to_duration",
 ]
 
 
@@ -36,7 +38,8 @@ class TrajectoryError(InputError):
     """A trajectory is malformed (shapes, names, non-finite values)."""
 
 
-def _duration_to_seconds(value) -> float:
+def duration_to_seconds(value) -> float:
+    """Seconds of a duration: a ``{secs, nsecs}`` mapping (stored plans), a message duration or a number."""
     if isinstance(value, dict):
         return float(value.get("secs", 0)) + float(value.get("nsecs", 0)) * 1e-9
     if hasattr(value, "secs") and hasattr(value, "nsecs"):
@@ -47,7 +50,8 @@ def _duration_to_seconds(value) -> float:
     return float(value)
 
 
-def _seconds_to_duration(seconds: float) -> dict:
+def seconds_to_duration(seconds: float) -> dict:
+    """``{secs, nsecs}`` of a duration in seconds, rounded to the nanosecond (not truncated)."""
     secs = int(np.floor(seconds))
     nsecs = round((seconds - secs) * 1e9)
     if nsecs >= 1_000_000_000:
@@ -111,10 +115,10 @@ class JointTrajectory:
             None if self.velocities is None else self.velocities[:, order],
             None if self.accelerations is None else self.accelerations[:, order],
             self.frame_id,
-            [[row[i] for i in order] for row in self.effort] if self._has_effort() else [],
+            [[row[i] for i in order] for row in self.effort] if self.has_effort() else [],
         )
 
-    def _has_effort(self) -> bool:
+    def has_effort(self) -> bool:
         return len(self.effort) == len(self) > 0 and all(len(r) == len(self.joint_names) for r in self.effort)
 
     def copy(self) -> JointTrajectory:
@@ -180,7 +184,9 @@ class JointTrajectory:
     # -------------------------------------------------------------------------------- conversions
     @classmethod
     def from_msg(cls, msg) -> JointTrajectory:
-        """From a ``trajectory_msgs/JointTrajectory`` message."""
+        """From a ``trajectory_msgs/JointTrajectory`` message or anything shaped like one (``joint_names``,
+        ``points`` with positions / velocities / accelerations / time_from_start, ``header.frame_id``); imports
+        nothing from ROS. The other direction is ``agiprobot_measurement.ros.conversions.joint_trajectory_to_msg``."""
         points = msg.points
 
         def stacked(attr):
@@ -189,7 +195,7 @@ class JointTrajectory:
 
         return cls(
             joint_names=list(msg.joint_names),
-            time_from_start=np.array([_duration_to_seconds(p.time_from_start) for p in points]),
+            time_from_start=np.array([duration_to_seconds(p.time_from_start) for p in points]),
             positions=np.array([list(p.positions) for p in points], dtype=float).reshape(
                 len(points), len(msg.joint_names)
             )
@@ -199,30 +205,6 @@ class JointTrajectory:
             accelerations=stacked("accelerations"),
             frame_id=msg.header.frame_id,
         )
-
-    def to_msg(self):
-        """To a ``trajectory_msgs/JointTrajectory`` message."""
-        import rospy
-        from trajectory_msgs.msg import JointTrajectory as JointTrajectoryMsg
-        from trajectory_msgs.msg import JointTrajectoryPoint
-
-        msg = JointTrajectoryMsg()
-        msg.header.frame_id = self.frame_id
-        msg.joint_names = list(self.joint_names)
-        for i, t in enumerate(self.time_from_start):
-            point = JointTrajectoryPoint()
-            point.positions = self.positions[i].tolist()
-            if self.velocities is not None:
-                point.velocities = self.velocities[i].tolist()
-            if self.accelerations is not None:
-                point.accelerations = self.accelerations[i].tolist()
-            if self._has_effort():
-                point.effort = [float(e) for e in self.effort[i]]
-            # rounded, not truncated like Duration.from_sec, so stored {secs, nsecs} survive a round trip
-            stamp = _seconds_to_duration(float(t))
-            point.time_from_start = rospy.Duration(stamp["secs"], stamp["nsecs"])
-            msg.points.append(point)
-        return msg
 
     @classmethod
     def from_dict(cls, data: dict) -> JointTrajectory:
@@ -241,7 +223,7 @@ class JointTrajectory:
 
         try:
             positions = np.array([p["positions"] for p in points], dtype=float).reshape(len(points), len(names))
-            times = np.array([_duration_to_seconds(p["time_from_start"]) for p in points])
+            times = np.array([duration_to_seconds(p["time_from_start"]) for p in points])
         except (KeyError, TypeError, ValueError) as exc:
             raise TrajectoryError(f"malformed trajectory point: {exc}") from exc
         header = data.get("header") or {}
@@ -261,14 +243,14 @@ class JointTrajectory:
     def to_dict(self, seq: int = 0) -> dict:
         """To the expanded ``joint_trajectory`` dict (the form ``rospy_message_converter`` / genpy write)."""
         points = []
-        has_effort = self._has_effort()
+        has_effort = self.has_effort()
         for i, t in enumerate(self.time_from_start):
             points.append(
                 {
                     "accelerations": [] if self.accelerations is None else self.accelerations[i].tolist(),
                     "effort": list(self.effort[i]) if has_effort else [],
                     "positions": self.positions[i].tolist(),
-                    "time_from_start": _seconds_to_duration(float(t)),
+                    "time_from_start": seconds_to_duration(float(t)),
                     "velocities": [] if self.velocities is None else self.velocities[i].tolist(),
                 }
             )

@@ -48,10 +48,8 @@ __all__ = [
     "load_execution_plan",
     "message_to_dict",
     "plan_from_dicts",
-    "plan_from_joint_trajectory_msgs",
     "plan_path",
     "plan_to_dicts",
-    "plan_to_joint_trajectory_msgs",
     "segment_from_dict",
     "segment_from_message",
     "segment_to_dict",
@@ -292,22 +290,6 @@ def plan_from_dicts(document: object, source: str | Path | None = None) -> Execu
         except PlanError as exc:
             raise PlanError(f"{where}{exc}") from exc
     return ExecutionPlan(copy.deepcopy(metadata), segments, Path(source) if source is not None else None)
-
-
-def plan_to_joint_trajectory_msgs(plan: ExecutionPlan) -> list:
-    """The segments as ``trajectory_msgs/JointTrajectory`` messages (needs rospy)."""
-    return [s.trajectory.to_msg() for s in plan.segments]
-
-
-def plan_from_joint_trajectory_msgs(messages: Sequence, metadata: dict | None = None) -> ExecutionPlan:
-    """A plan from ``trajectory_msgs/JointTrajectory`` messages in C-M-C-M-... order."""
-    segments = []
-    for index, message in enumerate(messages):
-        try:
-            segments.append(PlanSegment(kind_at(index), JointTrajectory.from_msg(message)))
-        except (TrajectoryError, ValueError, AttributeError) as exc:
-            raise PlanError(f"segment {index}: {exc}") from exc
-    return ExecutionPlan(dict(metadata or {}), segments)
 
 
 def _plain(value: object, where: str) -> object:

@@ -20,31 +20,54 @@ Pipeline (``generate_samples_and_viewpoints`` -> ``solve_scp`` -> ``connect_view
 
 Units: the API takes and returns mm (positions, lengths) and rad; kinematics and collision work in metres; the
 conversion happens here, at the edge.
+
+This module is the facade; the work lives beside it: ``request`` (a planning request's defaults and validation,
+:meth:`TrajectoryManager.plan_request`), ``mechanics`` (reachability, chunked metrology, scan lines and their
+mechanical check), ``ordering`` (move times, view order, unwrapping), ``report`` (coverage report, per-sample
+uncertainties, the coverable mask), ``execution`` (the executor interface and the segment loop) and
+``progress`` (the stages).
 """
 
 from __future__ import annotations
 
-import itertools
 import logging
 import math
 import time
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import scipy.sparse
 
+import agiprobot_measurement
 from agiprobot_measurement.errors import InternalError
-from agiprobot_measurement.motion.cartesian import compute_cartesian_path
 from agiprobot_measurement.motion.collision import CollisionChecker
 from agiprobot_measurement.motion.ik import make_ik_solver
 from agiprobot_measurement.motion.kinematics import KinematicModel
-from agiprobot_measurement.motion.time_parameterization import constant_speed_scan_trajectory
 from agiprobot_measurement.motion.trajectory import JointTrajectory, check_trajectory
 from agiprobot_measurement.planning import plan_io
-from agiprobot_measurement.planning.part_loading import LoadedPart, SurfaceSamples, load_part
+from agiprobot_measurement.planning.execution import (
+    ExecutionCancelled,
+    ExecutionError,
+    ExecutionOutcome,
+    PlanPart,
+    SimulatedExecutor,
+    execute_segments,
+    segment_triples,
+)
+from agiprobot_measurement.planning.mechanics import (
+    estimate_scan_duration,
+    evaluate_in_chunks,
+    reachable_anchors,
+    scan_line_extents,
+    verify_scan_line,
+)
+from agiprobot_measurement.planning.ordering import order_views, p2p_durations, unwrapped_towards
+from agiprobot_measurement.planning.part_loading import LoadedPart, PartLoadError, SurfaceSamples, load_part
 from agiprobot_measurement.planning.plan_io import PlanSegment
+from agiprobot_measurement.planning.progress import STAGES
+from agiprobot_measurement.planning.report import CoverageReport, coverable_mask, point_uncertainties
+from agiprobot_measurement.planning.request import PlanRequest, check_choice, check_positive
 from agiprobot_measurement.planning.set_cover import SOLVER_TYPES, SetCoverResult, solve_set_cover
 from agiprobot_measurement.planning.viewpoint import (
     TILT_MODES,
@@ -62,6 +85,7 @@ __all__ = [
     "STAGES",
     "CoverageReport",
     "ExecutionError",
+    "PlanRequest",
     "PlanningCancelled",
     "PlanningError",
     "ProgressCallback",
@@ -75,115 +99,13 @@ LOG = logging.getLogger(__name__)
 #: progress callback: (stage, fraction done 0..1, message)
 ProgressCallback = Callable[[str, float, str], None]
 
-STAGES = ("sampling", "metrology", "mechanics", "set cover", "connection")
-
 
 class PlanningError(InternalError):
     """The planning pipeline cannot go on (nothing reachable, nothing measurable, no part loaded...)."""
 
 
-class ExecutionError(InternalError):
-    """Executing a trajectory failed; the robot has been stopped."""
-
-
 class PlanningCancelled(RuntimeError):
     """The caller cancelled planning (the progress callback raised it)."""
-
-
-@dataclass
-class CoverageReport:
-    """What a plan covers and what it costs (lengths mm, times s)."""
-
-    n_samples: int
-    n_coverable: int
-    n_covered: int
-    n_views: int
-    n_candidates: int
-    n_valid_candidates: int
-    estimated_execution_time_s: float
-    measurement_time_s: float
-    connection_time_s: float
-    mean_uncertainty_mm: float
-    max_uncertainty_mm: float
-    solver: str
-    solver_gap: float | None
-    timings_s: dict = field(default_factory=dict)
-    unconnected_views: int = 0
-
-    @property
-    def coverage_of_coverable(self) -> float:
-        return self.n_covered / self.n_coverable if self.n_coverable else 0.0
-
-    @property
-    def coverage_of_samples(self) -> float:
-        return self.n_covered / self.n_samples if self.n_samples else 0.0
-
-    def as_dict(self) -> dict:
-        out = {k: v for k, v in self.__dict__.items()}
-        out["coverage_of_coverable"] = self.coverage_of_coverable
-        out["coverage_of_samples"] = self.coverage_of_samples
-        return out
-
-
-class SimulatedExecutor:
-    """Executes trajectories instantly on a kinematic state (no ROS): the default executor.
-
-    An executor needs ``current_state() -> (6,) rad`` and ``execute_segment(trajectory, kind, viewpoint)``,
-    which raises :class:`ExecutionError` on failure. The ROS node plugs in one that drives the simulated
-    robot's action.
-    """
-
-    def __init__(self, start_state: np.ndarray, limits, on_measure: Callable | None = None):
-        self.state = np.asarray(start_state, dtype=float).copy()
-        self.limits = limits
-        self.on_measure = on_measure
-        self.log: list[tuple[str, float]] = []
-
-    def current_state(self) -> np.ndarray:
-        return self.state.copy()
-
-    def execute_segment(self, trajectory: JointTrajectory, kind: str, viewpoint=None) -> None:
-        verdict = check_trajectory(trajectory, self.limits, self.state)
-        if not verdict.ok:
-            raise ExecutionError(f"{kind} segment rejected: {verdict.reason}")
-        self.state = trajectory.end.copy()
-        self.log.append((kind, trajectory.duration))
-        if kind == "measure" and self.on_measure is not None and viewpoint is not None:
-            self.on_measure(viewpoint)
-
-
-def _tip_pose_m(pose_mm: np.ndarray) -> np.ndarray:
-    pose = np.array(pose_mm, dtype=float)
-    pose[..., :3, 3] *= 1e-3
-    return pose
-
-
-def p2p_durations(
-    starts: np.ndarray,
-    goals: np.ndarray,
-    max_velocity: np.ndarray,
-    max_acceleration: np.ndarray,
-    wraps: np.ndarray | None = None,
-):
-    """Durations (s) of synchronised point-to-point joint moves, all pairs: (A, n) x (B, n) -> (A, B).
-
-    The time of the straight joint-space move, a lower bound of any collision-free connection and the exact
-    time where the straight move is free. Joints flagged in ``wraps`` (a range of at least 2 pi) count their
-    shortest angular distance, since the goal can be reached at an angle shifted by 2 pi.
-    """
-    difference = starts[:, None, :] - goals[None, :, :]
-    if wraps is not None:
-        wrapped = np.abs((difference + np.pi) % (2 * np.pi) - np.pi)
-        distance = np.where(wraps, wrapped, np.abs(difference))
-    else:
-        distance = np.abs(difference)
-    triangular = distance < max_velocity**2 / max_acceleration
-    own = np.where(
-        triangular,
-        2.0 * np.sqrt(distance / max_acceleration),
-        distance / max_velocity + max_velocity / max_acceleration,
-    )
-    return own.max(axis=2)
 
 
 class TrajectoryManager:
@@ -236,6 +158,10 @@ class TrajectoryManager:
         self.unconnected_views: list[ViewPoint] = []
         self.timings_s: dict[str, float] = {}
         self.parameters: dict = {}
+        self.mechanics_checked = 0
+        self.measurability = None
+        self._generation_views: list[ViewPoint] | None = None
+        self._duration_bias = 1.0
         # mechanics settings used by the lazy verification (set by generate_samples_and_viewpoints)
         self._mechanics = {
             "minimum_required_overmeasure": 5.0,
@@ -290,8 +216,6 @@ class TrajectoryManager:
         """
         transform = np.asarray(transform, dtype=float)
         if transform.shape != (4, 4) or not np.all(np.isfinite(transform)):
-            from agiprobot_measurement.planning.part_loading import PartLoadError
-
             raise PartLoadError(f"transform must be a finite 4x4 matrix, got shape {transform.shape}")
         scene_part = self.station.scene.part
         placement_mm = np.eye(4)
@@ -353,23 +277,15 @@ class TrajectoryManager:
         picks them, or at once with :meth:`process_viewpoint`.
         """
         part = self._require_part()
-        density = float(sampling_density)
-        if not (math.isfinite(density) and density > 0):
-            raise ValueError(f"sampling_density must be a positive number of points/mm^2, got {sampling_density}")
-        threshold = float(uncertainty_threshold)
-        if not (math.isfinite(threshold) and threshold > 0):
-            raise ValueError(f"uncertainty_threshold must be a positive number of mm, got {uncertainty_threshold}")
-        if viewpoint_tilt_mode not in TILT_MODES:
-            raise ValueError(
-                f"unknown viewpoint_tilt_mode {viewpoint_tilt_mode!r}; valid modes: {', '.join(TILT_MODES)}"
-            )
+        density = check_positive(sampling_density, "sampling_density", "sampling_density (points/mm^2)")
+        threshold = check_positive(uncertainty_threshold, "uncertainty_threshold", "uncertainty_threshold (mm)")
+        check_choice(viewpoint_tilt_mode, TILT_MODES, "viewpoint_tilt_mode")
         for name, value in (
             ("minimum_trajectory_length", minimum_trajectory_length),
             ("trajectory_sample_step", trajectory_sample_step),
             ("joint_jump_threshold", joint_jump_threshold),
         ):
-            if not (math.isfinite(float(value)) and float(value) > 0):
-                raise ValueError(f"{name} must be a positive number, got {value}")
+            check_positive(value, name)
         self._mechanics = {
             "minimum_required_overmeasure": float(minimum_required_overmeasure),
             "trajectory_sample_step": float(trajectory_sample_step),
@@ -405,12 +321,14 @@ class TrajectoryManager:
 
         # anchors: reachability for all candidates at once (closed-form IK); metrology only where reachable
         t1 = time.perf_counter()
-        reachable = self._reachable(candidates.poses)
+        reachable = reachable_anchors(self.ik, candidates.poses)
         timings["anchor_reachability"] = time.perf_counter() - t1
         self._report("metrology", 0.0, f"{int(reachable.sum())} of {len(reachable)} anchors reachable")
         t2 = time.perf_counter()
         index = np.flatnonzero(reachable)
-        result = self._evaluate_in_chunks(candidates.poses[index], threshold, maximum_deflection)
+        result = evaluate_in_chunks(
+            self.sensor_model, candidates.poses[index], threshold, maximum_deflection, self._report
+        )
         counts = result.counts
         useful = counts > 0
         if viewpoint_tilt_mode == "limited":
@@ -454,8 +372,10 @@ class TrajectoryManager:
         )
         overmeasure = self._mechanics["minimum_required_overmeasure"]
         min_length = self._mechanics["minimum_trajectory_length"]
-        lo, hi = self._scan_lines(store.t0_min, store.t0_max, overmeasure, min_length)
-        self._durations = np.array([self._estimate_scan_duration((a, b)) for a, b in zip(lo, hi, strict=True)])
+        lo, hi = scan_line_extents(store.t0_min, store.t0_max, overmeasure, min_length)
+        self._durations = np.array(
+            [estimate_scan_duration((a, b), self.scan_speed_mm_s) for a, b in zip(lo, hi, strict=True)]
+        )
         self._durations_estimate = self._durations.copy()
         self._duration_verified = np.zeros(len(self._durations), dtype=bool)
         self._duration_bias = 1.0
@@ -478,63 +398,6 @@ class TrajectoryManager:
                 "threshold (is the part within reach of the robot and the threshold sensible?)"
             )
         return list(self.sampled_surface_points), views
-
-    def _reachable(self, anchor_poses_mm: np.ndarray, chunk: int = 20000) -> np.ndarray:
-        """Whether each anchor pose of the laser_emitter_frame has an IK solution within the joint limits."""
-        out = np.zeros(len(anchor_poses_mm), dtype=bool)
-        for start in range(0, len(anchor_poses_mm), chunk):
-            poses = _tip_pose_m(anchor_poses_mm[start : start + chunk])
-            _, valid = self.ik.solve_all(poses)
-            out[start : start + chunk] = valid.any(axis=1)
-        return out
-
-    def _evaluate_in_chunks(self, poses: np.ndarray, threshold: float, deflection: float) -> MeasurabilityResult:
-        """Batch metrology with progress: chunks of views, merged into one result."""
-        n = len(poses)
-        if n == 0:
-            return self.sensor_model.evaluate_viewpoints_batch(np.zeros((0, 4, 4)), threshold, deflection)
-        chunk = max(2000, n // 20)
-        parts = []
-        for start in range(0, n, chunk):
-            parts.append(
-                self.sensor_model.evaluate_viewpoints_batch(poses[start : start + chunk], threshold, deflection)
-            )
-            self._report("metrology", min(start + chunk, n) / n, f"{min(start + chunk, n)} of {n} viewpoints")
-        indptr = [np.zeros(1, dtype=np.int64)]
-        offset = 0
-        for part in parts:
-            indptr.append(part.indptr[1:] + offset)
-            offset += part.nnz
-        return MeasurabilityResult(
-            parts[0].n_points,
-            n,
-            np.concatenate(indptr),
-            np.concatenate([p.point_indices for p in parts]),
-            np.concatenate([p.uncertainties for p in parts]),
-            np.concatenate([p.trajectory_distances for p in parts]),
-        )
-
-    @staticmethod
-    def _scan_lines(t0_min, t0_max, overmeasure: float, min_length: float):
-        """Scan-line extents (mm from the anchor along x) for arrays of the measured points' t0 ranges: the
-        range plus the overmeasure at both ends, widened symmetrically to ``min_length``."""
-        lo = np.asarray(t0_min, dtype=float) - overmeasure
-        hi = np.asarray(t0_max, dtype=float) + overmeasure
-        short = hi - lo < min_length
-        middle = 0.5 * (lo + hi)
-        lo = np.where(short, middle - 0.5 * min_length, lo)
-        hi = np.where(short, middle + 0.5 * min_length, hi)
-        return lo, hi
-
-    def _scan_line(self, t0s: np.ndarray, overmeasure: float, min_length: float) -> tuple[float, float]:
-        lo, hi = self._scan_lines([np.min(t0s)], [np.max(t0s)], overmeasure, min_length)
-        return float(lo[0]), float(hi[0])
-
-    def _estimate_scan_duration(self, scan_line: tuple[float, float]) -> float:
-        # ramps at the joints' pace are short; a constant tip acceleration of 500 mm/s^2 is a fair estimate
-        length = abs(scan_line[1] - scan_line[0])
-        v, a = self.scan_speed_mm_s, 500.0
-        return length / v + v / a
 
     # ------------------------------------------------------------------------------------ mechanics
     def process_viewpoint(
@@ -560,15 +423,16 @@ class TrajectoryManager:
         if threshold is None:
             raise ValueError("uncertainty_threshold is required")
         anchor = viewpoint.get_anchor_pose()
-        if not self._reachable(anchor[None])[0]:
+        if not reachable_anchors(self.ik, anchor[None])[0]:
             return False
         points, uncertainties, t0s = self.sensor_model.process_viewpoint_metrologically(viewpoint, float(threshold))
         if points.size == 0:
             return False
         viewpoint.set_measurable_surface_point_indices_and_uncertainties(points, uncertainties, t0s)
-        viewpoint.scan_line = self._scan_line(
-            t0s, float(minimum_required_overmeasure), float(minimum_trajectory_length)
+        lo, hi = scan_line_extents(
+            [np.min(t0s)], [np.max(t0s)], float(minimum_required_overmeasure), float(minimum_trajectory_length)
         )
+        viewpoint.scan_line = (float(lo[0]), float(hi[0]))
         viewpoint.mechanics_verified = False
         viewpoint.mechanics_valid = True
         settings = dict(
@@ -582,8 +446,8 @@ class TrajectoryManager:
 
     def _column_range(self, view: ViewPoint):
         """The view's entry range in the generation's coverage store, or None for a foreign view."""
-        j = getattr(view, "coverage_column", None)
-        views = getattr(self, "_generation_views", None)
+        j = view.coverage_column
+        views = self._generation_views
         if j is None or views is None or j >= len(views) or views[j] is not view:
             return None
         return int(self.measurability.indptr[j]), int(self.measurability.indptr[j + 1])
@@ -592,10 +456,20 @@ class TrajectoryManager:
         """Compute the view's measurement trajectory; shorten the view to what is executable or reject it."""
         started = time.perf_counter()
         try:
-            valid = self._verify_mechanics_inner(view, settings or self._mechanics)
+            valid = verify_scan_line(
+                view,
+                settings or self._mechanics,
+                ik=self.ik,
+                collision=self.collision,
+                kinematics=self.kinematics,
+                limits=self.limits,
+                preferred_state=self.preferred_state,
+                scan_speed_mm_s=self.scan_speed_mm_s,
+                connect_from_current=lambda q: self.connect(self.current_state, q, planning_time_s=1.0),
+            )
         finally:
             self.timings_s["mechanics"] = self.timings_s.get("mechanics", 0.0) + time.perf_counter() - started
-            self.mechanics_checked = getattr(self, "mechanics_checked", 0) + 1
+            self.mechanics_checked += 1
         span = self._column_range(view)
         if span is not None:
             a, b = span
@@ -607,98 +481,10 @@ class TrajectoryManager:
                 j = view.coverage_column
                 # estimates must not be optimistic, or IP_time keeps preferring views not yet verified
                 ratio = view.estimated_duration_s / max(self._durations_estimate[j], 1e-9)
-                self._duration_bias = max(getattr(self, "_duration_bias", 1.0), ratio)
+                self._duration_bias = max(self._duration_bias, ratio)
                 self._durations[j] = view.estimated_duration_s
                 self._duration_verified[j] = True
         return valid
-
-    def _verify_mechanics_inner(self, view: ViewPoint, settings: dict) -> bool:
-        view.mechanics_verified = True
-        step = settings["trajectory_sample_step"]
-        overmeasure = settings["minimum_required_overmeasure"]
-        lo, hi = view.scan_line if not view.reversed else view.scan_line[::-1]
-        best = None
-        for direction in ((lo, hi), (hi, lo)):
-            attempt = self._scan_path(view, direction, step, settings["joint_jump_threshold"])
-            if attempt is not None and (best is None or attempt[0] > best[0]):
-                best = attempt
-            if best is not None and best[0] >= 1.0:
-                break
-        if best is None:
-            view.mechanics_valid = False
-            return False
-        fraction, path, line = best
-        start_t, end_t = line
-        achieved_end = start_t + fraction * (end_t - start_t)
-        achieved_lo, achieved_hi = sorted((start_t, achieved_end))
-        if achieved_hi - achieved_lo < settings["minimum_trajectory_length"] - 1e-6:
-            view.mechanics_valid = False
-            return False
-        if fraction < 1.0:
-            # partial acceptance: keep the points the laser line still sweeps, with the overmeasure margin
-            indices = np.asarray(view.get_measurable_surface_point_indices())
-            uncert = np.asarray(view.get_measurable_surface_point_uncertainties())
-            t0s = np.asarray(view.get_measurable_surface_point_trajectory_distances())
-            keep = (t0s >= achieved_lo + overmeasure - 1e-9) & (t0s <= achieved_hi - overmeasure + 1e-9)
-            if not keep.any():
-                view.mechanics_valid = False
-                return False
-            view.set_measurable_surface_point_indices_and_uncertainties(indices[keep], uncert[keep], t0s[keep])
-        if settings.get("plan_path_to_check_reachability"):
-            connection = self._connect(self.current_state, path[0], planning_time_s=1.0)
-            if connection is None:
-                view.mechanics_valid = False
-                return False
-        scan = constant_speed_scan_trajectory(
-            path, self.limits, self.scan_speed_mm_s, spacing_mm=None, tip_positions_m=self._path_positions(path)
-        )
-        view.set_trajectory_for_measurement(scan.trajectory)
-        view.scan_line = (start_t, achieved_end)
-        view.reversed = False
-        view.scan_speed_mm_s = scan.scan_speed_mm_s
-        view.estimated_duration_s = scan.trajectory.duration
-        view.mechanics_valid = True
-        return True
-
-    def _path_positions(self, path: np.ndarray) -> np.ndarray:
-        return self.kinematics.fk_batch(path)[:, :3, 3]
-
-    def _scan_path(self, view: ViewPoint, line: tuple[float, float], step_mm: float, jump_rad: float):
-        """Cartesian path along the view's line from ``line[0]`` to ``line[1]`` (mm from the anchor along x).
-
-        Tries every collision-free IK branch of the start pose, nearest the preferred state first, and returns
-        the best ``(fraction, joint path, line)`` or None.
-        """
-        anchor = view.get_anchor_pose()
-        x_axis = anchor[:3, 0]
-        start_pose = anchor.copy()
-        start_pose[:3, 3] += line[0] * x_axis
-        end_pose = anchor.copy()
-        end_pose[:3, 3] += line[1] * x_axis
-        start_m, end_m = _tip_pose_m(start_pose), _tip_pose_m(end_pose)
-        solutions, valid = self.ik.solve_all(start_m[None], seeds=self.preferred_state[None])
-        branches = solutions[0][valid[0]]
-        if len(branches) == 0:
-            return None
-        branches = branches[self.collision.check_states(branches)]
-        if len(branches) == 0:
-            return None
-        order = np.argsort(np.abs(branches - self.preferred_state).max(axis=1))
-        best = None
-        for q_start in branches[order]:
-            result = compute_cartesian_path(
-                self.ik,
-                q_start,
-                end_m,
-                step_mm=step_mm,
-                jump_threshold_rad=jump_rad,
-                validity_checker=self.collision.check_states,
-            )
-            if len(result.joint_path) >= 2 and (best is None or result.fraction > best[0]):
-                best = (result.fraction, result.joint_path, line)
-            if best is not None and best[0] >= 1.0:
-                break
-        return best
 
     # ------------------------------------------------------------------------------------ set cover
     def solve_scp(self, provided_viewpoints, solver_type="greedy", time_limit_s=60.0, max_rounds=30):
@@ -736,7 +522,7 @@ class TrajectoryManager:
             )
             set_cover_time += result.solve_time_s
             chosen = [views[j] for j in result.selected.tolist()]
-            pending = [v for v in chosen if not getattr(v, "mechanics_verified", True)]
+            pending = [v for v in chosen if v.mechanics_verified is False]
             if not pending:
                 break
             if solver_type != "greedy" and not only_verified:
@@ -744,9 +530,7 @@ class TrajectoryManager:
                 # want: verifying them now saves rounds of the (slower) integer programme
                 extra = solve_set_cover(matrix, "greedy", time_limit_s=time_limit_s)
                 set_cover_time += extra.solve_time_s
-                pending += [
-                    views[j] for j in extra.selected.tolist() if not getattr(views[j], "mechanics_verified", True)
-                ]
+                pending += [views[j] for j in extra.selected.tolist() if views[j].mechanics_verified is False]
                 pending = list(dict.fromkeys(pending))
             for view in pending:
                 self._verify_mechanics(view)
@@ -771,8 +555,8 @@ class TrajectoryManager:
     def _coverage_problem(self, views: list[ViewPoint], n_points: int, only_verified: bool = False):
         """(points x views CSC matrix of uncertainties, per-view durations) for the set cover. Rejected views
         have empty columns, shortened ones only their remaining points."""
-        store = getattr(self, "measurability", None)
-        columns = [getattr(v, "coverage_column", None) for v in views]
+        store = self.measurability
+        columns = [v.coverage_column for v in views]
         from_store = store is not None and all(
             c is not None and c < store.n_views and self._generation_views[c] is v
             for c, v in zip(columns, views, strict=True)
@@ -789,18 +573,16 @@ class TrajectoryManager:
                 columns
             ]
         else:
-            indices = [
-                v.measurable_indices if getattr(v, "mechanics_valid", True) else np.zeros(0, np.int64) for v in views
-            ]
-            values = [v.measurable_uncertainties if getattr(v, "mechanics_valid", True) else np.zeros(0) for v in views]
+            indices = [v.measurable_indices if v.mechanics_valid else np.zeros(0, np.int64) for v in views]
+            values = [v.measurable_uncertainties if v.mechanics_valid else np.zeros(0) for v in views]
             indptr = np.zeros(len(views) + 1, dtype=np.int64)
             np.cumsum([len(i) for i in indices], out=indptr[1:])
             rows = np.concatenate(indices) if indices else np.zeros(0, dtype=np.int64)
             data = np.maximum(np.concatenate(values), 1e-12) if values else np.zeros(0)
             matrix = scipy.sparse.csc_matrix((data, rows, indptr), shape=(n_points, len(views)))
-            durations = np.array([getattr(v, "estimated_duration_s", 1.0) for v in views])
+            durations = np.array([1.0 if v.estimated_duration_s is None else v.estimated_duration_s for v in views])
         if only_verified:
-            unverified = np.flatnonzero([not getattr(v, "mechanics_verified", True) for v in views])
+            unverified = np.flatnonzero([v.mechanics_verified is False for v in views])
             if unverified.size:
                 keep = np.ones(matrix.shape[1])
                 keep[unverified] = 0.0
@@ -809,7 +591,7 @@ class TrajectoryManager:
         return matrix, durations
 
     # ----------------------------------------------------------------------------------- connection
-    def _connect(self, start: np.ndarray, goal: np.ndarray, planning_time_s: float = 0.2, attempts: int = 3):
+    def connect(self, start: np.ndarray, goal: np.ndarray, planning_time_s: float = 0.2, attempts: int = 3):
         """Collision-free, time-parameterised joint trajectory from ``start`` to ``goal``, or None.
 
         The straight joint move when it is free (exactly time-optimal), else OMPL with a bounded number of
@@ -835,24 +617,26 @@ class TrajectoryManager:
         views = [v for v in unordered_viewpoints]
         t0 = time.perf_counter()
         for view in views:
-            if not getattr(view, "mechanics_verified", False) or view.get_trajectory_for_measurement() is None:
+            if not view.mechanics_verified or view.get_trajectory_for_measurement() is None:
                 if not self._verify_mechanics(view):
                     raise PlanningError(f"{view} has no executable measurement trajectory")
         if not views:
             return []
         starts = np.array([v.get_trajectory_for_measurement().start for v in views])
         ends = np.array([v.get_trajectory_for_measurement().end for v in views])
-        order, flips = self._order_views(self.current_state, starts, ends)
+        order, flips = order_views(self.current_state, starts, ends, self.limits)
         ordered, unconnected = [], []
         state = self.current_state.copy()
         for k, (i, flip) in enumerate(zip(order, flips, strict=True)):
             view = views[i]
             if flip != view.reversed:
                 view.reverse_trajectory_for_measurement()
-            view.set_trajectory_for_measurement(self._unwrapped_towards(view.get_trajectory_for_measurement(), state))
+            view.set_trajectory_for_measurement(
+                unwrapped_towards(view.get_trajectory_for_measurement(), state, self.limits)
+            )
             entry = view.get_trajectory_for_measurement().start
             self._report("connection", k / len(order), f"connecting view {k + 1} of {len(order)}")
-            connection = self._connect(state, entry, planning_time_s=min_planning_time)
+            connection = self.connect(state, entry, planning_time_s=min_planning_time)
             if connection is None:
                 LOG.warning("view %d cannot be connected from the previous state: left out", i)
                 unconnected.append(view)
@@ -865,71 +649,6 @@ class TrajectoryManager:
         self.timings_s["connection"] = time.perf_counter() - t0
         self._report("connection", 1.0, f"{len(ordered)} views connected, {len(unconnected)} left out")
         return ordered
-
-    def _wrapping_joints(self) -> np.ndarray:
-        return (self.limits.upper - self.limits.lower) >= 2 * np.pi - 1e-6
-
-    def _unwrapped_towards(self, trajectory: JointTrajectory, reference: np.ndarray) -> JointTrajectory:
-        """The same motion with its wide joints shifted by multiples of 2 pi so that it starts as near
-        ``reference`` as the joint limits allow (a revolute joint reaches the same pose at q and q + 2 pi)."""
-        wraps = self._wrapping_joints()
-        turns = np.where(wraps, np.round((reference - trajectory.start) / (2 * np.pi)), 0.0)
-        for _ in range(3):
-            shift = 2 * np.pi * turns
-            moved = trajectory.positions + shift
-            low = moved.min(axis=0) < self.limits.lower - 1e-9
-            high = moved.max(axis=0) > self.limits.upper + 1e-9
-            if not (low.any() or high.any()):
-                if not np.any(shift):
-                    return trajectory
-                shifted = trajectory.copy()
-                shifted.positions = moved
-                return shifted
-            turns = turns + low - high  # step back towards the limits
-        return trajectory
-
-    def _order_views(self, current: np.ndarray, starts: np.ndarray, ends: np.ndarray):
-        """Greedy order + 2-opt on estimated connection times; returns (order, flipped per position)."""
-        n = len(starts)
-        vmax, amax = self.limits.max_velocity, self.limits.max_acceleration
-        # entries[2i] = start of view i (forward), entries[2i+1] = end of view i (reversed scan)
-        entries = np.empty((2 * n, starts.shape[1]))
-        entries[0::2], entries[1::2] = starts, ends
-        exits = np.empty_like(entries)
-        exits[0::2], exits[1::2] = ends, starts
-        wraps = self._wrapping_joints()
-        from_current = p2p_durations(current[None], entries, vmax, amax, wraps)[0]
-        between = p2p_durations(exits, entries, vmax, amax, wraps)  # exit of (i, dir) -> entry of (j, dir')
-        remaining = set(range(n))
-        tour = []
-        cost = from_current.copy()
-        while remaining:
-            candidates = [(cost[2 * i + d], i, d) for i in remaining for d in (0, 1)]
-            _, i, d = min(candidates)
-            tour.append((i, d))
-            remaining.remove(i)
-            cost = between[2 * i + d]
-
-        def tour_cost(t):
-            total = from_current[2 * t[0][0] + t[0][1]]
-            for (a, da), (b, db) in itertools.pairwise(t):
-                total += between[2 * a + da, 2 * b + db]
-            return total
-
-        best = tour_cost(tour)
-        improved = True
-        passes = 0
-        while improved and passes < 50:
-            improved = False
-            passes += 1
-            for i in range(n):
-                for j in range(i, n):
-                    # reverse the block i..j: order flips and so does each view's scan direction
-                    candidate = tour[:i] + [(v, 1 - d) for v, d in reversed(tour[i : j + 1])] + tour[j + 1 :]
-                    value = tour_cost(candidate)
-                    if value < best - 1e-9:
-                        tour, best, improved = candidate, value, True
-        return [v for v, _ in tour], [bool(d) for _, d in tour]
 
     # ----------------------------------------------------------------------------------- plans
     def convert_viewpointlist_to_execution_plan(self, viewpointlist) -> list[PlanSegment]:
@@ -960,8 +679,6 @@ class TrajectoryManager:
 
     def plan_metadata(self) -> dict:
         """Parameters, coverage and timings of the last planning run (for the plan file)."""
-        import agiprobot_measurement
-
         meta = {"parameters": {k: v for k, v in self.parameters.items()}, "version": agiprobot_measurement.__version__}
         if self.last_set_cover is not None and self.samples is not None:
             report = self.coverage_report()
@@ -987,16 +704,27 @@ class TrajectoryManager:
         if not verdict.ok:
             raise PlanningError(f"{file_path}: {verdict.reason}")
         if adapt_to_current_start_pose:
-
-            def planner_fn(start, goal):
-                trajectory = self._connect(np.asarray(start), np.asarray(goal), planning_time_s=1.0)
-                if trajectory is None:
-                    raise PlanningError("no collision-free motion from the current state to the plan's start")
-                return trajectory
-
-            plan = plan_io.adapt_to_current_start_pose(plan, self.current_state, planner_fn)
+            plan = self.adapt_start(plan, self.current_state)
         self.loaded_plan = plan
         return list(plan.segments)
+
+    def adapt_start(self, plan: plan_io.ExecutionPlan, state: np.ndarray) -> plan_io.ExecutionPlan:
+        """``plan`` starting at ``state`` (rad): a collision-free motion to its first point is merged into the
+        first connection when it starts elsewhere. Raises PlanningError when there is no such motion."""
+
+        def planner_fn(start, goal):
+            trajectory = self.connect(np.asarray(start), np.asarray(goal), planning_time_s=1.0)
+            if trajectory is None:
+                raise PlanningError("no collision-free motion from the current state to the plan's start")
+            return trajectory
+
+        return plan_io.adapt_to_current_start_pose(plan, state, planner_fn)
+
+    def set_collision_part(self, part: PlanPart) -> None:
+        """Put a stored plan's part into the collision world (as placed in the plan; downward faces kept), so
+        that motions planned to the plan's start avoid it."""
+        loaded = load_part(part.mesh_file, units=part.units, transform=part.file_units_placement, remove_downside=False)
+        self.collision.set_part(loaded.mesh, name="part", scale_to_m=1e-3)
 
     def postprocess_trajectory(self, trajectory) -> bool:
         """Whether a trajectory meets the joint limits (positions, velocities, accelerations) and its time is
@@ -1015,48 +743,44 @@ class TrajectoryManager:
         return verdict.ok
 
     # ------------------------------------------------------------------------------------ execution
-    def execute(self, execution_list, surface_points=None, executor=None):
+    def execute(self, execution_list, surface_points=None, executor=None, on_segment=None):
         """Execute segments (or ViewPoints) one after the other through ``executor`` (default: an instant
-        simulated robot). A failing segment stops execution and raises :class:`ExecutionError`."""
-        executor = executor or SimulatedExecutor(self.current_state, self.limits)
-        items = list(execution_list)
-        if items and isinstance(items[0], ViewPoint):
-            segments = []
-            for view in items:
-                segments.append(("connect", view.get_trajectory_to_view(), view))
-                segments.append(("measure", view.get_trajectory_for_measurement(), view))
-        else:
-            segments = []
-            for index, item in enumerate(items):
-                if isinstance(item, PlanSegment):
-                    segments.append((item.kind, item.trajectory, None))
-                elif isinstance(item, JointTrajectory):
-                    segments.append(("connect" if index % 2 == 0 else "measure", item, None))
-                else:
-                    raise TypeError(f"cannot execute a {type(item).__name__}")
-        for kind, trajectory, view in segments:
-            if trajectory is None:
-                raise ExecutionError(f"a {kind} segment has no trajectory")
-            executor.execute_segment(trajectory, kind, view)
-        self.current_state = executor.current_state()
+        simulated robot; see :class:`~agiprobot_measurement.planning.execution.SegmentExecutor`). A failing
+        segment stops execution and raises :class:`ExecutionError`; a cancel raises
+        :class:`~agiprobot_measurement.planning.execution.ExecutionCancelled`. ``on_segment(feedback)`` hears of
+        each segment before it starts."""
+        outcome = self.execute_with_outcome(execution_list, executor, on_segment)
+        if outcome.status == "cancelled":
+            raise ExecutionCancelled(outcome.describe())
+        if not outcome.ok:
+            raise ExecutionError(outcome.error)
         return True
 
+    def execute_with_outcome(self, execution_list, executor=None, on_segment=None) -> ExecutionOutcome:
+        """Like :meth:`execute`, but a failure or cancel is returned as the :class:`ExecutionOutcome` (how many
+        segments ran, why it stopped) instead of raised."""
+        executor = executor or SimulatedExecutor(self.current_state, self.limits)
+        outcome = execute_segments(segment_triples(execution_list), executor, on_segment)
+        self.current_state = executor.current_state()
+        return outcome
+
     # ------------------------------------------------------------------------------------ reports
+    def coverable_mask(self) -> np.ndarray:
+        """(n_samples,) bool: the samples some mechanically valid view measures, or the plan covers."""
+        if self.samples is None:
+            raise PlanningError("nothing planned yet")
+        covered = np.isfinite(self.point_uncertainties())
+        return coverable_mask(self.last_viewpoints, len(self.samples), covered)
+
     def coverage_report(self, views: Iterable[ViewPoint] | None = None) -> CoverageReport:
         """Coverage, view count, execution time and uncertainties of the chosen (or given) views."""
         if self.samples is None:
             raise PlanningError("nothing planned yet")
         chosen = list(views) if views is not None else (self.last_ordered or [])
         n = len(self.samples)
-        coverable = np.zeros(n, dtype=bool)
-        for view in self.last_viewpoints:
-            if getattr(view, "mechanics_valid", True):
-                coverable[view.measurable_indices] = True
-        best_u = np.full(n, np.inf)
-        for view in chosen:
-            np.minimum.at(best_u, view.measurable_indices, view.measurable_uncertainties)
+        best_u = point_uncertainties(chosen, n)
         covered = np.isfinite(best_u)
-        coverable |= covered
+        coverable = coverable_mask(self.last_viewpoints, n, covered)
         measure = sum(v.get_trajectory_for_measurement().duration for v in chosen if v.get_trajectory_for_measurement())
         connect = sum(v.get_trajectory_to_view().duration for v in chosen if v.get_trajectory_to_view())
         result = self.last_set_cover
@@ -1081,10 +805,7 @@ class TrajectoryManager:
     def point_uncertainties(self, views: Iterable[ViewPoint] | None = None) -> np.ndarray:
         """Best predicted uncertainty (mm) per sample over the given views (default: the plan); inf = unmeasured."""
         chosen = list(views) if views is not None else (self.last_ordered or [])
-        best_u = np.full(len(self.samples), np.inf)
-        for view in chosen:
-            np.minimum.at(best_u, view.measurable_indices, view.measurable_uncertainties)
-        return best_u
+        return point_uncertainties(chosen, len(self.samples))
 
     def scan_lines_mm(self, views: Iterable[ViewPoint] | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
         """(start, end) positions (mm) of the laser_emitter_frame's scan lines of the given views (default: plan)."""
@@ -1098,6 +819,47 @@ class TrajectoryManager:
         return lines
 
     # ------------------------------------------------------------------------------------ everything
+    @classmethod
+    def for_request(
+        cls,
+        request: PlanRequest,
+        station: Station | None = None,
+        progress: ProgressCallback | None = None,
+        start_state: np.ndarray | str = "home",
+    ) -> TrajectoryManager:
+        """A manager with the request's scan speed and seed (``request`` validated already)."""
+        return cls(
+            station,
+            scan_speed_mm_s=request.scan_speed_mm_s,
+            progress=progress,
+            seed=request.seed,
+            start_state=start_state,
+        )
+
+    def plan_request(self, request: PlanRequest) -> list[ViewPoint]:
+        """Load the request's part and run the whole pipeline with its settings (``request`` validated with
+        :meth:`PlanRequest.validate`; the manager made by :meth:`for_request`). Returns the ordered views."""
+        self._report("sampling", 0.0, f"loading {request.part_file}")
+        self.load_target_mesh(
+            request.part_file,
+            transform=request.part_transform_mm,
+            add_wbk_mirrors=request.add_wbk_mirrors,
+            units=request.units,
+        )
+        return self.plan(
+            request.sampling_density,
+            request.uncertainty_threshold_mm,
+            request.orientations_around_boresight,
+            request.viewpoint_tilt_mode,
+            request.solver_type,
+            set_cover_time_limit_s=request.set_cover_time_limit_s,
+            min_planning_time=request.min_planning_time_s,
+            minimum_trajectory_length=request.minimum_trajectory_length_mm,
+            trajectory_sample_step=request.trajectory_sample_step_mm,
+            minimum_required_overmeasure=request.minimum_required_overmeasure_mm,
+            joint_jump_threshold=request.joint_jump_threshold_rad,
+        )
+
     def plan(
         self,
         sampling_density=0.03,
@@ -1110,7 +872,8 @@ class TrajectoryManager:
         **generation,
     ) -> list[ViewPoint]:
         """The whole pipeline on the loaded part: generate, solve the set cover, connect. Returns the ordered
-        views (also in ``last_ordered``)."""
+        views (also in ``last_ordered``). The defaults are :class:`PlanRequest`'s."""
+        check_choice(solver_type, SOLVER_TYPES, "solver_type")
         t0 = time.perf_counter()
         _, views = self.generate_samples_and_viewpoints(
             sampling_density, uncertainty_threshold, orientations_around_boresight, viewpoint_tilt_mode, **generation

@@ -25,6 +25,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from agiprobot_measurement.motion.trajectory import JointTrajectory
+
 __all__ = [
     "TILT_MODES",
     "TILT_STEPS",
@@ -182,8 +184,6 @@ def reverse_trajectory(trajectory):
     """
     if trajectory is None:
         return None
-    from agiprobot_measurement.motion.trajectory import JointTrajectory
-
     if isinstance(trajectory, JointTrajectory):
         times = trajectory.time_from_start
         return JointTrajectory(
@@ -217,6 +217,19 @@ class ViewPoint:
     ``angle_around_boresight`` rad; ``standoff_distance`` mm from the surface point to the anchor along the
     boresight; ``tilt_theta`` and ``tilt_psi`` rad (see the module docstring).
     """
+
+    # Planning state the TrajectoryManager keeps per view. Class-level defaults: the batch path builds
+    # hundreds of thousands of views and sets these only for the few it verifies.
+    #: column of the view in its generation's coverage store, None for a view built elsewhere
+    coverage_column: int | None = None
+    #: True once the scan line was checked mechanically, False while pending, None for a view built elsewhere
+    mechanics_verified: bool | None = None
+    #: False when the mechanical check rejected the view
+    mechanics_valid: bool = True
+    #: estimated (before verification) or exact duration of the measurement trajectory, s
+    estimated_duration_s: float | None = None
+    #: the tip speed of the measurement trajectory, mm/s (set by the mechanical check)
+    scan_speed_mm_s: float | None = None
 
     def __init__(
         self,
@@ -316,6 +329,7 @@ class ViewPoint:
         return self._position(self._surface_point, as_matrix)
 
     def get_surface_normal(self) -> np.ndarray:
+        """The unit surface normal (3,) at the view's surface point (a copy)."""
         return self._surface_normal.copy()
 
     def get_orientation_matrix(self) -> np.ndarray:

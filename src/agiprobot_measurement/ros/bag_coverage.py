@@ -12,7 +12,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import rosbag
 
+from agiprobot_measurement.planning.coverage import is_uncoverable_color
+from agiprobot_measurement.ros.conversions import cloud_xyz
 from agiprobot_measurement.sensors.laser_line.simulator import measured_samples
 
 __all__ = [
@@ -62,10 +65,6 @@ def coverage_from_bag(bag_path: str | Path, radius_mm: float = 1.0, execution_in
     The execution's window runs from its first ExecutePlan feedback to its result; its samples are the last
     sample set published before the window; its measurement is every scanner profile inside the window.
     Bags without the action topics count all profiles after the last sample set."""
-    import rosbag
-
-    from agiprobot_measurement.ros.conversions import cloud_xyz
-
     with rosbag.Bag(str(bag_path)) as bag:
         windows: dict[str, list[float]] = {}
         order: list[str] = []
@@ -106,8 +105,8 @@ def coverage_from_bag(bag_path: str | Path, radius_mm: float = 1.0, execution_in
         raise ValueError(f"{bag_path}: no sample points ({SAMPLES_TOPIC}) before the execution")
     samples = cloud_xyz(samples_msg) * 1000.0
     colors = _rgb(samples_msg)
-    # red samples are not coverable: no viewpoint measures them (the node colours them (230, 25, 25))
-    coverable = np.ones(len(samples), dtype=bool) if colors is None else ~((colors[:, 0] > 200) & (colors[:, 1] < 60))
+    # red samples are not coverable: no viewpoint measures them (the node colours them UNCOVERABLE_RGB)
+    coverable = np.ones(len(samples), dtype=bool) if colors is None else ~is_uncoverable_color(colors)
     measured_points = np.vstack(chunks) if chunks else np.zeros((0, 3))
     measured = measured_samples(samples, measured_points, radius_mm)
     return BagCoverage(

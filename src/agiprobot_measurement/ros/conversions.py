@@ -1,17 +1,38 @@
-"""numpy <-> ROS message conversions used by the nodes (needs the ROS message packages, not a master)."""
+"""numpy <-> ROS message conversions used by the nodes (needs the ROS message packages, not a master).
+
+Poses and transforms: 4x4 matrices in metres <-> geometry_msgs Pose, Transform, TransformStamped, built on
+:mod:`agiprobot_measurement.common.geometry` (quaternions in geometry_msgs' order x, y, z, w). Clouds: (N, 3) points
+in metres <-> sensor_msgs/PointCloud2."""
 
 from __future__ import annotations
 
 import numpy as np
-from geometry_msgs.msg import Pose, TransformStamped
+import rospy
+from geometry_msgs.msg import Point, Pose, Quaternion, Transform, TransformStamped, Vector3
 from sensor_msgs.msg import PointCloud2, PointField
 from std_msgs.msg import Header
+from trajectory_msgs.msg import JointTrajectory as JointTrajectoryMsg
+from trajectory_msgs.msg import JointTrajectoryPoint
+
+from agiprobot_measurement.common.geometry import pose_from_quaternion, pose_to_quaternion
+from agiprobot_measurement.errors import InputError
+from agiprobot_measurement.motion.trajectory import JointTrajectory, TrajectoryError, seconds_to_duration
+from agiprobot_measurement.planning.plan_io import ExecutionPlan, PlanError, PlanSegment, kind_at
 
 __all__ = [
     "cloud_xyz",
+    "joint_trajectory_from_msg",
+    "joint_trajectory_to_msg",
+    "matrix_to_pose",
+    "matrix_to_transform",
+    "plan_from_joint_trajectory_msgs",
+    "plan_to_joint_trajectory_msgs",
     "pose_to_matrix",
+    "transform_stamped",
     "transform_to_matrix",
+    "xyz_array",
     "xyz_cloud",
+    "xyzw_array",
 ]
 
 _XYZ = [
@@ -67,28 +88,103 @@ def cloud_xyz(msg: PointCloud2) -> np.ndarray:
     return out[np.all(np.isfinite(out), axis=1)]
 
 
-def transform_to_matrix(transform: TransformStamped) -> np.ndarray:
-    """4x4 matrix (metres) of a geometry_msgs/TransformStamped."""
-    from scipy.spatial.transform import Rotation
+def transform_to_matrix(transform) -> np.ndarray:
+    """4x4 matrix (metres) of a geometry_msgs/TransformStamped or Transform; the quaternion is normalised.
 
-    t, r = transform.transform.translation, transform.transform.rotation
-    matrix = np.eye(4)
-    matrix[:3, :3] = Rotation.from_quat([r.x, r.y, r.z, r.w]).as_matrix()
-    matrix[:3, 3] = [t.x, t.y, t.z]
-    return matrix
+    Raises :class:`~agiprobot_measurement.errors.InputError` for NaN or infinite values or a zero quaternion."""
+    transform = getattr(transform, "transform", transform)
+    t, r = transform.translation, transform.rotation
+    return _pose_matrix((t.x, t.y, t.z), (r.x, r.y, r.z, r.w), "transform")
 
 
 def pose_to_matrix(pose: Pose) -> np.ndarray:
-    """4x4 matrix of a geometry_msgs/Pose; raises ValueError for NaN or a zero quaternion."""
-    from scipy.spatial.transform import Rotation
+    """4x4 matrix of a geometry_msgs/Pose; the quaternion is normalised.
 
-    q = np.array([pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w])
-    p = np.array([pose.position.x, pose.position.y, pose.position.z])
-    if not (np.all(np.isfinite(q)) and np.all(np.isfinite(p))):
-        raise ValueError("pose contains NaN or infinite values")
-    if np.linalg.norm(q) < 1e-9:
-        raise ValueError("pose has a zero quaternion")
-    matrix = np.eye(4)
-    matrix[:3, :3] = Rotation.from_quat(q / np.linalg.norm(q)).as_matrix()
-    matrix[:3, 3] = p
-    return matrix
+    Raises :class:`~agiprobot_measurement.errors.InputError` for NaN or infinite values or a zero quaternion."""
+    p, q = pose.position, pose.orientation
+    return _pose_matrix((p.x, p.y, p.z), (q.x, q.y, q.z, q.w), "pose")
+
+
+def _pose_matrix(translation, quaternion_xyzw, what: str) -> np.ndarray:
+    # the messages the nodes' clients have always seen for a bad pose
+    if not (np.all(np.isfinite(translation)) and np.all(np.isfinite(quaternion_xyzw))):
+        raise InputError(f"{what} contains NaN or infinite values")
+    try:
+        return pose_from_quaternion(translation, quaternion_xyzw)
+    except ValueError as exc:
+        raise InputError(f"{what} has a zero quaternion") from exc
+
+
+def matrix_to_pose(matrix: np.ndarray) -> Pose:
+    """geometry_msgs/Pose of a 4x4 matrix (metres)."""
+    translation, q = pose_to_quaternion(matrix)
+    return Pose(Point(*translation), Quaternion(*q))
+
+
+def matrix_to_transform(matrix: np.ndarray) -> Transform:
+    """geometry_msgs/Transform of a 4x4 matrix (metres)."""
+    translation, q = pose_to_quaternion(matrix)
+    return Transform(Vector3(*translation), Quaternion(*q))
+
+
+def xyz_array(msg) -> np.ndarray:
+    """(3,) float array of a geometry_msgs Point or Vector3."""
+    return np.array([msg.x, msg.y, msg.z], dtype=float)
+
+
+def xyzw_array(msg) -> np.ndarray:
+    """(4,) float array (x, y, z, w) of a geometry_msgs/Quaternion, as it is (not normalised)."""
+    return np.array([msg.x, msg.y, msg.z, msg.w], dtype=float)
+
+
+def transform_stamped(matrix: np.ndarray, parent_frame: str, child_frame: str, stamp) -> TransformStamped:
+    """geometry_msgs/TransformStamped parent_frame <- child_frame of a 4x4 matrix (metres), for tf."""
+    msg = TransformStamped()
+    msg.header.stamp = stamp
+    msg.header.frame_id = parent_frame
+    msg.child_frame_id = child_frame
+    msg.transform = matrix_to_transform(matrix)
+    return msg
+
+
+def joint_trajectory_to_msg(trajectory: JointTrajectory):
+    """A ``trajectory_msgs/JointTrajectory`` of a :class:`JointTrajectory` (times rounded to the nanosecond, so
+    stored {secs, nsecs} survive a round trip)."""
+    msg = JointTrajectoryMsg()
+    msg.header.frame_id = trajectory.frame_id
+    msg.joint_names = list(trajectory.joint_names)
+    effort = trajectory.effort if trajectory.has_effort() else None
+    for i, t in enumerate(trajectory.time_from_start):
+        point = JointTrajectoryPoint()
+        point.positions = trajectory.positions[i].tolist()
+        if trajectory.velocities is not None:
+            point.velocities = trajectory.velocities[i].tolist()
+        if trajectory.accelerations is not None:
+            point.accelerations = trajectory.accelerations[i].tolist()
+        if effort is not None:
+            point.effort = [float(e) for e in effort[i]]
+        stamp = seconds_to_duration(float(t))
+        point.time_from_start = rospy.Duration(stamp["secs"], stamp["nsecs"])
+        msg.points.append(point)
+    return msg
+
+
+def joint_trajectory_from_msg(msg) -> JointTrajectory:
+    """A :class:`JointTrajectory` of a ``trajectory_msgs/JointTrajectory`` message."""
+    return JointTrajectory.from_msg(msg)
+
+
+def plan_to_joint_trajectory_msgs(plan: ExecutionPlan) -> list:
+    """The plan's segments as ``trajectory_msgs/JointTrajectory`` messages."""
+    return [joint_trajectory_to_msg(s.trajectory) for s in plan.segments]
+
+
+def plan_from_joint_trajectory_msgs(messages, metadata: dict | None = None) -> ExecutionPlan:
+    """A plan from ``trajectory_msgs/JointTrajectory`` messages in C-M-C-M-... order."""
+    segments = []
+    for index, message in enumerate(messages):
+        try:
+            segments.append(PlanSegment(kind_at(index), joint_trajectory_from_msg(message)))
+        except (TrajectoryError, ValueError, AttributeError) as exc:
+            raise PlanError(f"segment {index}: {exc}") from exc
+    return ExecutionPlan(dict(metadata or {}), segments)

@@ -2,41 +2,26 @@
 
 from __future__ import annotations
 
-import numpy as np
-from geometry_msgs.msg import Pose
+from geometry_msgs.msg import Point
 from visualization_msgs.msg import Marker, MarkerArray
 
-from agiprobot_measurement.station import Scene
+from agiprobot_measurement.ros.conversions import matrix_to_pose
+from agiprobot_measurement.station import Scene, chessboard_dark_squares
 
 __all__ = [
-    "pose_msg",
     "scene_marker_array",
 ]
 
 
-def pose_msg(matrix: np.ndarray) -> Pose:
-    from scipy.spatial.transform import Rotation
-
-    pose = Pose()
-    pose.position.x, pose.position.y, pose.position.z = (float(v) for v in matrix[:3, 3])
-    qx, qy, qz, qw = Rotation.from_matrix(matrix[:3, :3]).as_quat()
-    pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = qx, qy, qz, qw
-    return pose
-
-
 def _chessboard_squares(board, frame_id: str, namespace: str, marker_id: int) -> Marker:
     """The dark squares of a chessboard object as one CUBE_LIST in the board frame (printed on its face)."""
-    from geometry_msgs.msg import Point
-
-    from agiprobot_measurement.station import chessboard_dark_squares
-
     marker = Marker()
     marker.header.frame_id = frame_id
     marker.ns = namespace
     marker.id = marker_id
     marker.action = Marker.ADD
     marker.type = Marker.CUBE_LIST
-    marker.pose = pose_msg(board.pose)
+    marker.pose = matrix_to_pose(board.pose)
     marker.scale.x = marker.scale.y = board.square_m
     marker.scale.z = 0.0004
     marker.color.r = marker.color.g = marker.color.b = 0.05
@@ -55,12 +40,12 @@ def scene_marker_array(scene: Scene, namespace: str = "scene") -> MarkerArray:
         marker.ns = namespace
         marker.id = i
         marker.action = Marker.ADD
-        marker.pose = pose_msg(obj.pose)
+        marker.pose = matrix_to_pose(obj.pose)
         marker.color.r, marker.color.g, marker.color.b, marker.color.a = obj.color_rgba
         if obj.type in ("box", "chessboard"):
             size, centre = obj.solid_box()
             marker.type = Marker.CUBE
-            marker.pose = pose_msg(centre)
+            marker.pose = matrix_to_pose(centre)
             marker.scale.x, marker.scale.y, marker.scale.z = (float(v) for v in size)
             if obj.type == "chessboard":
                 markers.markers.append(_chessboard_squares(obj, scene.frame_id, f"{namespace}_chessboard", i))
@@ -83,7 +68,7 @@ def scene_marker_array(scene: Scene, namespace: str = "scene") -> MarkerArray:
         marker.id = 0
         marker.type = Marker.MESH_RESOURCE
         marker.mesh_resource = f"file://{scene.part.mesh}"
-        marker.pose = pose_msg(scene.part.pose)
+        marker.pose = matrix_to_pose(scene.part.pose)
         marker.scale.x = marker.scale.y = marker.scale.z = scene.part.scale_to_m
         marker.color.r, marker.color.g, marker.color.b, marker.color.a = scene.part.color_rgba
         markers.markers.append(marker)

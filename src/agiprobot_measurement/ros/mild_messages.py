@@ -1,4 +1,5 @@
-"""ROS messages of the MILD nodes: pose and state conversions, the map as OccupancyGrid, frustum and IK markers.
+"""ROS messages of the MILD nodes: state conversions, the map as OccupancyGrid, frustum and IK markers (pose and
+transform conversions: :mod:`agiprobot_measurement.ros.conversions`).
 
 Needs the message packages (geometry_msgs, nav_msgs, visualization_msgs and this package's), not a master. Metres
 and radians throughout.
@@ -7,14 +8,14 @@ and radians throughout.
 from __future__ import annotations
 
 import numpy as np
-from geometry_msgs.msg import Point, Pose, Quaternion, TransformStamped
+from geometry_msgs.msg import Point, Quaternion
 from nav_msgs.msg import OccupancyGrid
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
-from agiprobot_measurement.common.geometry import matrix_to_quaternion, quaternion_to_matrix, yaw_quaternion
+from agiprobot_measurement.common.geometry import yaw_quaternion
 from agiprobot_measurement.mild.occupancy_map import OccupancyMap
-from agiprobot_measurement.mild.robot_model import RobotState
+from agiprobot_measurement.mild.state import RobotState
 from agiprobot_measurement.msg import RobotStateMessage
 
 __all__ = [
@@ -27,13 +28,10 @@ __all__ = [
     "delete_all",
     "frustum_marker_array",
     "ik_markers",
-    "matrix_to_pose",
     "occupancy_grid_msg",
-    "pose_to_matrix",
     "sphere",
     "state_from_msg",
     "state_to_msg",
-    "transform_to_matrix",
     "yaw_of",
 ]
 
@@ -49,27 +47,6 @@ def state_from_msg(msg: RobotStateMessage) -> RobotState:
 
 def state_to_msg(state: RobotState) -> RobotStateMessage:
     return RobotStateMessage(pan=state.pan, tilt=state.tilt, rotation=state.rotation, x=state.x, y=state.y)
-
-
-def matrix_to_pose(matrix: np.ndarray) -> Pose:
-    q = matrix_to_quaternion(matrix[:3, :3])
-    return Pose(Point(*matrix[:3, 3]), Quaternion(*q))
-
-
-def _matrix(translation, rotation) -> np.ndarray:
-    q = np.array([rotation.x, rotation.y, rotation.z, rotation.w])
-    matrix = np.eye(4)
-    matrix[:3, :3] = quaternion_to_matrix(q / np.linalg.norm(q))
-    matrix[:3, 3] = [translation.x, translation.y, translation.z]
-    return matrix
-
-
-def pose_to_matrix(pose: Pose) -> np.ndarray:
-    return _matrix(pose.position, pose.orientation)
-
-
-def transform_to_matrix(transform: TransformStamped) -> np.ndarray:
-    return _matrix(transform.transform.translation, transform.transform.rotation)
 
 
 def yaw_of(q: Quaternion) -> float:

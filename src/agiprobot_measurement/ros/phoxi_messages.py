@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from agiprobot_measurement.sensors.phoxi.renderer import CameraIntrinsics
+from agiprobot_measurement.sensors.phoxi.models import CameraIntrinsics
 
 __all__ = [
     "IMAGE_ENCODINGS",

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -106,9 +106,11 @@ class Scene:
 
     def without_group(self, group: str) -> Scene:
         """The same scene without the objects of ``group``."""
-        from dataclasses import replace
-
         return replace(self, objects=tuple(o for o in self.objects if o.group != group))
+
+    def without_part(self) -> Scene:
+        """The same scene without its part (the obstacles only)."""
+        return replace(self, part=None)
 
 
 def _resolve_path(value: object, where: str, relative_to: Path) -> Path:

@@ -38,3 +38,13 @@ def test_cli_bad_input(tmp_path):
     bad.write_text("p_robot 3-DoF index:1_2\n[0.1]\n")
     out = _run(bad)
     assert out.returncode == 2 and "error:" in out.stderr
+
+
+def test_cli_unwritable_output_is_a_clear_error(tmp_path):
+    pc = np.random.default_rng(1).uniform([-0.3, -0.3, 1.0], [0.3, 0.3, 1.6], (6, 3))
+    samples = [Sample(f"{i}_0", pc[i] + [0.5, -0.2, 1.1], pc[i], i < 4) for i in range(6)]
+    path = write_data_file(tmp_path / "data.txt", CalibrationData(samples))
+    blocker = tmp_path / "not_a_folder"
+    blocker.write_text("")
+    out = _run(path, "-o", blocker / "result.yaml")
+    assert out.returncode == 2 and "error:" in out.stderr and "Traceback" not in out.stderr

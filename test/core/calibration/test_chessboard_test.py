@@ -80,7 +80,7 @@ def test_chessboard_of_the_calibration_scene_is_rendered_and_found():
 
 
 def test_tool_rotation_faces_the_point_also_straight_down():
-    from agiprobot_measurement.calibration.simulation import tool_rotation
+    from agiprobot_measurement.calibration.config import tool_rotation
 
     for towards in ([0.3, 0.2, -1.0], [0.0, 0.0, -1.0], [0.0, 0.0, 2.0]):
         rotation = tool_rotation(np.array(towards), np.zeros(3))
@@ -89,3 +89,71 @@ def test_tool_rotation_faces_the_point_also_straight_down():
         np.testing.assert_allclose(rotation[:, 2], np.array(towards) / np.linalg.norm(towards), atol=1e-12)
     with pytest.raises(ValueError, match="coincides"):
         tool_rotation(np.ones(3), np.ones(3))
+
+
+def test_serpentine_order_reverses_every_other_row():
+    from agiprobot_measurement.calibration.chessboard_test import serpentine_order
+
+    order = serpentine_order(12, (3, 4))
+    assert order.tolist() == [0, 1, 2, 3, 7, 6, 5, 4, 8, 9, 10, 11]
+    assert serpentine_order(5, (3, 4)).tolist() == [0, 1, 2, 3, 4]  # not a full board: detection order
+
+
+def test_chessboard_truth_of_the_calibration_scene():
+    from agiprobot_measurement.calibration.chessboard_test import chessboard_truth
+    from agiprobot_measurement.station import CONFIG_DIR, load_scene
+
+    scene = load_scene(CONFIG_DIR / "calibration_scene.yaml")
+    truth = chessboard_truth(scene, (8, 11))
+    assert truth.corners_base_m.shape == (88, 3)
+    assert np.linalg.norm(truth.normal_base) == pytest.approx(1.0)
+    np.testing.assert_allclose(truth.nearest_corner(truth.corners_base_m[17] + 0.003), truth.corners_base_m[17])
+    assert chessboard_truth(scene, (6, 9)) is None
+    assert chessboard_truth(load_scene(CONFIG_DIR / "scene.yaml"), (8, 11)) is None
+
+
+def test_corner_targets_need_an_organised_cloud(frame_and_board):
+    from agiprobot_measurement.calibration.chessboard_test import corner_targets
+
+    frame, _ = frame_and_board
+    pixels = detect_corners(frame.texture, (8, 11))
+    h = np.eye(4)
+    h[:3, 3] = [0.0, 0.0, 2.0]  # camera 2 m above the base: the board normal points up to it
+    targets, found, normal = corner_targets(h, frame.points_m(), pixels)
+    assert len(found) == 88 and targets.shape == (88, 3)
+    assert normal @ (h[:3, 3] - targets.mean(axis=0)) > 0.0
+    with pytest.raises(CalibrationError, match="organised point cloud"):
+        corner_targets(h, frame.points_m().reshape(-1, 3), pixels)
+    with pytest.raises(CalibrationError, match="only 0 of 88 corners"):
+        corner_targets(h, np.zeros_like(frame.points_m()), pixels)
+
+
+def test_test_report_summary_and_message(tmp_path):
+    import os
+    import stat
+
+    from agiprobot_measurement.calibration import chessboard_test  # by module: pytest would collect test_report
+
+    corners = [
+        {"corner": 0, "distance_to_target_mm": 0.01, "positioning_error_mm": 0.2},
+        {"corner": 1, "distance_to_target_mm": 0.02, "positioning_error_mm": 0.4},
+        {"corner": 2, "error": "no IK solution for [1.0, 0.0, 0.0]"},
+    ]
+    report = chessboard_test.test_report(corners, 3, 3, 0.02, tmp_path / "r.yaml")
+    summary = report["summary"]
+    assert summary["corners_reached"] == 2 and summary["positioning_error_max_mm"] == pytest.approx(0.4)
+    assert summary["positioning_error_rms_mm"] == pytest.approx(np.sqrt(0.1))
+    assert chessboard_test.test_message(report) == (
+        "test: 3 corners detected, 3 in 3D, 2 reached; positioning error against the true corners mean 0.300 mm, "
+        "max 0.400 mm"
+    )
+    no_truth = chessboard_test.test_report([{"corner": 0, "distance_to_target_mm": 0.01}], 1, 1, 0.02, "r.yaml")
+    assert chessboard_test.test_message(no_truth).endswith(
+        "(the scene file has no chessboard: no true corners to compare with)"
+    )
+    previous = os.umask(0o022)
+    try:
+        path = chessboard_test.write_test_report(tmp_path / "new" / "test_result.yaml", report)
+    finally:
+        os.umask(previous)
+    assert stat.S_IMODE(path.stat().st_mode) == 0o644

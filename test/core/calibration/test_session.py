@@ -4,6 +4,7 @@ refused, the session's criteria, sample bookkeeping and the data file rewritten 
 import numpy as np
 import pytest
 
+from agiprobot_measurement.calibration.config import load_calibration_config
 from agiprobot_measurement.calibration.flange_detection import (
     FlangeDetection,
     FlangeDetectorConfig,
@@ -17,7 +18,6 @@ from agiprobot_measurement.calibration.registration import (
     select_consistent_flags,
 )
 from agiprobot_measurement.calibration.session import CalibrationSession, detector_config
-from agiprobot_measurement.calibration.simulation import load_calibration_config
 from agiprobot_measurement.common.geometry import transform_points
 
 RADIUS_M = 0.0315

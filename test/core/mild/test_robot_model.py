@@ -10,22 +10,18 @@ import xacro
 from scipy.spatial.transform import Rotation
 
 from agiprobot_measurement.common.geometry import wrap_to_pi
-from agiprobot_measurement.mild.robot_model import (
+from agiprobot_measurement.errors import InputError
+from agiprobot_measurement.mild.config import MildKinematics, load_kinematics, load_settings, settings_from_mapping
+from agiprobot_measurement.mild.lp import solve_turn_lp, turn_split_closed_form
+from agiprobot_measurement.mild.ratings import (
     RATING_BASE,
-    MildKinematics,
-    MildRobotModel,
-    RobotState,
-    load_kinematics,
-    load_settings,
     path_heading_change,
     rating_angle_approximation,
     rating_navigation_path,
     rating_simple,
-    settings_from_mapping,
-    solve_turn_lp,
-    turn_split_closed_form,
-    view_directions,
 )
+from agiprobot_measurement.mild.robot_model import MildRobotModel
+from agiprobot_measurement.mild.state import RobotState, view_directions
 from agiprobot_measurement.station import CONFIG_DIR, URDF_DIR, ConfigError, read_yaml
 from agiprobot_measurement.station.urdf_model import UrdfModel
 
@@ -491,6 +487,75 @@ def test_bad_requests_raise_clear_errors(real, position, orientation, words):
             assert word in str(info.value)
     with pytest.raises(ValueError, match="tilt"):
         real.calculate_robot_state(RobotState(tilt=np.nan), [0, 0, 1], [0, 0, 0, 1])
+
+
+@pytest.mark.parametrize(
+    ("state", "words"),
+    [
+        (RobotState(1e12, 0.0, 0.0, 1.0, 1.0), ["sourceRobotState: pan", "deg outside [-20.0, 20.0] deg", "1e+12 rad"]),
+        (RobotState(math.radians(20.5), 0.0, 0.0, 1.0, 1.0), ["pan 20.50 deg outside [-20.0, 20.0] deg"]),
+        (RobotState(0.0, math.radians(-46), 0.0, 1.0, 1.0), ["tilt -46.00 deg outside [-45.0, 25.0] deg"]),
+        (RobotState(0.0, np.nan, 0.0, 1.0, 1.0), ["tilt = nan is not finite"]),
+        (RobotState(0.0, 0.0, -np.inf, 1.0, 1.0), ["rotation = -inf is not finite"]),
+        (RobotState(0.0, 0.0, 1e12, 1.0, 1.0), ["rotation = 1e+12 rad lies beyond"]),
+        (RobotState(0.0, 0.0, 0.0, 1.0, -1e300), ["y = -1e+300 m lies beyond"]),
+    ],
+)
+def test_states_the_mild_cannot_take_are_refused_by_every_service(real, state, words):
+    """As mild_sim/set_state: pan and tilt outside the settings' PTU limits, non-finite and absurd values."""
+    for model_id in (1, 2):
+        model = MildRobotModel(real.kinematics, real.settings.with_changes(robot_model_id=model_id), real.map)
+        for call in (
+            lambda m=model: m.calculate_camera_pose(state),
+            lambda m=model: m.camera_pose_correction(state, [2, 2, 1.3], [0, 0, 0, 1]),
+            lambda m=model: m.calculate_robot_state(state, [2, 2, 1.3], [0, 0, 0, 1]),
+        ):
+            with pytest.raises(InputError) as info:
+                call()
+            for word in words:
+                assert word in str(info.value)
+
+
+def test_states_at_the_limits_are_taken(real):
+    (plo, phi), (tlo, thi) = real.pan_limits, real.tilt_limits
+    for state in (RobotState(plo, tlo, -math.pi, 1.0, 1.0), RobotState(phi + 1e-10, thi, 7.0, 1.0, 1.0)):
+        assert real.check_state(state) is state
+        np.testing.assert_allclose(real.calculate_camera_pose(state), real.camera_pose(state))
+        assert real.calculate_robot_state(state, [2, 2, 1.3], [0, 0, 0, 1]).ok
+
+
+@pytest.mark.parametrize(
+    ("position", "orientation", "words"),
+    [
+        ([1e12, 0, 1], [0, 0, 0, 1], ["position", "beyond +-10000 m"]),
+        ([0, -1e300, 1], [0, 0, 0, 1], ["position", "beyond"]),
+        ([0, 0, 1], [1e308, 1e308, 1e308, 1e308], ["orientation", "too large to normalise"]),
+    ],
+)
+def test_absurd_requested_poses_are_refused(real, position, orientation, words):
+    for call in (
+        lambda: real.calculate_robot_state(RobotState(), position, orientation),
+        lambda: real.camera_pose_correction(RobotState(), position, orientation),
+    ):
+        with pytest.raises(InputError) as info:
+            call()
+        for word in words:
+            assert word in str(info.value)
+
+
+def test_absurd_positions_are_refused_by_get_distance_and_is_position_allowed(real):
+    with pytest.raises(InputError, match=r"targetPosition.*beyond"):
+        real.get_distance([0, 0], [1e300, 0])
+    with pytest.raises(InputError, match=r"sourcePosition.*beyond"):
+        real.get_distance([-1e5, 0], [1, 1])
+    with pytest.raises(InputError, match="beyond"):
+        real.is_position_allowed([0.0, 1e12, 0.0])
+
+
+def test_huge_quaternion_components_are_only_normalised(real):
+    a = real.calculate_robot_state(RobotState(), [1, 1, 1.2], [0, 0, 3e300, 9e300])
+    b = real.calculate_robot_state(RobotState(), [1, 1, 1.2], [0, 0, 0.3, 0.9])
+    np.testing.assert_allclose(a.state.as_array(), b.state.as_array())
 
 
 def test_unnormalised_quaternion_is_accepted(real):

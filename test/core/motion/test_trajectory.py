@@ -242,6 +242,8 @@ def test_from_dict_rejects_bad_points():
 
 def test_msg_round_trip(good):
     pytest.importorskip("rospy")
-    again = JointTrajectory.from_msg(good.to_msg())
+    from agiprobot_measurement.ros.conversions import joint_trajectory_from_msg, joint_trajectory_to_msg
+
+    again = joint_trajectory_from_msg(joint_trajectory_to_msg(good))
     assert again.to_dict() == good.to_dict()
     np.testing.assert_array_equal(again.time_from_start, JointTrajectory.from_dict(good.to_dict()).time_from_start)

@@ -24,9 +24,7 @@ from agiprobot_measurement.planning.plan_io import (
     dump_execution_plan,
     load_execution_plan,
     message_to_dict,
-    plan_from_joint_trajectory_msgs,
     plan_path,
-    plan_to_joint_trajectory_msgs,
     segment_from_dict,
     segment_from_message,
     segment_to_dict,
@@ -131,6 +129,8 @@ def test_shared_plan_round_trips_exactly(plan_file, plan, tmp_path):
 
 def test_round_trip_through_trajectory_msgs(plan):
     pytest.importorskip("rospy")
+    from agiprobot_measurement.ros.conversions import plan_from_joint_trajectory_msgs, plan_to_joint_trajectory_msgs
+
     messages = plan_to_joint_trajectory_msgs(plan)
     assert len(messages) == 8 and messages[1].joint_names == plan.joint_names
     again = plan_from_joint_trajectory_msgs(messages, plan.metadata)
@@ -141,8 +141,11 @@ def test_robot_trajectory_message_like_objects(plan):
     pytest.importorskip("rospy")
     from trajectory_msgs.msg import MultiDOFJointTrajectory
 
+    from agiprobot_measurement.ros.conversions import joint_trajectory_to_msg
+
     message = SimpleNamespace(
-        joint_trajectory=plan.segments[1].trajectory.to_msg(), multi_dof_joint_trajectory=MultiDOFJointTrajectory()
+        joint_trajectory=joint_trajectory_to_msg(plan.segments[1].trajectory),
+        multi_dof_joint_trajectory=MultiDOFJointTrajectory(),
     )
     segment = segment_from_message(message, 1)
     assert segment.kind == MEASURE

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy import sparse
 
-from agiprobot_measurement.planning import set_cover as sc
+from agiprobot_measurement.planning import cover_columns, cover_greedy, cover_reduction
 from agiprobot_measurement.planning.set_cover import SOLVER_TYPES, SetCoverError, solve_set_cover
 from agiprobot_measurement.testing.set_cover_instances import cube_instance, random_instance
 
@@ -198,9 +198,9 @@ def test_lazy_greedy_matches_naive_greedy(seed):
     mask = rng.random((60, 80)) < 0.08
     # Few distinct uncertainty values and equal-sized columns make ties common.
     tie = rng.choice([0.1, 0.2, 0.3], 80)
-    cols, _ = sc._measurable_columns(sparse.csc_array(mask))
+    cols, _ = cover_columns.measurable_columns(sparse.csc_array(mask))
     n_coverable = int(mask.any(axis=1).sum())
-    assert sc._greedy(cols, tie, n_coverable) == _naive_greedy(mask, tie)
+    assert cover_greedy.greedy_cover(cols, tie, n_coverable) == _naive_greedy(mask, tie)
 
 
 def test_greedy_selection_is_irredundant(small_cube):
@@ -265,10 +265,10 @@ def test_dominated_columns_match_naive_check(seed):
     cols = [big[:, rng.integers(8)] & (rng.random(90) < rng.uniform(0.3, 1.0)) for _ in range(300)]
     mask = np.column_stack([c for c in cols if c.any()])
     costs = rng.choice([1.0, 1.5, 2.0], mask.shape[1]) if seed % 2 else np.ones(mask.shape[1])
-    columns, _ = sc._measurable_columns(sparse.csc_array(mask))
-    dup = sc._duplicates(columns, np.lexsort((np.arange(mask.shape[1]), costs)))
+    columns, _ = cover_columns.measurable_columns(sparse.csc_array(mask))
+    dup = cover_reduction.duplicate_columns(columns, np.lexsort((np.arange(mask.shape[1]), costs)))
     keep = np.nonzero(~dup)[0]
-    dominated, complete = sc._dominated_columns(columns.take(keep), costs[keep], time.perf_counter() + 60)
+    dominated, complete = cover_reduction.dominated_columns(columns.take(keep), costs[keep], time.perf_counter() + 60)
     assert complete
     np.testing.assert_array_equal(dominated, _naive_dominated(mask[:, keep], costs[keep]))
 
@@ -279,15 +279,15 @@ def test_duplicates_and_implied_rows_match_naive_check():
     mask[:, 5] = mask[:, 3]
     mask[:, 9] = mask[:, 3]
     mask = mask[:, mask.any(axis=0)]
-    columns, _ = sc._measurable_columns(sparse.csc_array(mask))
-    dup = sc._duplicates(columns, np.arange(columns.n_cols))
+    columns, _ = cover_columns.measurable_columns(sparse.csc_array(mask))
+    dup = cover_reduction.duplicate_columns(columns, np.arange(columns.n_cols))
     expected = [any(np.array_equal(mask[:, i], mask[:, j]) for i in range(j)) for j in range(mask.shape[1])]
     np.testing.assert_array_equal(dup, expected)
 
     rows = mask[mask.any(axis=1)]
-    row_sets = sc._measurable_columns(sparse.csc_array(rows.T))[0]
-    candidates = np.nonzero(~sc._duplicates(row_sets, np.arange(row_sets.n_cols)))[0]
-    implied, complete = sc._implied_rows(row_sets, candidates, time.perf_counter() + 60)
+    row_sets = cover_columns.measurable_columns(sparse.csc_array(rows.T))[0]
+    candidates = np.nonzero(~cover_reduction.duplicate_columns(row_sets, np.arange(row_sets.n_cols)))[0]
+    implied, complete = cover_reduction.implied_rows(row_sets, candidates, time.perf_counter() + 60)
     assert complete
     for b in range(rows.shape[0]):
         strict_subset_exists = any(

@@ -84,6 +84,10 @@ def test_tilts_set_psi_and_theta(tilt_theta, tilt_psi):
 def test_documented_getters_and_setters():
     view = ViewPoint([1, 2, 3], [0, 0, 1], 0.0, STANDOFF)
     assert np.allclose(view.get_surface_point(), [1, 2, 3])
+    normal = view.get_surface_normal()
+    assert np.allclose(normal, [0, 0, 1])
+    normal[2] = -1.0  # a copy: the view keeps its normal
+    assert np.allclose(view.get_surface_normal(), [0, 0, 1])
     matrix = view.get_surface_point(as_matrix=True)
     assert matrix.shape == (4, 4) and np.allclose(matrix[:3, 3], [1, 2, 3]) and np.allclose(matrix[:3, :3], np.eye(3))
     anchor = view.get_anchor_position(as_matrix=True)

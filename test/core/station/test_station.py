@@ -185,3 +185,13 @@ def test_malformed_chessboard_names_the_bad_key(tmp_path, change, expected):
     board.pop("square_m")
     with pytest.raises(ConfigError, match="square_m"):
         load_scene(_write(tmp_path, "scene.yaml", scene))
+
+
+def test_scene_without_part_keeps_the_obstacles():
+    scene = load_scene()
+    assert scene.part is not None
+    bare = scene.without_part()
+    assert bare.part is None
+    assert bare.objects == scene.objects and bare.frame_id == scene.frame_id and bare.source == scene.source
+    np.testing.assert_array_equal(bare.robot_base_pose, scene.robot_base_pose)
+    assert scene.part is not None  # the original is unchanged

@@ -36,6 +36,7 @@ import scipy.sparse
 import trimesh
 
 from agiprobot_measurement.errors import InternalError
+from agiprobot_measurement.station import load_scanner_config
 
 __all__ = [
     "DEFAULT_CHUNK_ELEMENTS",
@@ -129,15 +130,6 @@ class MeasurabilityResult:
     def uncertainty(self) -> scipy.sparse.csc_matrix:
         """(P, V) CSC matrix of assigned uncertainties in mm (every stored entry is measurable, > 0)."""
         return self._matrix(self.uncertainties)
-
-    @property
-    def trajectory_distance(self) -> scipy.sparse.csc_matrix:
-        """(P, V) CSC matrix of ``t0`` in mm with the structure of :attr:`uncertainty`.
-
-        ``t0`` may be exactly 0 (the view's own sample point): use the structure of :attr:`uncertainty`, not
-        this matrix's, to tell which pairs are measurable.
-        """
-        return self._matrix(self.trajectory_distances)
 
     @property
     def measurability(self) -> scipy.sparse.csc_matrix:
@@ -321,8 +313,6 @@ class SensorModel:
     @classmethod
     def from_config(cls, path=None, **kwargs) -> SensorModel:
         """Build from ``config/laser_scanner.yaml`` (or the scanner file at ``path``)."""
-        from agiprobot_measurement.station import load_scanner_config
-
         return cls(load_scanner_config(path).sensor_parameters, **kwargs)
 
     # --------------------------------------------------------------------------------------- equations
@@ -437,10 +427,6 @@ class SensorModel:
     @property
     def sampled_surface_points(self) -> np.ndarray:
         return self._require_context().points
-
-    @property
-    def sampled_surface_normals(self) -> np.ndarray:
-        return self._require_context().normals
 
     def _require_context(self) -> _Context:
         if self._context is None:

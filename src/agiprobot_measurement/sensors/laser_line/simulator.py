@@ -24,7 +24,9 @@ from agiprobot_measurement.sensors.laser_line.model import SensorModel
 __all__ = [
     "LaserLineScannerSimulator",
     "Profile",
+    "StitchedCloud",
     "measured_samples",
+    "voxel_thin",
 ]
 
 
@@ -160,3 +162,37 @@ def measured_samples(samples_mm: np.ndarray, measured_points_mm: np.ndarray, rad
         return np.zeros(len(samples), dtype=bool)
     distance, _ = cKDTree(measured).query(samples, k=1, distance_upper_bound=radius_mm)
     return np.isfinite(distance)
+
+
+def voxel_thin(points_mm: np.ndarray, voxel_mm: float) -> np.ndarray:
+    """The first point of each ``voxel_mm`` cube, in the points' order (for display: a dense cloud thinned to
+    about one point per voxel); all points when ``voxel_mm`` <= 0."""
+    points = np.asarray(points_mm, dtype=float).reshape(-1, 3)
+    if not len(points) or voxel_mm <= 0:
+        return points
+    keys = np.floor(points / voxel_mm).astype(np.int64)
+    _, first = np.unique(keys, axis=0, return_index=True)
+    return points[np.sort(first)]
+
+
+class StitchedCloud:
+    """The profiles stitched since the last :meth:`clear`: their count and their measured points (mm)."""
+
+    def __init__(self):
+        self.chunks: list[np.ndarray] = []
+        self.profiles = 0
+
+    def clear(self) -> None:
+        self.chunks = []
+        self.profiles = 0
+
+    def add(self, profiles) -> None:
+        """Add :class:`Profile` s; empty ones count but add no points."""
+        for profile in profiles:
+            if len(profile):
+                self.chunks.append(profile.points_mm)
+        self.profiles += len(profiles)
+
+    def points(self) -> np.ndarray:
+        """(N, 3) every measured point, mm."""
+        return np.vstack(self.chunks) if self.chunks else np.zeros((0, 3))

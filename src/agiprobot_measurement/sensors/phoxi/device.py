@@ -7,23 +7,33 @@ Frames keep the coordinate space they were captured in (the scanner applies the 
 
 Coordinate spaces: 1 CameraSpace (the sensor frame), 4 RobotSpace and 5 CustomSpace (p' = R p + t with the
 transformation set by ``set_transformation``; CustomSpace starts as identity, RobotSpace needs a transformation
-first). 2 MountingSpace and 3 MarkerSpace need a marker calibration the simulated scanner does not have.
+first). 2 MountingSpace and 3 MarkerSpace need a marker calibration the simulated scanner does not have. A
+transformation must be finite and rigid (orthonormal rotation, determinant +1) with a translation of at most
+:data:`MAX_TRANSLATION_M`, so that every later frame stays finite; a refused one changes nothing.
+
+Files follow the package's one file policy (:class:`~agiprobot_measurement.common.files.FileRoot`, see
+:class:`PhoxiDevice`); reconfigured numbers that are not finite are put back (:meth:`PhoxiDevice.reconfigure`).
 """
 
 from __future__ import annotations
 
+import math
+import os
 from collections import OrderedDict
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
 from agiprobot_measurement.common.config import require, vector
-from agiprobot_measurement.common.geometry import look_at
-from agiprobot_measurement.errors import InternalError
+from agiprobot_measurement.common.files import FileRoot, PathPolicyError
+from agiprobot_measurement.common.geometry import look_at, matrix_to_rpy, pose_from_quaternion
+from agiprobot_measurement.errors import InputError
+from agiprobot_measurement.sensors.phoxi import reconfigure as phoxi_config
+from agiprobot_measurement.sensors.phoxi.models import ScannerModel
 from agiprobot_measurement.sensors.phoxi.point_cloud_io import (
-    OutputPathError,
-    resolve_output_path,
     write_ply,
     write_point_tiff,
     write_ptx,
@@ -31,13 +41,11 @@ from agiprobot_measurement.sensors.phoxi.point_cloud_io import (
 from agiprobot_measurement.sensors.phoxi.renderer import (
     Frame,
     RayCaster,
-    RobotGeometry,
-    ScannerModel,
     ScanSettings,
-    SceneGeometry,
     StructuredLightScanner,
     transform_points,
 )
+from agiprobot_measurement.sensors.phoxi.scene_geometry import RobotGeometry, SceneGeometry
 from agiprobot_measurement.station import (
     CONFIG_DIR,
     ConfigError,
@@ -50,14 +58,22 @@ __all__ = [
     "CAMERA_CONFIG_FILE",
     "COORDINATE_SPACES",
     "FIRMWARE_VERSION",
+    "MAX_TRANSLATION_M",
     "OK",
+    "RAW_EXTENSIONS",
     "SAVE_LAST_FRAME_EXTENSIONS",
+    "SETTING_NAMES",
     "WRITTEN_EXTENSIONS",
     "CameraConfig",
     "PhoxiDevice",
     "PhoxiError",
+    "ScenePoses",
+    "check_transformation",
+    "default_allowed_save_dirs",
+    "default_output_dir",
     "frame_output",
     "load_camera_config",
+    "overridden_pose",
     "pose_from_entry",
     "transform_from_quaternion",
 ]
@@ -68,13 +84,33 @@ COORDINATE_SPACES = {1: "CameraSpace", 2: "MountingSpace", 3: "MarkerSpace", 4: 
 #: extensions V2/save_last_frame accepts (as the driver); the simulator writes ply, ptx and tif
 SAVE_LAST_FRAME_EXTENSIONS = ("praw", "ply", "ptx", "tif", "prawf")
 WRITTEN_EXTENSIONS = ("ply", "ptx", "tif")
+#: PhoXi Control's raw formats: the real scanner writes them, the simulated one cannot
+RAW_EXTENSIONS = ("praw", "prawf")
+#: largest accepted translation of a coordinate-space transformation: a station is metres across, and beyond this
+#: every point of a frame loses its millimetres (1e308 made every point inf)
+MAX_TRANSLATION_M = 1e3
+#: how far R R^T of a transformation's rotation may be from the identity (a rotation made of float32 values passes)
+ROTATION_TOLERANCE = 1e-6
 API_VERSION = "1.2.35-sim"
 FIRMWARE_VERSION = "1.2.35-sim"
 CAMERA_CONFIG_FILE = CONFIG_DIR / "phoxi_camera.yaml"
+#: the reconfigurable parameters that are capturing settings (ScanSettings' fields)
+SETTING_NAMES = (
+    "resolution",
+    "scan_multiplier",
+    "shutter_multiplier",
+    "single_pattern_exposure",
+    "confidence",
+    "ambient_light_suppression",
+    "camera_only_mode",
+)
+
+_DOUBLE_PARAMETERS = tuple(entry[0] for entry in phoxi_config.PARAMETERS if entry[1] == "double")
 
 
-class PhoxiError(InternalError):
-    """A request the device refuses; the message is what the service answers."""
+class PhoxiError(InputError):
+    """A request the device refuses (a bad argument, or one the device's state does not allow: the client must
+    change it); the message is what the service answers."""
 
 
 # --------------------------------------------------------------------------------------------- config
@@ -118,28 +154,96 @@ def load_camera_config(path: str | Path | None = None) -> CameraConfig:
 
 
 def transform_from_quaternion(translation, quaternion_xyzw) -> np.ndarray:
-    """4x4 from a translation and a quaternion (x, y, z, w); the quaternion is normalised, a zero one refused."""
-    q = np.asarray(quaternion_xyzw, dtype=float)
-    t = np.asarray(translation, dtype=float)
-    if not (np.all(np.isfinite(q)) and np.all(np.isfinite(t))):
-        raise PhoxiError("transformation must be finite")
-    norm = np.linalg.norm(q)
+    """4x4 from a translation (m) and a quaternion (x, y, z, w); the quaternion is normalised; a zero or overflowing
+    one, non-finite values and a translation beyond :data:`MAX_TRANSLATION_M` are refused (:class:`PhoxiError`)."""
+    translation = np.asarray(translation, dtype=float)
+    quaternion = np.asarray(quaternion_xyzw, dtype=float)
+    if not (np.all(np.isfinite(quaternion)) and np.all(np.isfinite(translation))):
+        raise PhoxiError(
+            f"transformation must be finite, got translation {translation.tolist()}, rotation {quaternion.tolist()}"
+        )
+    if translation.shape != (3,) or quaternion.shape != (4,):
+        raise PhoxiError("transformation needs a translation (x, y, z) and a quaternion (x, y, z, w)")
+    norm = math.hypot(*quaternion)  # hypot neither overflows nor underflows where the sum of squares would
+    if not math.isfinite(norm):
+        raise PhoxiError(f"transformation's quaternion {quaternion.tolist()} is too large to normalise")
     if norm < 1e-6:
         raise PhoxiError("transformation has a zero quaternion (rotation.w = 1 is the identity)")
-    x, y, z, w = q / norm
-    pose = np.eye(4)
-    pose[:3, :3] = [
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ]
-    pose[:3, 3] = t
-    return pose
+    return check_transformation(pose_from_quaternion(translation, quaternion / norm))
+
+
+def check_transformation(matrix) -> np.ndarray:
+    """``matrix`` as a 4x4 float array if it is a rigid transformation the scanner can apply: finite, its rotation
+    orthonormal with determinant +1, its translation at most :data:`MAX_TRANSLATION_M` long, last row 0 0 0 1;
+    else :class:`PhoxiError` naming the bad part."""
+    matrix = np.asarray(matrix, dtype=float)
+    if matrix.shape != (4, 4) or not np.all(np.isfinite(matrix)):
+        raise PhoxiError("transformation must be a finite 4x4 matrix")
+    if not np.allclose(matrix[3], [0.0, 0.0, 0.0, 1.0]):
+        raise PhoxiError(f"transformation's last row must be 0 0 0 1, got {matrix[3].tolist()}")
+    rotation = matrix[:3, :3]
+    error = float(np.abs(rotation @ rotation.T - np.eye(3)).max())
+    if error > ROTATION_TOLERANCE or np.linalg.det(rotation) < 0:
+        raise PhoxiError(
+            f"transformation's rotation is not a proper rotation (|R R^T - I| = {error:.3g}, det = "
+            f"{np.linalg.det(rotation):.3g}; expected an orthonormal matrix with determinant +1)"
+        )
+    length = math.hypot(*matrix[:3, 3])
+    if length > MAX_TRANSLATION_M:
+        raise PhoxiError(
+            f"transformation's translation {matrix[:3, 3].tolist()} m is {length:.3g} m long, beyond the "
+            f"{MAX_TRANSLATION_M:g} m a coordinate space may be shifted"
+        )
+    return matrix
+
+
+def overridden_pose(pose: np.ndarray, xyz_m: np.ndarray | None = None, rpy_rad: np.ndarray | None = None) -> np.ndarray:
+    """``pose`` (4x4) with its position and/or its roll, pitch, yaw replaced (None keeps the pose's own)."""
+    if xyz_m is None and rpy_rad is None:
+        return np.array(pose, dtype=float)
+    return pose_matrix(
+        pose[:3, 3] if xyz_m is None else xyz_m, matrix_to_rpy(pose[:3, :3]) if rpy_rad is None else rpy_rad
+    )
+
+
+def _ros_home(environ: Mapping[str, str]) -> Path:
+    return Path(environ.get("ROS_HOME") or str(Path("~/.ros").expanduser()))
+
+
+def default_output_dir(environ: Mapping[str, str] | None = None) -> Path:
+    """``$ROS_HOME/phoxi_frames`` (ROS_HOME defaults to ~/.ros): a folder for frames that scripts and tools save (the
+    node itself resolves relative names under its working directory, as the driver)."""
+    return _ros_home(os.environ if environ is None else environ) / "phoxi_frames"
+
+
+def default_allowed_save_dirs(environ: Mapping[str, str] | None = None, cwd: str | Path | None = None) -> list[Path]:
+    """Where absolute save paths may point unless ``~allowed_save_dirs`` says otherwise: the working directory,
+    ROS_HOME and /tmp (the real driver writes anywhere; the simulator only where a ROS user's files go)."""
+    environ = os.environ if environ is None else environ
+    return [Path(cwd or os.getcwd()), _ros_home(environ), Path("/tmp")]
+
+
+class ScenePoses(Protocol):
+    """Where the camera and the robot's links are when a frame is taken (scene frame, 4x4, metres)."""
+
+    def camera_pose(self) -> np.ndarray:
+        """scene frame <- sensor frame."""
+
+    def link_poses(self, link_names: list[str]) -> dict[str, np.ndarray]:
+        """Poses of those links that are known; unknown links are left out."""
 
 
 # --------------------------------------------------------------------------------------------- device
 class PhoxiDevice:
-    """One simulated scanner: state, frame store and file output. Not thread-safe: the node serialises calls."""
+    """One simulated scanner: state, frame store and file output. Not thread-safe: the node serialises calls,
+    except the writers that :meth:`frame_writer` and :meth:`last_frame_writer` return: they touch only the frame
+    they were given, so the node runs them outside its lock.
+
+    Files: requested names resolve under ``output_dir`` (the node's working directory, as the driver's paths);
+    absolute names may also point into ``allowed_dirs``; ``..``, ``~`` and anything else (symlinks resolved) are
+    refused with a message naming the root (:class:`~agiprobot_measurement.common.files.FileRoot`). An existing file
+    is replaced, as the driver does (its API has no overwrite flag), atomically.
+    """
 
     def __init__(
         self,
@@ -150,14 +254,16 @@ class PhoxiDevice:
         hardware_identification: str | None = None,
         frame_buffer_size: int = 3,
         settings: ScanSettings | None = None,
+        allowed_dirs: Iterable[str | Path] = (),
     ):
         if frame_buffer_size < 1:
-            raise ValueError("frame_buffer_size must be at least 1")
+            raise ConfigError("frame_buffer_size must be at least 1")
         self.model = model
         self.scanner = StructuredLightScanner(model)
         self.scene = scene
         self.robot = robot
-        self.output_dir = Path(output_dir).expanduser().resolve()
+        self.files = FileRoot(Path(output_dir), tuple(Path(d) for d in allowed_dirs), purpose="PhoXi frame file")
+        self.output_dir = self.files.root
         self.hardware_identification = hardware_identification or f"PhoXi3DScanner-{model.name}-sim"
         self.frame_buffer_size = int(frame_buffer_size)
         self.settings = settings or ScanSettings()
@@ -233,12 +339,65 @@ class PhoxiDevice:
         """The driver's getPFrame: a new frame for ``index < 0``, else the stored one."""
         return self.trigger(camera_pose, link_poses) if index < 0 else self.frame(index)
 
+    def capture(self, index: int, poses: ScenePoses) -> Frame:
+        """:meth:`get_frame` with the poses asked of ``poses`` only when a new frame is taken."""
+        if index >= 0:
+            return self.frame(index)
+        links = poses.link_poses(self.robot.link_names) if self.robot is not None else {}
+        return self.trigger(poses.camera_pose(), links)
+
+    def save_captured_frame(self, index: int, requested: str, poses: ScenePoses, organized: bool = True):
+        """The driver's saveFrame: frame ``index`` (a new one for < 0) as PLY; a bad path is refused before rendering.
+
+        Returns (frame, path written)."""
+        frame, write = self.capture_for_saving(index, requested, poses, organized)
+        return frame, write()
+
+    def capture_for_saving(self, index: int, requested: str, poses: ScenePoses, organized: bool = True):
+        """The part of :meth:`save_captured_frame` that needs the device: (frame, writer); the writer writes the file."""
+        self.output_path(requested, ply_only=True)
+        frame = self.capture(index, poses)
+        return frame, self.frame_writer(frame, requested, organized)
+
     def mark_published(self, frame: Frame) -> None:
         self.last_frame = frame
+
+    # ---------------------------------------------------------------------------------------- information
+    def require_connected(self) -> None:
+        """PhoxiError unless connected: what hardware identification and capturing modes need."""
+        self._require_connected()
+
+    def supported_capturing_modes(self) -> list[tuple[int, int]]:
+        """(width, height) pixels of every resolution, highest first; needs a connection."""
+        self._require_connected()
+        return self.model.supported_resolutions()
+
+    def free_running(self, trigger_mode: int) -> bool:
+        """Whether frames should be taken one after the other (trigger mode 0 = free run while acquiring)."""
+        return trigger_mode == 0 and self.connected and self.acquiring
 
     # ----------------------------------------------------------------------------------------- settings
     def update_settings(self, **changes) -> None:
         self.settings = replace(self.settings, **changes)
+
+    def reconfigure(self, config: dict, previous: Mapping | None = None) -> str:
+        """Apply a dynamic_reconfigure configuration (changed in place: a refused coordinate space is put back to the
+        device's, a number that is not finite to its ``previous`` value, the defaults without one); returns why
+        something was refused, or ''. (dynamic_reconfigure clamps to the ranges, but NaN passes its comparisons.)"""
+        previous = phoxi_config.defaults if previous is None else previous
+        refusals = []
+        for name in _DOUBLE_PARAMETERS:
+            if not math.isfinite(float(config[name])):
+                refusals.append(f"{name} {config[name]} refused: not a finite number (kept {previous[name]})")
+                config[name] = previous[name]
+        if config["coordinate_space"] != self.coordinate_space:
+            try:
+                self.set_coordinate_space(config["coordinate_space"])
+            except PhoxiError as exc:
+                refusals.append(f"coordinate_space {config['coordinate_space']} refused: {exc}")
+                config["coordinate_space"] = self.coordinate_space
+        self.update_settings(**{name: config[name] for name in SETTING_NAMES})
+        return "; ".join(refusals)
 
     # -------------------------------------------------------------------------------- coordinate spaces
     def output_transform(self, space: int | None = None) -> np.ndarray:
@@ -273,49 +432,61 @@ class PhoxiDevice:
         if space not in (ROBOT_SPACE, CUSTOM_SPACE):
             name = COORDINATE_SPACES.get(space, f"unknown space {space}")
             raise PhoxiError(f"A transformation can be set for 4 RobotSpace and 5 CustomSpace only, not {name}")
-        matrix = np.asarray(matrix, dtype=float)
-        if matrix.shape != (4, 4) or not np.all(np.isfinite(matrix)):
-            raise PhoxiError("transformation must be a finite 4x4 matrix")
-        rotation = matrix[:3, :3]
-        if not np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-6) or np.linalg.det(rotation) < 0:
-            raise PhoxiError("transformation's rotation is not a proper rotation")
+        matrix = check_transformation(matrix)
         self.transformations[space] = matrix.copy()
         if set_space:
             self.coordinate_space = space
 
     # -------------------------------------------------------------------------------------------- files
-    def output_path(self, requested: str) -> Path:
+    def output_path(self, requested: str, ply_only: bool = False) -> Path:
+        """The confined path of a requested file (see the class); ``ply_only``: save_frame's request, which writes
+        PLY whatever the extension (as the driver) but cannot write PhoXi Control's raw formats."""
+        extension = Path(str(requested)).suffix.lower().lstrip(".")
+        if ply_only and extension in RAW_EXTENSIONS:
+            raise PhoxiError(self._raw_refusal(extension))
         try:
-            return resolve_output_path(self.output_dir, requested)
-        except OutputPathError as exc:
+            return self.files.for_writing(requested, overwrite=True)
+        except PathPolicyError as exc:
             raise PhoxiError(str(exc)) from exc
+
+    @staticmethod
+    def _raw_refusal(extension: str) -> str:
+        written = ", ".join("." + e for e in WRITTEN_EXTENSIONS)
+        return (
+            f"Extension .{extension} (PhoXi Control's raw format) is not supported by the simulator: "
+            f"it writes {written}"
+        )
 
     def save_frame(self, frame: Frame, requested: str, organized: bool = True) -> Path:
         """The frame as binary PLY at ``requested`` (inside the output directory), whatever its extension (as the driver)."""
-        path = self.output_path(requested)
-        return self._write_ply(frame, path, organized)
+        return self.frame_writer(frame, requested, organized)()
+
+    def frame_writer(self, frame: Frame, requested: str, organized: bool = True) -> Callable[[], Path]:
+        """A writer of ``frame`` as PLY at ``requested``, the path checked now; the writer returns the path."""
+        path = self.output_path(requested, ply_only=True)
+        return lambda: self._write_ply(frame, path, organized)
 
     def save_last_frame(self, requested: str, organized: bool = True) -> Path:
         """The last published frame in the format its extension names (ply, ptx, tif)."""
+        return self.last_frame_writer(requested, organized)()
+
+    def last_frame_writer(self, requested: str, organized: bool = True) -> Callable[[], Path]:
+        """A writer of the last published frame in the format its extension names (ply, ptx, tif); extension, frame
+        and path are checked now, so the writer, which needs no device state, can run outside the node's lock."""
         extension = Path(str(requested)).suffix.lower().lstrip(".")
         if extension not in SAVE_LAST_FRAME_EXTENSIONS:
             raise PhoxiError("Wrong extension.")
         if extension not in WRITTEN_EXTENSIONS:
-            raise PhoxiError(
-                f"Extension .{extension} is the PhoXi Control raw format, which the simulated scanner does not write "
-                f"(it writes {', '.join('.' + e for e in WRITTEN_EXTENSIONS)})"
-            )
+            raise PhoxiError(self._raw_refusal(extension))
         if self.last_frame is None:
             raise PhoxiError("There is no frame to save: trigger or get a frame first")
         path = self.output_path(requested)
         frame = self.last_frame
         if extension == "ply":
-            return self._write_ply(frame, path, organized)
-        points, _ = frame_output(frame)
+            return lambda: self._write_ply(frame, path, organized)
         if extension == "ptx":
-            scale = max(float(frame.texture.max()), 1.0)
-            return write_ptx(path, points, frame.texture / scale)
-        return write_point_tiff(path, points)
+            return lambda: _write_frame_ptx(frame, path)
+        return lambda: write_point_tiff(path, frame_output(frame)[0])
 
     def _write_ply(self, frame: Frame, path: Path, organized: bool) -> Path:
         points, normals = frame_output(frame)
@@ -336,6 +507,12 @@ class PhoxiDevice:
             {k: v.reshape(-1)[keep] for k, v in scalars.items()},
             tuple(comments),
         )
+
+
+def _write_frame_ptx(frame: Frame, path: Path) -> Path:
+    points, _ = frame_output(frame)
+    scale = max(float(frame.texture.max()), 1.0)
+    return write_ptx(path, points, frame.texture / scale)
 
 
 def frame_output(frame: Frame) -> tuple[np.ndarray, np.ndarray]:

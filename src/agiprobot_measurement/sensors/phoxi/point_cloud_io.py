@@ -1,49 +1,32 @@
-"""Point-cloud files (binary PLY, PTX, float TIFF) written atomically, and output paths confined to one directory.
+"""Point-cloud files (binary PLY, PTX, float TIFF) written atomically.
 
 Writers take organised (H, W, 3) or flat (N, 3) arrays in metres and write to a temporary file beside the target,
-then rename it, so a reader never sees half a file. :func:`resolve_output_path` is the one gate for requested paths:
-``~`` expands to the home directory, relative paths are taken relative to the output directory, and anything that
-resolves (symlinks included) outside the output directory is refused with :class:`OutputPathError`.
+then rename it (:func:`agiprobot_measurement.common.files.atomic_write`), so a reader never sees half a file. Which
+paths a client may name is the file policy's business (:class:`agiprobot_measurement.common.files.FileRoot`, used by
+:mod:`agiprobot_measurement.sensors.phoxi.device`), not the writers'.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
-from agiprobot_measurement.common.files import atomic_write
-from agiprobot_measurement.errors import InputError
+from agiprobot_measurement.common.files import PathPolicyError, atomic_write
 
 __all__ = [
     "OutputPathError",
+    "format_fixed_rows",
     "read_ply",
     "read_point_tiff",
-    "resolve_output_path",
     "write_ply",
     "write_point_tiff",
     "write_ptx",
 ]
 
-
-class OutputPathError(InputError):
-    """A requested output path is empty, a directory, or outside the configured output directory."""
-
-
-def resolve_output_path(output_dir: str | Path, requested: str | Path) -> Path:
-    """The absolute file path for ``requested`` if it lies inside ``output_dir``; else :class:`OutputPathError`."""
-    if requested is None or not str(requested).strip():
-        raise OutputPathError("empty path")
-    root = Path(output_dir).expanduser().resolve()
-    path = Path(str(requested).strip()).expanduser()
-    if not path.is_absolute():
-        path = root / path
-    resolved = path.resolve()
-    if resolved == root or not resolved.is_relative_to(root):
-        raise OutputPathError(f"refused: {requested} resolves to {resolved}, outside the output directory {root}")
-    if resolved.is_dir():
-        raise OutputPathError(f"refused: {resolved} is a directory; give a file name")
-    return resolved
+#: the file policy's refusal; the old name stays importable for code that catches it
+OutputPathError = PathPolicyError
 
 
 # ------------------------------------------------------------------------------------------------- PLY
@@ -147,27 +130,89 @@ def read_ply(path: str | Path) -> dict:
 
 
 # ------------------------------------------------------------------------------------------------- PTX
+#: rows formatted per block: bounds the formatter's scratch memory (about 100 bytes a row) whatever the frame size
+_ROWS_PER_BLOCK = 1 << 18
+#: beyond this magnitude the fixed-point formatter's int64 would overflow; such tables use printf formatting
+_FIXED_POINT_LIMIT = 1e11
+_ZERO, _MINUS, _DOT, _SPACE, _NEWLINE = (ord(c) for c in "0-. \n")
+
+
+def format_fixed_rows(table: np.ndarray, decimals: Sequence[int]) -> bytes:
+    """Rows of ``table`` (N, C) as text, column c with ``decimals[c]`` decimals, space-separated, one line a row:
+    the bytes ``np.savetxt(fmt="%.{d}f ...")`` writes, formatted with array operations instead of per-row printf.
+
+    Each column becomes fixed-width digit fields (sign, integer digits, point, decimals) built digit by digit for all
+    rows at once; leading zeros and the sign of positive numbers are then dropped with one mask. Values are rounded
+    half to even on their binary value times 10**d (exact for float32 data and d <= 6, hence printf's result).
+    """
+    table = np.asarray(table, dtype=np.float64)
+    if table.ndim != 2 or table.shape[1] != len(decimals):
+        raise ValueError(f"expected a table with {len(decimals)} columns, got shape {table.shape}")
+    if len(table) == 0:
+        return b""
+    if not np.all(np.isfinite(table)) or np.abs(table).max() >= _FIXED_POINT_LIMIT:
+        fmt = " ".join(f"%.{d}f" for d in decimals) + "\n"
+        return "".join(fmt % tuple(row) for row in table.tolist()).encode("ascii")
+    chars, keep = [], []
+    rows = len(table)
+    for column, d in enumerate(decimals):
+        values = table[:, column]
+        scaled = np.rint(np.abs(values) * 10.0**d).astype(np.int64)
+        integer, fraction = np.divmod(scaled, 10**d)
+        digits = len(str(int(integer.max())))
+        width = 1 + digits + (1 + d if d else 0)
+        field = np.empty((rows, width), dtype=np.uint8)
+        shown = np.ones((rows, width), dtype=bool)
+        field[:, 0] = _MINUS
+        shown[:, 0] = np.signbit(values)  # printf shows the sign of -0.0 and of negatives rounded to zero
+        significant = np.zeros(rows, dtype=bool)
+        for j in range(digits):
+            digit = (integer // 10 ** (digits - 1 - j)) % 10
+            field[:, 1 + j] = _ZERO + digit
+            if j < digits - 1:  # the last integer digit shows even when 0
+                significant |= digit != 0
+                shown[:, 1 + j] = significant
+        if d:
+            field[:, 1 + digits] = _DOT
+            for j in range(d):
+                field[:, 2 + digits + j] = _ZERO + (fraction // 10 ** (d - 1 - j)) % 10
+        separator = np.full((rows, 1), _NEWLINE if column == len(decimals) - 1 else _SPACE, dtype=np.uint8)
+        chars += [field, separator]
+        keep += [shown, np.ones((rows, 1), dtype=bool)]
+    return np.concatenate(chars, axis=1)[np.concatenate(keep, axis=1)].tobytes()
+
+
 def write_ptx(path: str | Path, points: np.ndarray, intensity: np.ndarray, scanner_pose: np.ndarray | None = None):
     """Leica PTX (ASCII) of an organised cloud (H, W, 3) in metres with intensities in [0, 1], written atomically.
 
     PTX lists points column by column; missing points are ``0 0 0 0``. The header holds the scanner's position,
-    axes and a 4x4 transform (``scanner_pose``, identity when points are already in the scanner frame).
+    axes and a 4x4 transform (``scanner_pose``, identity when points are already in the scanner frame). Points are
+    written with 6 decimals (micrometres), intensities with 4, formatted block by block with
+    :func:`format_fixed_rows` (a 2064 x 1544 frame in well under 2 s; per-row printf took 5 to 13 s).
     """
-    points = np.asarray(points, dtype=np.float64)
+    points = np.asarray(points)
     if points.ndim != 3 or points.shape[2] != 3:
         raise ValueError("PTX needs an organised cloud (H, W, 3)")
     height, width = points.shape[:2]
     pose = np.eye(4) if scanner_pose is None else np.asarray(scanner_pose, dtype=float)
-    columns = np.concatenate([points, np.asarray(intensity, dtype=np.float64)[:, :, None]], axis=2)
-    table = columns.transpose(1, 0, 2).reshape(-1, 4)
+    intensity = np.asarray(intensity)
+    if intensity.shape != (height, width):
+        raise ValueError(f"PTX intensity must be ({height}, {width}), got {intensity.shape}")
     header = [str(width), str(height), " ".join(f"{v:.6f}" for v in pose[:3, 3])]
     header += [" ".join(f"{v:.6f}" for v in pose[:3, i]) for i in range(3)]
     header += [" ".join(f"{v:.6f}" for v in row) for row in pose.T]
+    # column by column: transposing the (H, W) grid lists each image column's points top to bottom
+    by_column = points.transpose(1, 0, 2).reshape(-1, 3)
+    intensity_by_column = intensity.T.reshape(-1)
 
     def write(tmp: Path) -> None:
-        with tmp.open("w") as stream:
-            stream.write("\n".join(header) + "\n")
-            np.savetxt(stream, table, fmt="%.6f %.6f %.6f %.4f")
+        with tmp.open("wb") as stream:
+            stream.write(("\n".join(header) + "\n").encode("ascii"))
+            for start in range(0, len(by_column), _ROWS_PER_BLOCK):
+                block = np.empty((min(_ROWS_PER_BLOCK, len(by_column) - start), 4))
+                block[:, :3] = by_column[start : start + len(block)]
+                block[:, 3] = intensity_by_column[start : start + len(block)]
+                stream.write(format_fixed_rows(block, (6, 6, 6, 4)))
 
     return atomic_write(path, write, make_parents=True)
 

@@ -42,55 +42,46 @@ import math
 import os
 from dataclasses import dataclass, field
 from functools import lru_cache
-from pathlib import Path
 
 import numpy as np
 
-from agiprobot_measurement.common.config import positive, require, vector
-from agiprobot_measurement.station import (
-    CONFIG_DIR,
-    ConfigError,
-    Scene,
-    read_yaml,
+from agiprobot_measurement.errors import InputError
+
+# Scanner models and scene geometry live in their own modules; the names the calibration simulation, its tests and
+# tools import from here stay importable (re-exported in __all__).
+from agiprobot_measurement.sensors.phoxi.models import (
+    RESOLUTION_HIGH,
+    CameraIntrinsics,
+    ScannerModel,
+    load_scanner_model,
 )
-from agiprobot_measurement.station.scene import chessboard_board_size, chessboard_dark_squares
+from agiprobot_measurement.sensors.phoxi.scene_geometry import (
+    RobotGeometry,
+    SceneGeometry,
+    chessboard_geometry,
+    primitive_mesh,
+    scene_geometry,
+)
 
 __all__ = [
     "AMBIENT_SUPPRESSION_SHUTTER_MULTIPLIER",
-    "BLACK_ALBEDO",
     "CHUNK_PIXELS",
-    "DEFAULT_ALBEDO",
-    "PHOXI_MODELS_FILE",
-    "RESOLUTION_HIGH",
-    "RESOLUTION_LOW",
-    "ROBOT_ALBEDO",
     "SINGLE_PATTERN_EXPOSURES_MS",
-    "WHITE_ALBEDO",
-    "CameraIntrinsics",
     "Frame",
-    "NoiseModel",
     "RayCaster",
     "RobotGeometry",
     "ScanSettings",
-    "ScannerModel",
     "SceneGeometry",
     "StructuredLightScanner",
-    "albedo_of",
     "chessboard_geometry",
     "depth_sigma_mm",
     "load_scanner_model",
-    "load_scanner_models",
     "primitive_mesh",
     "rgb_texture",
-    "scene_chessboard_geometry",
     "scene_geometry",
     "transform_points",
 ]
 
-PHOXI_MODELS_FILE = CONFIG_DIR / "phoxi_models.yaml"
-
-RESOLUTION_LOW = 0
-RESOLUTION_HIGH = 1
 #: PhoXi ``single_pattern_exposure`` index -> exposure of one pattern (ms), as PhoXi Control offers them
 SINGLE_PATTERN_EXPOSURES_MS = (
     10.24,
@@ -108,321 +99,6 @@ SINGLE_PATTERN_EXPOSURES_MS = (
 )
 #: shutter multiplier PhoXi Control fixes while ambient light suppression is on
 AMBIENT_SUPPRESSION_SHUTTER_MULTIPLIER = 2
-DEFAULT_ALBEDO = 0.6
-ROBOT_ALBEDO = 0.55
-
-
-# ----------------------------------------------------------------------------------------------- models
-@dataclass(frozen=True)
-class NoiseModel:
-    """Constants of the noise and texture model (see the module docstring)."""
-
-    min_cos_incidence: float = 0.05
-    reference_albedo: float = 0.8
-    reference_exposure_ms: float = 20.48
-    texture_full_scale: float = 1000.0
-    texture_saturation: float = 4095.0
-    ambient_fraction: float = 0.05
-    camera_only_ambient_fraction: float = 0.6
-    shadow_epsilon_m: float = 0.001
-
-
-@dataclass(frozen=True)
-class CameraIntrinsics:
-    """Pinhole intrinsics in pixels of one resolution (no distortion)."""
-
-    width: int
-    height: int
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-
-    def matrix(self) -> np.ndarray:
-        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
-
-    def pixel_rays(self) -> np.ndarray:
-        """(H * W, 3) float32 ray of every pixel, row-major, scaled to z = 1 (so ray * depth = point)."""
-        return _pixel_rays(self.width, self.height, self.fx, self.fy, self.cx, self.cy)
-
-    def project(self, points_m: np.ndarray) -> np.ndarray:
-        """Pixel coordinates (N, 2) (u, v) of camera-frame points (N, 3)."""
-        points_m = np.asarray(points_m, dtype=float)
-        return np.stack(
-            [
-                self.fx * points_m[:, 0] / points_m[:, 2] + self.cx,
-                self.fy * points_m[:, 1] / points_m[:, 2] + self.cy,
-            ],
-            axis=1,
-        )
-
-
-@lru_cache(maxsize=4)
-def _pixel_rays(width: int, height: int, fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
-    u = (np.arange(width, dtype=np.float64) - cx) / fx
-    v = (np.arange(height, dtype=np.float64) - cy) / fy
-    rays = np.empty((height, width, 3), dtype=np.float32)
-    rays[:, :, 0] = u[None, :]
-    rays[:, :, 1] = v[:, None]
-    rays[:, :, 2] = 1.0
-    rays = rays.reshape(-1, 3)
-    rays.setflags(write=False)
-    return rays
-
-
-@dataclass(frozen=True)
-class ScannerModel:
-    """One PhoXi model: the maker's figures (mm, deg) and the simulator's noise constants."""
-
-    name: str
-    scanning_range_mm: tuple[float, float]
-    sweet_spot_mm: float
-    scan_area_mm: tuple[float, float]
-    baseline_mm: float
-    projector_fov_deg: tuple[float, float]
-    temporal_noise_mm: float
-    resolutions: dict = field(default_factory=lambda: {RESOLUTION_HIGH: (2064, 1544), RESOLUTION_LOW: (1032, 772)})
-    noise: NoiseModel = field(default_factory=NoiseModel)
-
-    def intrinsics(self, resolution: int = RESOLUTION_HIGH) -> CameraIntrinsics:
-        if resolution not in self.resolutions:
-            raise ValueError(f"unknown resolution {resolution!r}: 1 = High, 0 = Low")
-        width, height = self.resolutions[resolution]
-        # the image spans the scanning area's width at the sweet spot; pixels are square
-        f = width * self.sweet_spot_mm / self.scan_area_mm[0]
-        return CameraIntrinsics(width, height, f, f, (width - 1) / 2.0, (height - 1) / 2.0)
-
-    def projector_pose(self) -> np.ndarray:
-        """Camera -> projector frame (4x4, metres): ``baseline`` along +x, z axis through the sweet spot."""
-        b = self.baseline_mm / 1000.0
-        d = self.sweet_spot_mm / 1000.0
-        z = np.array([-b, 0.0, d]) / math.hypot(b, d)
-        y = np.array([0.0, 1.0, 0.0])
-        pose = np.eye(4)
-        pose[:3, :3] = np.column_stack([np.cross(y, z), y, z])
-        pose[:3, 3] = [b, 0.0, 0.0]
-        return pose
-
-    def supported_resolutions(self) -> list[tuple[int, int]]:
-        return [self.resolutions[k] for k in sorted(self.resolutions, reverse=True)]
-
-
-def load_scanner_models(path: str | Path | None = None) -> dict[str, ScannerModel]:
-    """Read ``config/phoxi_models.yaml`` (or ``path``); errors name the file and the bad key."""
-    path = Path(path) if path else PHOXI_MODELS_FILE
-    data = read_yaml(path)
-    where = str(path)
-    resolutions = require(data, "resolutions", where)
-    res = {}
-    for key, code in (("high", RESOLUTION_HIGH), ("low", RESOLUTION_LOW)):
-        size = vector(require(resolutions, key, f"{where}: resolutions"), 2, f"{where}: resolutions.{key}")
-        if np.any(size < 1) or np.any(size != np.round(size)):
-            raise ConfigError(f"{where}: resolutions.{key} must be two positive integers")
-        res[code] = (int(size[0]), int(size[1]))
-    noise_entry = data.get("noise_model") or {}
-    if not isinstance(noise_entry, dict):
-        raise ConfigError(f"{where}: noise_model must be a mapping")
-    unknown = set(noise_entry) - set(NoiseModel.__dataclass_fields__)
-    if unknown:
-        raise ConfigError(f"{where}: noise_model: unknown key(s) {sorted(unknown)}")
-    noise = NoiseModel(**{k: positive(v, f"{where}: noise_model.{k}") for k, v in noise_entry.items()})
-    models_entry = require(data, "models", where)
-    if not isinstance(models_entry, dict) or not models_entry:
-        raise ConfigError(f"{where}: models must be a non-empty mapping of name -> figures")
-    models = {}
-    for name, entry in models_entry.items():
-        here = f"{where}: models.{name}"
-        rng = vector(require(entry, "scanning_range_mm", here), 2, f"{here}.scanning_range_mm")
-        sweet = positive(require(entry, "sweet_spot_mm", here), f"{here}.sweet_spot_mm")
-        if not 0 < rng[0] < sweet < rng[1]:
-            raise ConfigError(f"{here}: need 0 < scanning_range_mm[0] < sweet_spot_mm < scanning_range_mm[1]")
-        area = vector(require(entry, "scan_area_mm", here), 2, f"{here}.scan_area_mm")
-        fov = vector(require(entry, "projector_fov_deg", here), 2, f"{here}.projector_fov_deg")
-        if np.any(area <= 0) or np.any(fov <= 0) or np.any(fov >= 180):
-            raise ConfigError(f"{here}: scan_area_mm must be positive and projector_fov_deg within (0, 180)")
-        models[str(name)] = ScannerModel(
-            name=str(name),
-            scanning_range_mm=(float(rng[0]), float(rng[1])),
-            sweet_spot_mm=sweet,
-            scan_area_mm=(float(area[0]), float(area[1])),
-            baseline_mm=positive(require(entry, "baseline_mm", here), f"{here}.baseline_mm"),
-            projector_fov_deg=(float(fov[0]), float(fov[1])),
-            temporal_noise_mm=positive(require(entry, "temporal_noise_mm", here), f"{here}.temporal_noise_mm"),
-            resolutions=res,
-            noise=noise,
-        )
-    return models
-
-
-def load_scanner_model(name: str, path: str | Path | None = None) -> ScannerModel:
-    models = load_scanner_models(path)
-    if name not in models:
-        raise ConfigError(f"unknown PhoXi model {name!r}; models in {path or PHOXI_MODELS_FILE}: {', '.join(models)}")
-    return models[name]
-
-
-# -------------------------------------------------------------------------------------------- geometry
-@dataclass(frozen=True)
-class SceneGeometry:
-    """Triangles of the scene in one frame (metres) with an outward unit normal, albedo and owner per face."""
-
-    triangles: np.ndarray  # (F, 3, 3)
-    normals: np.ndarray  # (F, 3)
-    albedo: np.ndarray  # (F,)
-    owner: np.ndarray  # (F,) index into names
-    names: tuple[str, ...]
-
-    @classmethod
-    def empty(cls) -> SceneGeometry:
-        return cls(np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros(0, dtype=np.int32), ())
-
-    @classmethod
-    def from_trimesh(cls, mesh, name: str, albedo: float) -> SceneGeometry:
-        triangles = np.asarray(mesh.triangles, dtype=float)
-        normals = np.asarray(mesh.face_normals, dtype=float)
-        n = len(triangles)
-        return cls(triangles, normals, np.full(n, float(albedo)), np.zeros(n, dtype=np.int32), (name,))
-
-    def __len__(self) -> int:
-        return len(self.triangles)
-
-    def transformed(self, pose: np.ndarray) -> SceneGeometry:
-        rotation, translation = pose[:3, :3], pose[:3, 3]
-        return SceneGeometry(
-            self.triangles @ rotation.T + translation, self.normals @ rotation.T, self.albedo, self.owner, self.names
-        )
-
-    @staticmethod
-    def concatenate(parts: list[SceneGeometry]) -> SceneGeometry:
-        parts = [p for p in parts if len(p)]
-        if not parts:
-            return SceneGeometry.empty()
-        names, owners, offset = [], [], 0
-        for part in parts:
-            owners.append(part.owner + offset)
-            names.extend(part.names)
-            offset += len(part.names)
-        return SceneGeometry(
-            np.concatenate([p.triangles for p in parts]),
-            np.concatenate([p.normals for p in parts]),
-            np.concatenate([p.albedo for p in parts]),
-            np.concatenate(owners).astype(np.int32),
-            tuple(names),
-        )
-
-    def owner_names(self, faces: np.ndarray) -> np.ndarray:
-        """Owner name per face index (-1 -> '')."""
-        lookup = np.array([*self.names, ""], dtype=object)
-        faces = np.asarray(faces)
-        return lookup[np.where(faces >= 0, self.owner[np.clip(faces, 0, None)], len(self.names))]
-
-
-def primitive_mesh(kind: str, size=None, radius: float | None = None, length: float | None = None, sections: int = 48):
-    """A box (size), cylinder (radius, length along z) or sphere centred at the origin, as URDF and the scene define them."""
-    import trimesh
-
-    if kind == "box":
-        return trimesh.creation.box(extents=np.asarray(size, dtype=float))
-    if kind == "cylinder":
-        return trimesh.creation.cylinder(radius=float(radius), height=float(length), sections=sections)
-    if kind == "sphere":
-        return trimesh.creation.icosphere(subdivisions=3, radius=float(radius))
-    raise ConfigError(f"unsupported primitive {kind!r} (box, cylinder, sphere)")
-
-
-def albedo_of(color_rgba) -> float:
-    """Diffuse albedo from a display colour: its luminance (Rec. 709), kept within [0.05, 1]."""
-    r, g, b = (float(c) for c in color_rgba[:3])
-    return float(np.clip(0.2126 * r + 0.7152 * g + 0.0722 * b, 0.05, 1.0))
-
-
-def _load_mesh(path: Path, scale: float):
-    import trimesh
-
-    mesh = trimesh.load(str(path), force="mesh")
-    mesh.apply_scale(scale)
-    return mesh
-
-
-def scene_geometry(scene: Scene, exclude_groups: tuple[str, ...] = ()) -> SceneGeometry:
-    """The scene file's objects and the part as triangles in the scene frame (albedo from their colours)."""
-    parts = []
-    for obj in scene.objects:
-        if obj.group is not None and obj.group in exclude_groups:
-            continue
-        if obj.type == "chessboard":
-            parts.append(scene_chessboard_geometry(obj))
-            continue
-        if obj.type == "mesh":
-            mesh = _load_mesh(obj.mesh, obj.mesh_scale)
-        else:
-            mesh = primitive_mesh(obj.type, obj.size_m, obj.radius_m, obj.length_m)
-        parts.append(SceneGeometry.from_trimesh(mesh, obj.name, albedo_of(obj.color_rgba)).transformed(obj.pose))
-    if scene.part is not None:
-        mesh = _load_mesh(scene.part.mesh, scene.part.scale_to_m)
-        parts.append(
-            SceneGeometry.from_trimesh(mesh, scene.part.name, albedo_of(scene.part.color_rgba)).transformed(
-                scene.part.pose
-            )
-        )
-    return SceneGeometry.concatenate(parts)
-
-
-class RobotGeometry:
-    """The robot's link shapes from its URDF (visual elements by default) in link frames, posed per frame.
-
-    ``mesh_resolver`` maps a URDF mesh filename (``package://...``, ``file://...``) to a local path; meshes it
-    cannot resolve are left out and listed in :attr:`skipped`.
-    """
-
-    def __init__(self, urdf, elements: str = "visual", albedo: float = ROBOT_ALBEDO, mesh_resolver=None):
-        table = urdf.visual if elements == "visual" else urdf.collision
-        self.links: dict[str, SceneGeometry] = {}
-        self.skipped: list[str] = []
-        for link, geometries in table.items():
-            parts = []
-            for geometry in geometries:
-                if geometry.type == "mesh":
-                    path = _resolve_mesh(geometry.mesh, mesh_resolver)
-                    if path is None:
-                        self.skipped.append(f"{link}: {geometry.mesh}")
-                        continue
-                    mesh = _load_mesh(path, 1.0)
-                    mesh.apply_scale(np.asarray(geometry.scale, dtype=float))
-                else:
-                    mesh = primitive_mesh(geometry.type, geometry.size, geometry.radius, geometry.length)
-                parts.append(SceneGeometry.from_trimesh(mesh, link, albedo).transformed(geometry.origin))
-            if parts:
-                merged = SceneGeometry.concatenate(parts)
-                self.links[link] = SceneGeometry(
-                    merged.triangles, merged.normals, merged.albedo, np.zeros(len(merged), np.int32), (link,)
-                )
-
-    @property
-    def link_names(self) -> list[str]:
-        return list(self.links)
-
-    def posed(self, link_poses: dict) -> SceneGeometry:
-        """Triangles of the links whose pose (4x4, scene frame) is given; other links are left out."""
-        return SceneGeometry.concatenate(
-            [
-                geometry.transformed(np.asarray(link_poses[link]))
-                for link, geometry in self.links.items()
-                if link in link_poses
-            ]
-        )
-
-
-def _resolve_mesh(filename: str | None, resolver) -> Path | None:
-    if not filename:
-        return None
-    if resolver is not None:
-        resolved = resolver(filename)
-        return Path(resolved) if resolved else None
-    if filename.startswith("file://"):
-        filename = filename[len("file://") :]
-    path = Path(filename)
-    return path if path.is_absolute() and path.is_file() else None
 
 
 # ------------------------------------------------------------------------------------------ ray casting
@@ -484,7 +160,7 @@ class ScanSettings:
 
     def exposure_ms(self) -> float:
         if not 0 <= self.single_pattern_exposure < len(SINGLE_PATTERN_EXPOSURES_MS):
-            raise ValueError(f"single_pattern_exposure must be an index 0..{len(SINGLE_PATTERN_EXPOSURES_MS) - 1}")
+            raise InputError(f"single_pattern_exposure must be an index 0..{len(SINGLE_PATTERN_EXPOSURES_MS) - 1}")
         return SINGLE_PATTERN_EXPOSURES_MS[self.single_pattern_exposure]
 
     def effective_shutter_multiplier(self) -> int:
@@ -608,9 +284,7 @@ class StructuredLightScanner:
             settings=settings,
             frame_index=int(frame_index),
             rays=rays,
-            inverse_ray_norms=_inverse_norms(
-                intrinsics.width, intrinsics.height, intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy
-            ),
+            inverse_ray_norms=_inverse_norms(intrinsics),
             rotation=rotation.astype(np.float32),
             origin=pose[:3, 3].astype(np.float32),
             projector_world=(pose @ np.append(self.projector[:3, 3], 1.0))[:3].astype(np.float32),
@@ -717,8 +391,8 @@ class StructuredLightScanner:
 
 
 @lru_cache(maxsize=4)
-def _inverse_norms(width: int, height: int, fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
-    rays = _pixel_rays(width, height, fx, fy, cx, cy)
+def _inverse_norms(intrinsics: CameraIntrinsics) -> np.ndarray:
+    rays = intrinsics.pixel_rays()
     inverse = (1.0 / np.sqrt(np.einsum("ij,ij->i", rays.astype(np.float64), rays))).astype(np.float32)
     inverse.setflags(write=False)
     return inverse
@@ -749,30 +423,3 @@ def transform_points(points: np.ndarray, normals: np.ndarray, valid: np.ndarray,
     points_out[~valid] = 0.0
     normals_out[~valid] = 0.0
     return points_out, normals_out
-
-
-# --------------------------------------------------------------------------------------- chessboards
-WHITE_ALBEDO = 0.9
-BLACK_ALBEDO = 0.08
-
-
-def chessboard_geometry(board_pose: np.ndarray, inner_corners=(8, 11), square_m: float = 0.03, thickness_m=0.003):
-    """SceneGeometry (frame of ``board_pose``'s parent) of a chessboard: (rows+1) x (cols+1) squares of alternating
-    albedo, printed (0.1 mm) on a white backing board with a one-square margin (the quiet zone OpenCV needs)."""
-    backing = np.eye(4)
-    backing[2, 3] = -thickness_m / 2.0  # its face at z = 0: the corners' plane
-    size = chessboard_board_size(inner_corners, square_m, thickness_m)
-    parts = [SceneGeometry.from_trimesh(primitive_mesh("box", size=size), "board", WHITE_ALBEDO).transformed(backing)]
-    printed = SceneGeometry.from_trimesh(
-        primitive_mesh("box", size=(square_m, square_m, 0.0002)), "square", BLACK_ALBEDO
-    )
-    for x, y in chessboard_dark_squares(inner_corners, square_m):
-        square = np.eye(4)
-        square[:2, 3] = [x, y]  # printed: 0.1 mm proud of the face
-        parts.append(printed.transformed(square))
-    return SceneGeometry.concatenate(parts).transformed(np.asarray(board_pose, dtype=float))
-
-
-def scene_chessboard_geometry(board) -> object:
-    """SceneGeometry of a scene file's chessboard object (station.SceneObject of type chessboard)."""
-    return chessboard_geometry(board.pose, board.inner_corners, board.square_m, board.thickness_m)

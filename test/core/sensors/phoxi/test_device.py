@@ -1,28 +1,31 @@
 """The simulated PhoXi device: connection, acquisition, frame ids, coordinate spaces, files; messages; reconfigure."""
 
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+from agiprobot_measurement.common.geometry import pose_matrix
+from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.sensors.phoxi import reconfigure as phoxi_config
 from agiprobot_measurement.sensors.phoxi.device import (
     CUSTOM_SPACE,
+    MAX_TRANSLATION_M,
     ROBOT_SPACE,
     PhoxiDevice,
     PhoxiError,
+    check_transformation,
+    default_allowed_save_dirs,
+    default_output_dir,
     frame_output,
     load_camera_config,
+    overridden_pose,
     transform_from_quaternion,
 )
+from agiprobot_measurement.sensors.phoxi.models import RESOLUTION_HIGH, RESOLUTION_LOW, load_scanner_model
 from agiprobot_measurement.sensors.phoxi.point_cloud_io import read_ply, read_point_tiff
-from agiprobot_measurement.sensors.phoxi.renderer import (
-    RESOLUTION_HIGH,
-    RESOLUTION_LOW,
-    SceneGeometry,
-    load_scanner_model,
-    primitive_mesh,
-)
+from agiprobot_measurement.sensors.phoxi.scene_geometry import SceneGeometry, primitive_mesh
 
 
 def _wall(depth_m=0.65):
@@ -123,6 +126,46 @@ def test_transformations_must_be_proper(device):
     np.testing.assert_allclose(transform_from_quaternion([0, 0, 0], [0, 0, 2, 2])[:3, 0], [0, 1, 0], atol=1e-12)
 
 
+@pytest.mark.parametrize(
+    "translation, quaternion, words",
+    [
+        ([1e308, 0, 0], [0, 0, 0, 1], ["translation", "beyond the 1000 m"]),
+        ([0, 0, 1001], [0, 0, 0, 1], ["translation", "1e+03 m long"]),
+        ([0, np.inf, 0], [0, 0, 0, 1], ["must be finite", "inf"]),
+        ([0, 0, 0], [np.nan, 0, 0, 1], ["must be finite", "nan"]),
+        ([0, 0, 0], [1e308, 1e308, 1e308, 1e308], ["too large to normalise"]),
+        ([0, 0, 0], [0, 0, 0, 1e-300], ["zero quaternion"]),
+    ],
+)
+def test_absurd_transformations_are_refused_and_later_frames_stay_finite(device, translation, quaternion, words):
+    good = transform_from_quaternion([0.1, 0.2, 0.3], [0, 0, 0, 1])
+    device.set_transformation(good, CUSTOM_SPACE, set_space=True, save_settings=False)
+    with pytest.raises(PhoxiError) as info:
+        device.set_transformation(transform_from_quaternion(translation, quaternion), CUSTOM_SPACE, True, False)
+    for word in words:
+        assert word in str(info.value)
+    np.testing.assert_array_equal(device.output_transform(), good)  # the refusal changed nothing
+    points, normals = frame_output(device.trigger(CAMERA))
+    assert np.all(np.isfinite(points)) and np.all(np.isfinite(normals))
+
+
+def test_check_transformation_refuses_matrices_that_are_not_rigid():
+    np.testing.assert_array_equal(check_transformation(np.eye(4)), np.eye(4))
+    at_limit = np.eye(4)
+    at_limit[0, 3] = MAX_TRANSLATION_M
+    check_transformation(at_limit)
+    sheared, scaled, bottom = np.eye(4), np.diag([2.0, 2.0, 2.0, 1.0]), np.eye(4)
+    sheared[0, 1] = 0.1
+    bottom[3, 0] = 1.0
+    for matrix, word in ((sheared, "not a proper rotation"), (scaled, "orthonormal"), (bottom, "last row")):
+        with pytest.raises(PhoxiError, match=word):
+            check_transformation(matrix)
+    with pytest.raises(PhoxiError, match="finite 4x4"):
+        check_transformation(np.eye(3))
+    # huge but finite components are only a quaternion to normalise
+    np.testing.assert_allclose(transform_from_quaternion([0, 0, 0], [0, 0, 1e300, 1e300])[:3, 0], [0, 1, 0], atol=1e-12)
+
+
 # ----------------------------------------------------------------------------------------- files
 def test_save_frame_writes_a_ply_that_reloads_with_the_same_points(device):
     frame = device.trigger(CAMERA)
@@ -143,10 +186,10 @@ def test_refused_paths_write_nothing(device, tmp_path):
     frame = device.trigger(CAMERA)
     before = sorted(p.name for p in tmp_path.rglob("*"))
     for requested in ("../escape.ply", str(tmp_path / "escape.ply"), ""):
-        with pytest.raises(PhoxiError, match=r"outside the output directory|empty path"):
+        with pytest.raises(PhoxiError, match=r"is not allowed in|outside the allowed folder|empty"):
             device.save_frame(frame, requested)
     device.mark_published(frame)
-    with pytest.raises(PhoxiError, match="outside the output directory"):
+    with pytest.raises(PhoxiError, match=r"'\.\.' is not allowed.*names resolve under"):
         device.save_last_frame("../../escape.ply")
     assert sorted(p.name for p in tmp_path.rglob("*")) == before
 
@@ -168,6 +211,117 @@ def test_save_last_frame_by_extension(device):
     np.testing.assert_array_equal(read_point_tiff(device.save_last_frame("last.tif")), points)
     ptx = device.save_last_frame("last.ptx").read_text().splitlines()
     assert ptx[:2] == [str(frame.width), str(frame.height)] and len(ptx) == 10 + frame.width * frame.height
+
+
+# ------------------------------------------------------------------------------------- file policy
+def _policy_device(tmp_path, allowed=()):
+    root = tmp_path / "cwd"
+    root.mkdir(exist_ok=True)
+    model = replace(load_scanner_model("M"), resolutions={RESOLUTION_HIGH: (40, 30), RESOLUTION_LOW: (20, 15)})
+    dev = PhoxiDevice(model, _wall(), root, allowed_dirs=allowed)
+    dev.connect("")
+    frame = dev.trigger(CAMERA)
+    dev.mark_published(frame)
+    return dev, frame
+
+
+def _files(folder):
+    return sorted(str(p) for p in folder.rglob("*"))
+
+
+def test_a_good_relative_name_resolves_under_the_working_directory_and_is_replaced_atomically(tmp_path):
+    device, frame = _policy_device(tmp_path)
+    path = device.save_frame(frame, "run/frame.ply")
+    assert path == tmp_path / "cwd" / "run" / "frame.ply" and path.is_file()
+    # the driver overwrites: a second save replaces the file, with no temporary left behind
+    second = device.trigger(CAMERA)
+    assert device.save_frame(second, "run/frame.ply") == path
+    assert f"frame {second.index}" in " ".join(read_ply(path)["comments"])
+    assert [p.name for p in path.parent.iterdir()] == ["frame.ply"]
+    assert device.save_frame(frame, str(path)) == path  # an absolute name inside the root
+
+
+@pytest.mark.parametrize(
+    "requested, words",
+    [
+        ("../x.ply", ["'..' is not allowed", "names resolve under", "cwd"]),
+        ("run/../../x.ply", ["'..' is not allowed"]),
+        ("~/x.ply", ["'~' is not expanded", "names resolve under"]),
+        ("/etc/x.ply", ["/etc/x.ply is outside the allowed folder", "cwd"]),
+        ("run/.ply", []),  # a hidden file name: allowed, below
+        (".", ["is a directory"]),
+    ],
+)
+def test_escaping_names_are_refused_with_the_root_named(tmp_path, requested, words):
+    device, frame = _policy_device(tmp_path)
+    if not words:
+        assert device.save_frame(frame, requested) == tmp_path / "cwd" / requested
+        return
+    before = _files(tmp_path)
+    for save in (device.save_frame, lambda _frame, name: device.save_last_frame(name)):
+        with pytest.raises(PhoxiError) as info:
+            save(frame, requested if requested != "." else "./")
+        if requested != ".":
+            for word in words:
+                assert word in str(info.value)
+    assert _files(tmp_path) == before
+
+
+@pytest.mark.parametrize("requested", ["", "   "])
+def test_empty_names_are_refused(tmp_path, requested):
+    device, frame = _policy_device(tmp_path)
+    with pytest.raises(PhoxiError, match="empty"):
+        device.save_frame(frame, requested)
+    assert _files(tmp_path / "cwd") == []
+
+
+def test_a_symlink_out_of_the_root_is_refused(tmp_path):
+    device, frame = _policy_device(tmp_path)
+    outside = tmp_path / "elsewhere"
+    outside.mkdir()
+    (tmp_path / "cwd" / "link").symlink_to(outside, target_is_directory=True)
+    with pytest.raises(PhoxiError, match="outside the allowed folder"):
+        device.save_frame(frame, "link/x.ply")
+    with pytest.raises(PhoxiError, match="outside the allowed folder"):
+        device.save_last_frame("link/x.ptx")
+    (tmp_path / "cwd" / "file_link.ply").symlink_to(outside / "target.ply")
+    with pytest.raises(PhoxiError, match="outside the allowed folder"):
+        device.save_frame(frame, "file_link.ply")
+    assert list(outside.iterdir()) == []
+
+
+def test_absolute_names_may_point_into_the_allowed_folders_only(tmp_path):
+    allowed = tmp_path / "ros_home"
+    allowed.mkdir()
+    device, frame = _policy_device(tmp_path, allowed=[allowed])
+    assert device.save_last_frame(str(allowed / "last.ply")) == allowed / "last.ply"
+    with pytest.raises(PhoxiError) as info:
+        device.save_frame(frame, str(tmp_path / "x.ply"))
+    assert str(tmp_path / "cwd") in str(info.value) and str(allowed) in str(info.value)
+    assert not (tmp_path / "x.ply").exists()
+    defaults = default_allowed_save_dirs({"ROS_HOME": "/rh"}, cwd="/work")
+    assert defaults == [Path("/work"), Path("/rh"), Path("/tmp")]
+
+
+def test_raw_formats_are_not_supported_by_the_simulator(tmp_path):
+    device, frame = _policy_device(tmp_path)
+    for requested in ("frame.praw", "frame.PRAWF"):
+        with pytest.raises(PhoxiError, match="not supported by the simulator"):
+            device.save_frame(frame, requested)
+        with pytest.raises(PhoxiError, match="not supported by the simulator"):
+            device.save_last_frame(requested)
+    assert _files(tmp_path / "cwd") == []
+
+
+def test_writers_check_everything_before_they_run(tmp_path):
+    device, frame = _policy_device(tmp_path)
+    with pytest.raises(PhoxiError):
+        device.last_frame_writer("../x.ptx")
+    write = device.last_frame_writer("late.ptx")
+    assert not (tmp_path / "cwd" / "late.ptx").exists()  # nothing written until the writer runs (outside the lock)
+    device.trigger(CAMERA)  # the device moves on; the writer keeps the frame it was given
+    lines = write().read_text().splitlines()
+    assert lines[:2] == [str(frame.width), str(frame.height)]
 
 
 # ------------------------------------------------------------------------------------- messages
@@ -267,3 +421,97 @@ def test_camera_config_errors_name_the_key(tmp_path):
     path.write_text("model: L\npose:\n  xyz_m: [1, 2]\n  rpy_rad: [0, 0, 0]\n")
     with pytest.raises(ConfigError, match=r"pose\.xyz_m: expected 3 numbers"):
         load_camera_config(path)
+
+
+# ------------------------------------------------------------------ capture with poses, node logic in the core
+class _Poses:
+    """ScenePoses double that counts what the device asks."""
+
+    def __init__(self, camera=CAMERA):
+        self.camera = camera
+        self.camera_calls = 0
+        self.link_calls = []
+
+    def camera_pose(self):
+        self.camera_calls += 1
+        return self.camera
+
+    def link_poses(self, link_names):
+        self.link_calls.append(list(link_names))
+        return {}
+
+
+def test_capture_asks_for_poses_only_for_a_new_frame(device):
+    poses = _Poses()
+    frame = device.capture(-1, poses)
+    assert frame.index == 0 and poses.camera_calls == 1
+    assert poses.link_calls == []  # no robot: no link poses to ask for
+    assert device.capture(0, poses) is frame and poses.camera_calls == 1
+    with pytest.raises(PhoxiError, match="Frame 5 is not available"):
+        device.capture(5, poses)
+
+
+def test_save_captured_frame_refuses_a_bad_path_before_rendering(device, tmp_path):
+    poses = _Poses()
+    with pytest.raises(PhoxiError, match="outside the allowed folder"):
+        device.save_captured_frame(-1, str(tmp_path / "elsewhere.ply"), poses)
+    assert poses.camera_calls == 0 and device.next_index == 0
+    frame, path = device.save_captured_frame(-1, "sub/frame.ply", poses, organized=False)
+    assert path == device.output_dir / "sub" / "frame.ply" and path.is_file()
+    assert len(read_ply(path)["x"]) == int(frame.valid.sum())
+
+
+def test_reconfigure_applies_settings_and_puts_back_a_refused_space(device):
+    config = dict(phoxi_config.defaults)
+    config.update(coordinate_space=ROBOT_SPACE, resolution=RESOLUTION_LOW, confidence=1.5)
+    refusal = device.reconfigure(config)
+    assert "RobotSpace has no transformation yet" in refusal
+    assert config["coordinate_space"] == device.coordinate_space == 1
+    assert device.settings.resolution == RESOLUTION_LOW and device.settings.confidence == 1.5
+    config["coordinate_space"] = CUSTOM_SPACE
+    assert device.reconfigure(config) == "" and device.coordinate_space == CUSTOM_SPACE
+
+
+def test_reconfigure_puts_back_numbers_that_are_not_finite(device):
+    previous = dict(phoxi_config.defaults, confidence=2.0)
+    config = dict(previous, confidence=float("nan"), free_run_rate_hz=float("inf"), resolution=RESOLUTION_LOW)
+    refusal = device.reconfigure(config, previous=previous)
+    assert "confidence nan refused: not a finite number (kept 2.0)" in refusal
+    assert "free_run_rate_hz inf refused" in refusal
+    assert config["confidence"] == 2.0 and config["free_run_rate_hz"] == phoxi_config.defaults["free_run_rate_hz"]
+    assert device.settings.confidence == 2.0 and device.settings.resolution == RESOLUTION_LOW
+    frame = device.trigger(CAMERA)
+    assert frame.valid.any()
+
+
+def test_capturing_modes_and_free_run_need_a_connection(device):
+    assert device.supported_capturing_modes() == [(160, 120), (80, 60)]
+    assert device.free_running(0) and not device.free_running(1)
+    device.disconnect()
+    assert not device.free_running(0)
+    with pytest.raises(PhoxiError, match="not connected"):
+        device.supported_capturing_modes()
+    with pytest.raises(PhoxiError, match="not connected"):
+        device.require_connected()
+
+
+def test_device_refusals_are_input_errors():
+    assert issubclass(PhoxiError, InputError)
+    with pytest.raises(InputError, match="transformation must be finite"):
+        transform_from_quaternion([0, 0, np.nan], [0, 0, 0, 1])
+    np.testing.assert_allclose(transform_from_quaternion([1, 2, 3], [0, 0, 0, 2]), pose_matrix([1, 2, 3], [0, 0, 0]))
+
+
+def test_overridden_pose_replaces_only_what_is_given():
+    pose = pose_matrix([1.0, 2.0, 3.0], [0.1, -0.2, 0.3])
+    np.testing.assert_allclose(overridden_pose(pose), pose)
+    moved = overridden_pose(pose, xyz_m=np.array([0.0, 0.5, 1.0]))
+    np.testing.assert_allclose(moved[:3, :3], pose[:3, :3], atol=1e-12)
+    np.testing.assert_allclose(moved[:3, 3], [0.0, 0.5, 1.0])
+    turned = overridden_pose(pose, rpy_rad=np.array([0.0, 0.0, 1.0]))
+    np.testing.assert_allclose(turned, pose_matrix([1.0, 2.0, 3.0], [0.0, 0.0, 1.0]), atol=1e-12)
+
+
+def test_default_output_dir_follows_ros_home():
+    assert default_output_dir({"ROS_HOME": "/tmp/rh"}) == Path("/tmp/rh/phoxi_frames")
+    assert default_output_dir({}) == Path("~/.ros/phoxi_frames").expanduser()

@@ -9,18 +9,22 @@ import pytest
 from agiprobot_measurement.common.geometry import look_at, matrix_to_rpy
 from agiprobot_measurement.motion.kinematics import KinematicModel
 from agiprobot_measurement.sensors.phoxi.device import load_camera_config
-from agiprobot_measurement.sensors.phoxi.renderer import (
+from agiprobot_measurement.sensors.phoxi.models import (
     RESOLUTION_HIGH,
     RESOLUTION_LOW,
-    RobotGeometry,
-    ScanSettings,
-    SceneGeometry,
-    StructuredLightScanner,
-    depth_sigma_mm,
     load_scanner_model,
     load_scanner_models,
-    primitive_mesh,
+)
+from agiprobot_measurement.sensors.phoxi.renderer import (
+    ScanSettings,
+    StructuredLightScanner,
+    depth_sigma_mm,
     rgb_texture,
+)
+from agiprobot_measurement.sensors.phoxi.scene_geometry import (
+    RobotGeometry,
+    SceneGeometry,
+    primitive_mesh,
     scene_geometry,
 )
 from agiprobot_measurement.station import ConfigError

@@ -1,0 +1,149 @@
+"""Set-cover input: the measurability matrix as column-wise sparse sets, per-view worst uncertainties and
+normalised costs (the first step of :func:`~agiprobot_measurement.planning.set_cover.solve_set_cover`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import sparse
+
+from agiprobot_measurement.errors import InputError
+
+__all__ = [
+    "ColumnSets",
+    "SetCoverError",
+    "column_max",
+    "measurable_columns",
+    "normalised_costs",
+    "worst_uncertainty",
+]
+
+
+class SetCoverError(InputError):
+    """Invalid input to the set-cover solvers."""
+
+
+@dataclass
+class ColumnSets:
+    """Column-wise sparse sets: column j holds the rows ``indices[indptr[j]:indptr[j + 1]]`` (sorted)."""
+
+    indptr: np.ndarray
+    indices: np.ndarray
+    n_rows: int
+
+    @property
+    def n_cols(self) -> int:
+        return self.indptr.size - 1
+
+    def sizes(self) -> np.ndarray:
+        return np.diff(self.indptr)
+
+    def col(self, j: int) -> np.ndarray:
+        return self.indices[self.indptr[j] : self.indptr[j + 1]]
+
+    def take(self, which: np.ndarray) -> ColumnSets:
+        """The columns ``which`` (same rows), renumbered 0.."""
+        sizes = self.indptr[which + 1] - self.indptr[which]
+        indptr = np.zeros(which.size + 1, dtype=np.int64)
+        np.cumsum(sizes, out=indptr[1:])
+        # Flat positions of all entries of the chosen columns, without a Python loop.
+        pos = np.repeat(self.indptr[which] - indptr[:-1], sizes) + np.arange(indptr[-1])
+        return ColumnSets(indptr, self.indices[pos], self.n_rows)
+
+    def transpose(self) -> ColumnSets:
+        csc = sparse.csc_array(
+            (np.ones(self.indices.size, dtype=bool), self.indices, self.indptr), shape=(self.n_rows, self.n_cols)
+        )
+        csr = csc.tocsr()
+        csr.sort_indices()
+        return ColumnSets(csr.indptr, csr.indices, self.n_cols)
+
+
+def measurable_columns(matrix) -> tuple[ColumnSets, np.ndarray | None]:
+    """Canonical column sets of the measurable entries and, for numeric input, their values."""
+    if sparse.issparse(matrix):
+        csc = matrix.tocsc()
+        if csc is matrix and not csc.has_canonical_format:
+            csc = csc.copy()  # canonicalising works in place: leave the caller's matrix alone
+    else:
+        dense = np.asarray(matrix)
+        if dense.ndim != 2:
+            raise SetCoverError(f"matrix must be 2-D (points x views), got shape {dense.shape}")
+        csc = sparse.csc_array(dense)
+    csc.sum_duplicates()
+    csc.sort_indices()
+    n_rows, n_cols = csc.shape
+    # int32 positions halve the memory traffic of every gather below (nnz stays far below 2**31 here).
+    small = csc.nnz < 2**31 - 1
+    indptr = csc.indptr.astype(np.int32, copy=False) if small else csc.indptr
+    indices = csc.indices.astype(np.int32, copy=False) if small else csc.indices
+    data = csc.data
+    if data.dtype == bool:
+        keep, values = data, None
+        all_kept = bool(keep.all())
+    elif np.issubdtype(data.dtype, np.number):
+        values = data.astype(np.float64, copy=False)
+        # Fast path for the usual input (all stored values positive and finite): two passes, no copies.
+        positive = values > 0.0
+        all_kept = bool(positive.all()) and (values.size == 0 or math.isfinite(float(values.max())))
+        if not all_kept:
+            if np.any(values < 0.0) or np.any(np.isinf(values)):
+                raise SetCoverError("uncertainty values in the matrix must be finite and non-negative")
+            keep = positive  # zero and NaN entries are not measurable
+    else:
+        raise SetCoverError(f"matrix dtype {data.dtype} is neither boolean nor numeric")
+    if all_kept:
+        return ColumnSets(indptr, indices, n_rows), values
+    col_of_entry = np.repeat(np.arange(n_cols), np.diff(indptr))
+    counts = np.bincount(col_of_entry[keep], minlength=n_cols)
+    new_indptr = np.zeros(n_cols + 1, dtype=indptr.dtype)
+    np.cumsum(counts, out=new_indptr[1:])
+    return ColumnSets(new_indptr, indices[keep], n_rows), None if values is None else values[keep]
+
+
+def column_max(cols: ColumnSets, values: np.ndarray) -> np.ndarray:
+    """Per-column maximum of ``values`` (aligned with ``cols.indices``); 0 for empty columns."""
+    out = np.zeros(cols.n_cols)
+    nonempty = np.nonzero(cols.sizes() > 0)[0]
+    if nonempty.size:
+        # reduceat segments run from one start to the next; empty columns in between hold no entries, so
+        # every segment is exactly one non-empty column.
+        out[nonempty] = np.maximum.reduceat(values, cols.indptr[nonempty])
+    return out
+
+
+def worst_uncertainty(cols: ColumnSets, values, uncertainties) -> np.ndarray | None:
+    """Worst (maximum) uncertainty per view, or None when nothing gives uncertainties."""
+    if uncertainties is None:
+        return None if values is None else column_max(cols, values)
+    if sparse.issparse(uncertainties) or np.ndim(uncertainties) == 2:
+        if tuple(uncertainties.shape) != (cols.n_rows, cols.n_cols):
+            raise SetCoverError(
+                f"uncertainties matrix has shape {tuple(uncertainties.shape)}, expected {(cols.n_rows, cols.n_cols)}"
+            )
+        u = sparse.csc_array(uncertainties, dtype=np.float64)
+        mask = sparse.csc_array(
+            (np.ones(cols.indices.size), cols.indices, cols.indptr), shape=(cols.n_rows, cols.n_cols)
+        )
+        u = sparse.csc_array(u.multiply(mask))  # only the measurable entries count
+        u.sum_duplicates()
+        if u.data.size and (np.any(u.data < 0.0) or not np.all(np.isfinite(u.data))):
+            raise SetCoverError("uncertainties must be finite and non-negative")
+        return column_max(ColumnSets(u.indptr, u.indices, cols.n_rows), u.data)
+    per_view = np.asarray(uncertainties, dtype=np.float64)
+    if per_view.shape != (cols.n_cols,):
+        raise SetCoverError(
+            f"uncertainties must be one value per view ({cols.n_cols}) or a points x views matrix, "
+            f"got shape {per_view.shape}"
+        )
+    if not np.all(np.isfinite(per_view)) or np.any(per_view < 0.0):
+        raise SetCoverError("uncertainties must be finite and non-negative")
+    return per_view
+
+
+def normalised_costs(costs: np.ndarray) -> np.ndarray:
+    top = float(costs.max()) if costs.size else 0.0
+    return costs / top if top > 0.0 else costs.copy()

@@ -1,0 +1,201 @@
+"""The robot side of viewpoints: anchor reachability, chunked metrology, scan-line extents and the mechanical
+check of a scan line (Cartesian path, joint jumps, collisions, partial acceptance, timing).
+
+Poses in the planning API are 4x4 mm; kinematics and IK work in metres (:func:`tip_pose_m` converts). Scan-line
+extents are mm from the view's anchor along the laser_emitter_frame's x axis; joint values rad, speeds mm/s.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from agiprobot_measurement.motion.cartesian import compute_cartesian_path
+from agiprobot_measurement.motion.time_parameterization import constant_speed_scan_trajectory
+from agiprobot_measurement.sensors.laser_line.model import MeasurabilityResult
+
+__all__ = [
+    "SCAN_ACCELERATION_MM_S2",
+    "estimate_scan_duration",
+    "evaluate_in_chunks",
+    "reachable_anchors",
+    "scan_line_extents",
+    "scan_path",
+    "tip_pose_m",
+    "verify_scan_line",
+]
+
+#: ramps at the joints' pace are short; a constant tip acceleration of this much is a fair estimate
+SCAN_ACCELERATION_MM_S2 = 500.0
+
+
+def tip_pose_m(pose_mm: np.ndarray) -> np.ndarray:
+    """A copy of 4x4 pose(s) with the translation in metres."""
+    pose = np.array(pose_mm, dtype=float)
+    pose[..., :3, 3] *= 1e-3
+    return pose
+
+
+def reachable_anchors(ik, anchor_poses_mm: np.ndarray, chunk: int = 20000) -> np.ndarray:
+    """Whether each anchor pose of the laser_emitter_frame has an IK solution within the joint limits."""
+    out = np.zeros(len(anchor_poses_mm), dtype=bool)
+    for start in range(0, len(anchor_poses_mm), chunk):
+        poses = tip_pose_m(anchor_poses_mm[start : start + chunk])
+        _, valid = ik.solve_all(poses)
+        out[start : start + chunk] = valid.any(axis=1)
+    return out
+
+
+def evaluate_in_chunks(
+    sensor_model,
+    poses: np.ndarray,
+    threshold_mm: float,
+    deflection: float,
+    report: Callable[[str, float, str], None] | None = None,
+) -> MeasurabilityResult:
+    """Batch metrology with progress (stage 'metrology'): chunks of views, merged into one result."""
+    n = len(poses)
+    if n == 0:
+        return sensor_model.evaluate_viewpoints_batch(np.zeros((0, 4, 4)), threshold_mm, deflection)
+    chunk = max(2000, n // 20)
+    parts = []
+    for start in range(0, n, chunk):
+        parts.append(sensor_model.evaluate_viewpoints_batch(poses[start : start + chunk], threshold_mm, deflection))
+        if report is not None:
+            report("metrology", min(start + chunk, n) / n, f"{min(start + chunk, n)} of {n} viewpoints")
+    indptr = [np.zeros(1, dtype=np.int64)]
+    offset = 0
+    for part in parts:
+        indptr.append(part.indptr[1:] + offset)
+        offset += part.nnz
+    return MeasurabilityResult(
+        parts[0].n_points,
+        n,
+        np.concatenate(indptr),
+        np.concatenate([p.point_indices for p in parts]),
+        np.concatenate([p.uncertainties for p in parts]),
+        np.concatenate([p.trajectory_distances for p in parts]),
+    )
+
+
+def scan_line_extents(t0_min, t0_max, overmeasure_mm: float, min_length_mm: float):
+    """Scan-line extents (lo, hi arrays, mm from the anchor along x) for arrays of the measured points' t0
+    ranges: the range plus the overmeasure at both ends, widened symmetrically to ``min_length_mm``."""
+    lo = np.asarray(t0_min, dtype=float) - overmeasure_mm
+    hi = np.asarray(t0_max, dtype=float) + overmeasure_mm
+    short = hi - lo < min_length_mm
+    middle = 0.5 * (lo + hi)
+    lo = np.where(short, middle - 0.5 * min_length_mm, lo)
+    hi = np.where(short, middle + 0.5 * min_length_mm, hi)
+    return lo, hi
+
+
+def estimate_scan_duration(scan_line: tuple[float, float], scan_speed_mm_s: float) -> float:
+    """Estimated duration (s) of a scan line's measurement trajectory before its mechanics are checked."""
+    length = abs(scan_line[1] - scan_line[0])
+    return length / scan_speed_mm_s + scan_speed_mm_s / SCAN_ACCELERATION_MM_S2
+
+
+def scan_path(view, line: tuple[float, float], step_mm: float, jump_rad: float, ik, collision, preferred_state):
+    """Cartesian path along the view's line from ``line[0]`` to ``line[1]`` (mm from the anchor along x).
+
+    Tries every collision-free IK branch of the start pose, nearest ``preferred_state`` first, and returns
+    the best ``(fraction, joint path, line)`` or None.
+    """
+    anchor = view.get_anchor_pose()
+    x_axis = anchor[:3, 0]
+    start_pose = anchor.copy()
+    start_pose[:3, 3] += line[0] * x_axis
+    end_pose = anchor.copy()
+    end_pose[:3, 3] += line[1] * x_axis
+    start_m, end_m = tip_pose_m(start_pose), tip_pose_m(end_pose)
+    solutions, valid = ik.solve_all(start_m[None], seeds=preferred_state[None])
+    branches = solutions[0][valid[0]]
+    if len(branches) == 0:
+        return None
+    branches = branches[collision.check_states(branches)]
+    if len(branches) == 0:
+        return None
+    order = np.argsort(np.abs(branches - preferred_state).max(axis=1))
+    best = None
+    for q_start in branches[order]:
+        result = compute_cartesian_path(
+            ik,
+            q_start,
+            end_m,
+            step_mm=step_mm,
+            jump_threshold_rad=jump_rad,
+            validity_checker=collision.check_states,
+        )
+        if len(result.joint_path) >= 2 and (best is None or result.fraction > best[0]):
+            best = (result.fraction, result.joint_path, line)
+        if best is not None and best[0] >= 1.0:
+            break
+    return best
+
+
+def verify_scan_line(
+    view,
+    settings: dict,
+    *,
+    ik,
+    collision,
+    kinematics,
+    limits,
+    preferred_state: np.ndarray,
+    scan_speed_mm_s: float,
+    connect_from_current: Callable[[np.ndarray], object] | None = None,
+) -> bool:
+    """Compute the view's measurement trajectory; shorten the view to what is executable or reject it.
+
+    ``settings``: trajectory_sample_step, minimum_required_overmeasure, joint_jump_threshold,
+    minimum_trajectory_length, plan_path_to_check_reachability (the generation's mechanics settings, mm / rad).
+    ``connect_from_current(q)`` plans a motion from the current state to ``q`` (None if there is none); it is
+    used when ``plan_path_to_check_reachability`` is set. Sets the view's mechanics fields; returns validity.
+    """
+    view.mechanics_verified = True
+    step = settings["trajectory_sample_step"]
+    overmeasure = settings["minimum_required_overmeasure"]
+    lo, hi = view.scan_line if not view.reversed else view.scan_line[::-1]
+    best = None
+    for direction in ((lo, hi), (hi, lo)):
+        attempt = scan_path(view, direction, step, settings["joint_jump_threshold"], ik, collision, preferred_state)
+        if attempt is not None and (best is None or attempt[0] > best[0]):
+            best = attempt
+        if best is not None and best[0] >= 1.0:
+            break
+    if best is None:
+        view.mechanics_valid = False
+        return False
+    fraction, path, line = best
+    start_t, end_t = line
+    achieved_end = start_t + fraction * (end_t - start_t)
+    achieved_lo, achieved_hi = sorted((start_t, achieved_end))
+    if achieved_hi - achieved_lo < settings["minimum_trajectory_length"] - 1e-6:
+        view.mechanics_valid = False
+        return False
+    if fraction < 1.0:
+        # partial acceptance: keep the points the laser line still sweeps, with the overmeasure margin
+        indices = np.asarray(view.get_measurable_surface_point_indices())
+        uncert = np.asarray(view.get_measurable_surface_point_uncertainties())
+        t0s = np.asarray(view.get_measurable_surface_point_trajectory_distances())
+        keep = (t0s >= achieved_lo + overmeasure - 1e-9) & (t0s <= achieved_hi - overmeasure + 1e-9)
+        if not keep.any():
+            view.mechanics_valid = False
+            return False
+        view.set_measurable_surface_point_indices_and_uncertainties(indices[keep], uncert[keep], t0s[keep])
+    if settings.get("plan_path_to_check_reachability") and connect_from_current is not None:
+        if connect_from_current(path[0]) is None:
+            view.mechanics_valid = False
+            return False
+    scan = constant_speed_scan_trajectory(
+        path, limits, scan_speed_mm_s, spacing_mm=None, tip_positions_m=kinematics.fk_batch(path)[:, :3, 3]
+    )
+    view.set_trajectory_for_measurement(scan.trajectory)
+    view.scan_line = (start_t, achieved_end)
+    view.reversed = False
+    view.scan_speed_mm_s = scan.scan_speed_mm_s
+    view.estimated_duration_s = scan.trajectory.duration
+    view.mechanics_valid = True
+    return True

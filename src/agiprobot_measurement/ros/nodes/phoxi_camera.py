@@ -1,0 +1,507 @@
+"""The node ``phoxi_camera`` (launched by nodes/phoxi_camera): a simulated PhoXi 3D scanner with the real driver's
+ROS interface (all names private).
+
+Frames are rendered from the scene file's objects, the part and the robot's links at their current pose from tf
+(:mod:`agiprobot_measurement.sensors.phoxi.renderer`); the device semantics (connection, acquisition, frame ids,
+coordinate spaces, files) live in :mod:`agiprobot_measurement.sensors.phoxi.device`. This node only wires
+parameters, services and topics, and gives the device the poses from tf (it is the device's ScenePoses).
+
+Services (every handler answers; errors are ``success: false`` with the reason, success is ``Ok``):
+  get_device_list, connect_camera, disconnect_camera (std_srvs/Empty), is_connected, is_acquiring (deprecated),
+  V2/is_connected, V2/is_acquiring, start_acquisition, stop_acquisition (std_srvs/Empty), V2/start_acquisition,
+  V2/stop_acquisition, trigger_image, get_frame, save_frame, V2/save_last_frame, get_hardware_indentification,
+  get_supported_capturing_modes, get_api_version, get_firmware_version, V2/set_coordinate_space,
+  V2/set_transformation, and the seed's names set_coordinate_space, set_transformation_matrix (same types).
+Topics: pointcloud, depth_map, texture, rgb_texture, confidence_map, normal_map, camera_info, /diagnostics (5 s),
+  parameter_descriptions / parameter_updates (dynamic_reconfigure).
+Parameters: the driver's (scanner_id, frame_id, latch_topics, topic_queue_size, init_from_config, organized_cloud,
+  and the reconfigurable ones of phoxi_config.py) and the simulator's: ~camera_config (config/phoxi_camera.yaml),
+  ~model, ~camera_xyz_m, ~camera_rpy_rad, ~parent_frame (override the config file), ~publish_tf (true: publish the
+  configured pose on tf; false: take the sensor's pose from tf), ~render_configured_pose (false; true with
+  publish_tf false: render at the configured pose, publish nothing on tf: a camera awaiting calibration),
+  ~scene (config/scene.yaml), ~robot_description
+  (name of the URDF parameter, "" for no robot), ~output_dir (where relative file names resolve; "" = the node's
+  working directory, as the driver's paths), ~allowed_save_dirs (list, or a string of paths separated by spaces or
+  colons: where absolute names may also point; default the working directory, ROS_HOME and /tmp), ~frame_buffer_size,
+  ~noise_seed, ~models (config/phoxi_models.yaml), ~hardware_identification, ~tf_timeout_s (0.5, for the sensor's
+  pose when it comes from tf).
+The simulated device has no settings of its own: it starts with the parameters whatever ``init_from_config`` says,
+``timeout`` is accepted and has no effect (a frame is rendered while the service waits), and triggering also works
+in free-run mode (it renders one more frame).
+
+Files: save_frame and V2/save_last_frame follow the package's file policy (common.files.FileRoot): ``..``, ``~`` and
+paths outside the allowed folders are refused with a message naming the root; an existing file is replaced atomically
+(the driver overwrites and its services have no flag for it); ``.praw``/``.prawf`` are refused (not supported by the
+simulator). The file is written outside the device lock, so a long export does not hold up the other services.
+"""
+
+__all__ = ["PhoxiCameraNode", "main"]
+
+import os
+import threading
+
+import numpy as np
+import rospy
+import tf2_ros
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from dynamic_reconfigure.server import Server as ReconfigureServer
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+from std_msgs.msg import Header
+from std_srvs.srv import Empty as StdEmpty
+from std_srvs.srv import EmptyResponse as StdEmptyResponse
+
+from agiprobot_measurement.common.config import ConfigError
+from agiprobot_measurement.errors import AgiprobotError, InternalError
+from agiprobot_measurement.msg import DeviceConnectionStatus, DeviceInformation, DeviceType, PhoXiSize
+from agiprobot_measurement.ros import phoxi_messages
+from agiprobot_measurement.ros.conversions import transform_stamped, transform_to_matrix
+from agiprobot_measurement.ros.params import file_param, vector_param
+from agiprobot_measurement.sensors.phoxi import reconfigure as phoxi_config
+from agiprobot_measurement.sensors.phoxi.device import (
+    API_VERSION,
+    COORDINATE_SPACES,
+    FIRMWARE_VERSION,
+    OK,
+    PhoxiDevice,
+    PhoxiError,
+    default_allowed_save_dirs,
+    frame_output,
+    load_camera_config,
+    overridden_pose,
+    transform_from_quaternion,
+)
+from agiprobot_measurement.sensors.phoxi.models import load_scanner_model
+from agiprobot_measurement.sensors.phoxi.scene_geometry import RobotGeometry, scene_geometry
+from agiprobot_measurement.srv import (
+    ConnectCamera,
+    ConnectCameraResponse,
+    Empty,
+    EmptyResponse,
+    GetBool,
+    GetBoolResponse,
+    GetDeviceList,
+    GetDeviceListResponse,
+    GetFrame,
+    GetFrameResponse,
+    GetHardwareIdentification,
+    GetHardwareIdentificationResponse,
+    GetString,
+    GetStringResponse,
+    GetSupportedCapturingModes,
+    GetSupportedCapturingModesResponse,
+    IsAcquiring,
+    IsAcquiringResponse,
+    IsConnected,
+    IsConnectedResponse,
+    SaveFrame,
+    SaveFrameResponse,
+    SaveLastFrame,
+    SaveLastFrameResponse,
+    SetCoordinatesSpace,
+    SetCoordinatesSpaceResponse,
+    SetTransformationMatrix,
+    SetTransformationMatrixResponse,
+    TriggerImage,
+    TriggerImageResponse,
+)
+from agiprobot_measurement.station import load_scene
+from agiprobot_measurement.station.urdf_model import UrdfModel
+
+#: what a request can fail with: the device's refusals and bad values (AgiprobotError), and file-system errors (disk
+#: full, permissions)
+REQUEST_ERRORS = (AgiprobotError, OSError)
+DIAGNOSTIC_LEVELS = {"OK": DiagnosticStatus.OK, "WARN": DiagnosticStatus.WARN, "ERROR": DiagnosticStatus.ERROR}
+
+
+def _allowed_save_dirs(value) -> list[str]:
+    """``~allowed_save_dirs``: a list of folders, or one string of them separated by spaces, commas or colons."""
+    if value in (None, ""):
+        return [str(d) for d in default_allowed_save_dirs()]
+    if isinstance(value, str):
+        value = value.replace(",", " ").replace(":", " ").split()
+    if not isinstance(value, list) or not all(isinstance(d, str) and d.strip() for d in value):
+        raise ConfigError(f"~allowed_save_dirs: expected a list of folders, got {value!r}")
+    return [os.path.expanduser(d) for d in value]
+
+
+def _matrix_from_tf(transform):
+    """A requested transformation (geometry_msgs/Transform) as 4x4; refusals are the device's PhoxiError."""
+    t, q = transform.translation, transform.rotation
+    return transform_from_quaternion([t.x, t.y, t.z], [q.x, q.y, q.z, q.w])
+
+
+class PhoxiCameraNode:
+    def __init__(self):
+        self.lock = threading.RLock()
+        static = {
+            name: rospy.get_param(f"~{name}", default) for name, default in phoxi_config.STATIC_PARAMETERS.items()
+        }
+        for name, value in static.items():
+            rospy.set_param(f"~{name}", value)  # so clients and tests find every parameter, given or not
+        self.frame_id = str(static["frame_id"])
+
+        config = load_camera_config(file_param("~camera_config"))
+        model_name = rospy.get_param("~model", "") or config.model
+        self.model = load_scanner_model(model_name, file_param("~models"))
+        self.parent_frame = rospy.get_param("~parent_frame", "") or config.parent_frame
+        self.configured_pose = overridden_pose(
+            config.pose, vector_param("~camera_xyz_m", 3), vector_param("~camera_rpy_rad", 3)
+        )
+        self.publish_tf = bool(rospy.get_param("~publish_tf", True))
+        # simulation of an uncalibrated camera: render at the configured (true) pose but leave tf to a calibration
+        self.render_configured_pose = bool(rospy.get_param("~render_configured_pose", False))
+        self.tf_timeout = rospy.Duration(float(rospy.get_param("~tf_timeout_s", 0.5)))
+
+        scene = load_scene(file_param("~scene"))
+        self.scene_frame = scene.frame_id
+        robot = None
+        description_param = rospy.get_param("~robot_description", "robot_description")
+        if description_param and rospy.has_param(description_param):
+            robot = RobotGeometry(UrdfModel(rospy.get_param(description_param)))
+            for entry in robot.skipped:
+                rospy.logwarn("phoxi_camera: robot mesh not found, left out: %s", entry)
+        elif description_param:
+            rospy.logwarn("phoxi_camera: no robot description in '%s': frames show the scene only", description_param)
+        # the driver's paths are relative to the node's working directory (roslaunch: ROS_HOME unless cwd="node")
+        output_dir = os.path.expanduser(rospy.get_param("~output_dir", "") or os.getcwd())
+        self.device = PhoxiDevice(
+            self.model,
+            scene_geometry(scene),
+            output_dir,
+            robot=robot,
+            hardware_identification=rospy.get_param("~hardware_identification", "") or None,
+            frame_buffer_size=int(rospy.get_param("~frame_buffer_size", 3)),
+            allowed_dirs=_allowed_save_dirs(rospy.get_param("~allowed_save_dirs", "")),
+        )
+        self.noise_seed = int(rospy.get_param("~noise_seed", 0))
+        self.device.update_settings(seed=self.noise_seed)
+        self.config = dict(phoxi_config.defaults)
+
+        self.tf_buffer = tf2_ros.Buffer()
+        self.tf_listener = tf2_ros.TransformListener(self.tf_buffer)
+        self.tf_broadcaster = tf2_ros.StaticTransformBroadcaster()
+        if self.publish_tf:
+            self._broadcast_pose()
+
+        self.latch, queue = bool(static["latch_topics"]), int(static["topic_queue_size"])
+        self.publishers = {
+            name: rospy.Publisher(f"~{name}", kind, queue_size=queue, latch=self.latch)
+            for name, kind in (
+                ("pointcloud", PointCloud2),
+                ("depth_map", Image),
+                ("texture", Image),
+                ("rgb_texture", Image),
+                ("confidence_map", Image),
+                ("normal_map", Image),
+                ("camera_info", CameraInfo),
+            )
+        }
+        self.diagnostics = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=5)
+
+        try:
+            self.device.connect(str(static["scanner_id"]))
+        except PhoxiError as exc:
+            rospy.logwarn("phoxi_camera: connection to scanner '%s' failed: %s", static["scanner_id"], exc)
+        self.reconfigure = ReconfigureServer(phoxi_config, self._reconfigure)
+
+        services = [
+            ("get_device_list", GetDeviceList, self.get_device_list),
+            ("connect_camera", ConnectCamera, self.connect_camera),
+            ("disconnect_camera", StdEmpty, self.disconnect_camera),
+            ("is_connected", IsConnected, lambda _r: IsConnectedResponse(connected=self.device.connected)),
+            ("is_acquiring", IsAcquiring, lambda _r: IsAcquiringResponse(is_acquiring=self.device.acquiring)),
+            (
+                "V2/is_connected",
+                GetBool,
+                lambda _r: GetBoolResponse(value=self.device.connected, message=OK, success=True),
+            ),
+            (
+                "V2/is_acquiring",
+                GetBool,
+                lambda _r: GetBoolResponse(value=self.device.acquiring, message=OK, success=True),
+            ),
+            ("start_acquisition", StdEmpty, self.start_acquisition),
+            ("stop_acquisition", StdEmpty, self.stop_acquisition),
+            ("V2/start_acquisition", Empty, self.start_acquisition_v2),
+            ("V2/stop_acquisition", Empty, self.stop_acquisition_v2),
+            ("trigger_image", TriggerImage, self.trigger_image),
+            ("get_frame", GetFrame, self.get_frame),
+            ("save_frame", SaveFrame, self.save_frame),
+            ("V2/save_last_frame", SaveLastFrame, self.save_last_frame),
+            ("get_hardware_indentification", GetHardwareIdentification, self.get_hardware_identification),
+            ("get_supported_capturing_modes", GetSupportedCapturingModes, self.get_supported_capturing_modes),
+            ("get_api_version", GetString, lambda _r: GetStringResponse(value=API_VERSION, message=OK, success=True)),
+            (
+                "get_firmware_version",
+                GetString,
+                lambda _r: GetStringResponse(value=FIRMWARE_VERSION, message=OK, success=True),
+            ),
+            ("V2/set_coordinate_space", SetCoordinatesSpace, self.set_coordinate_space),
+            ("set_coordinate_space", SetCoordinatesSpace, self.set_coordinate_space),
+            ("V2/set_transformation", SetTransformationMatrix, self.set_transformation),
+            ("set_transformation_matrix", SetTransformationMatrix, self.set_transformation),
+        ]
+        self.services = [rospy.Service(f"~{name}", kind, handler) for name, kind, handler in services]
+
+        self.diagnostic_timer = rospy.Timer(rospy.Duration(5.0), lambda _e: self.publish_diagnostics())
+        self.publish_diagnostics()
+        self.free_run = threading.Thread(target=self._free_run_loop, daemon=True)
+        self.free_run.start()
+        rospy.loginfo(
+            "phoxi_camera: simulated PhoXi %s (%s) in %s at %s, files under %s",
+            self.model.name,
+            self.device.hardware_identification,
+            self.parent_frame,
+            np.round(self.configured_pose[:3, 3], 3).tolist(),
+            " or ".join(str(r) for r in self.device.files.roots),
+        )
+
+    # ------------------------------------------------------------------------------------ tf, scene poses
+    def _broadcast_pose(self):
+        self.tf_broadcaster.sendTransform(
+            transform_stamped(self.configured_pose, self.parent_frame, self.frame_id, rospy.Time.now())
+        )
+
+    def _lookup(self, target, source, timeout):
+        return transform_to_matrix(self.tf_buffer.lookup_transform(target, source, rospy.Time(0), timeout))
+
+    def camera_pose(self):
+        """scene frame <- sensor frame."""
+        if (self.publish_tf or self.render_configured_pose) and self.parent_frame == self.scene_frame:
+            return self.configured_pose
+        try:
+            return self._lookup(self.scene_frame, self.frame_id, self.tf_timeout)
+        except tf2_ros.TransformException as exc:
+            raise InternalError(f"no pose of {self.frame_id} in {self.scene_frame} on tf: {exc}") from exc
+
+    def link_poses(self, link_names):
+        """Poses of the robot's links in the scene frame from tf; links tf does not know are left out."""
+        poses, missing = {}, []
+        for link in link_names:
+            try:
+                # no waiting: robot_state_publisher keeps tf current, and a robot that is not running must not
+                # cost a time-out per link and frame
+                poses[link] = self._lookup(self.scene_frame, link, rospy.Duration(0))
+            except tf2_ros.TransformException:
+                missing.append(link)
+        if missing:
+            rospy.logwarn_throttle(30.0, "phoxi_camera: no tf for robot links %s: left out of the frame", missing)
+        return poses
+
+    # ---------------------------------------------------------------------------------------- frames
+    def capture(self, index=-1):
+        with self.lock:
+            return self.device.capture(index, self)
+
+    def publish_frame(self, frame):
+        with self.lock:
+            header = Header(stamp=rospy.Time.now(), frame_id=self.frame_id)
+            cfg = self.config
+            points, normals = frame_output(frame)
+            outputs = [("camera_info", lambda: phoxi_messages.camera_info(frame.intrinsics, header))]
+            if cfg["send_point_cloud"]:
+                organized = cfg["organized_cloud"]
+                outputs.append(
+                    ("pointcloud", lambda: phoxi_messages.pointcloud2(points, normals, frame.valid, header, organized))
+                )
+            if cfg["send_depth_map"]:
+                outputs.append(("depth_map", lambda: phoxi_messages.image(frame.depth_mm, "32FC1", header)))
+            if cfg["send_normal_map"]:
+                outputs.append(("normal_map", lambda: phoxi_messages.image(normals, "32FC3", header)))
+            if cfg["send_confidence_map"]:
+                outputs.append(("confidence_map", lambda: phoxi_messages.image(frame.confidence, "32FC1", header)))
+            if cfg["send_texture"]:
+                outputs.append(("texture", lambda: phoxi_messages.image(frame.texture, "32FC1", header)))
+                outputs.append(("rgb_texture", lambda: phoxi_messages.image(frame.rgb_texture(), "rgb8", header)))
+            for name, build in outputs:
+                publisher = self.publishers[name]
+                # a message nobody receives is not worth building, unless it is latched for later subscribers
+                if self.latch or publisher.get_num_connections() > 0:
+                    self._publish(publisher, build(), frame.index)
+            self.device.mark_published(frame)
+
+    @staticmethod
+    def _publish(publisher, msg, seq):
+        # rospy overwrites header.seq with the publisher's own message count when it serialises; setting that
+        # count first makes the header carry the frame index, as the real driver's messages do.
+        impl = publisher.impl
+        impl.acquire()
+        try:
+            impl.seq = int(seq) - 1
+            publisher.publish(msg)
+        finally:
+            impl.release()
+
+    def _free_run_loop(self):
+        """Trigger frames one after the other at ``free_run_rate_hz`` (at most) while in free-run mode."""
+        try:
+            while not rospy.is_shutdown():
+                with self.lock:
+                    running = self.device.free_running(self.config["trigger_mode"])
+                    period = 1.0 / max(float(self.config["free_run_rate_hz"]), 1e-3)
+                if not running:
+                    rospy.sleep(0.1)
+                    continue
+                started = rospy.get_time()
+                try:
+                    self.publish_frame(self.capture(-1))
+                except REQUEST_ERRORS as exc:
+                    rospy.logwarn_throttle(10.0, "phoxi_camera: free run: %s", exc)
+                rospy.sleep(max(0.0, period - (rospy.get_time() - started)))
+        except rospy.ROSException:  # shutdown while sleeping or publishing
+            return
+
+    # -------------------------------------------------------------------------------------- services
+    def get_device_list(self, _request):
+        status = DeviceConnectionStatus.Occupied if self.device.connected else DeviceConnectionStatus.Ready
+        info = DeviceInformation(
+            name=f"PhoXi 3D Scanner {self.model.name} (simulated)",
+            type=DeviceType(type=DeviceType.PhoXiScanner),
+            hwIdentification=self.device.hardware_identification,
+            IPaddress="127.0.0.1",
+            status=DeviceConnectionStatus(status=status),
+            firmwareVersion=FIRMWARE_VERSION,
+        )
+        return GetDeviceListResponse(
+            len=1, out=[self.device.hardware_identification], device_information_list=[info], message=OK, success=True
+        )
+
+    def _call(self, action):
+        """{success, message} of ``action()`` for a response; a refusal becomes the message."""
+        try:
+            with self.lock:
+                action()
+        except REQUEST_ERRORS as exc:
+            return {"success": False, "message": str(exc)}
+        finally:
+            self.publish_diagnostics()
+        return {"success": True, "message": OK}
+
+    def connect_camera(self, request):
+        return ConnectCameraResponse(**self._call(lambda: self.device.connect(request.name)))
+
+    def disconnect_camera(self, _request):
+        self._call(self.device.disconnect)
+        return StdEmptyResponse()
+
+    def start_acquisition(self, _request):
+        result = self._call(self.device.start_acquisition)
+        if not result["success"]:
+            rospy.logerr("phoxi_camera: %s", result["message"])
+        return StdEmptyResponse()
+
+    def stop_acquisition(self, _request):
+        result = self._call(self.device.stop_acquisition)
+        if not result["success"]:
+            rospy.logerr("phoxi_camera: %s", result["message"])
+        return StdEmptyResponse()
+
+    def start_acquisition_v2(self, _request):
+        return EmptyResponse(**self._call(self.device.start_acquisition))
+
+    def stop_acquisition_v2(self, _request):
+        return EmptyResponse(**self._call(self.device.stop_acquisition))
+
+    def trigger_image(self, _request):
+        try:
+            frame = self.capture(-1)
+            self.publish_frame(frame)
+        except REQUEST_ERRORS as exc:
+            return TriggerImageResponse(id=-1, message=str(exc), success=False)
+        return TriggerImageResponse(id=frame.index, message=OK, success=True)
+
+    def get_frame(self, request):
+        try:
+            self.publish_frame(self.capture(int(request.in_)))
+        except REQUEST_ERRORS as exc:
+            return GetFrameResponse(message=str(exc), success=False)
+        return GetFrameResponse(message=OK, success=True)
+
+    def save_frame(self, request):
+        try:
+            with self.lock:
+                frame, write = self.device.capture_for_saving(
+                    int(request.in_), request.path, self, self.config["organized_cloud"]
+                )
+            path = write()  # outside the lock: other frame calls go on while the file is written
+        except REQUEST_ERRORS as exc:
+            return SaveFrameResponse(message=str(exc), success=False)
+        rospy.loginfo("phoxi_camera: frame %d written to %s", frame.index, path)
+        return SaveFrameResponse(message=OK, success=True)
+
+    def save_last_frame(self, request):
+        try:
+            with self.lock:
+                write = self.device.last_frame_writer(request.file_path, self.config["organized_cloud"])
+            path = write()  # outside the lock: a PTX export must not hold up get_frame and the others
+        except REQUEST_ERRORS as exc:
+            return SaveLastFrameResponse(message=str(exc), success=False)
+        rospy.loginfo("phoxi_camera: last frame written to %s", path)
+        return SaveLastFrameResponse(message=OK, success=True)
+
+    def get_hardware_identification(self, _request):
+        try:
+            self.device.require_connected()
+        except PhoxiError as exc:
+            return GetHardwareIdentificationResponse(message=str(exc), success=False)
+        return GetHardwareIdentificationResponse(
+            hardware_identification=self.device.hardware_identification, message=OK, success=True
+        )
+
+    def get_supported_capturing_modes(self, _request):
+        try:
+            sizes = self.device.supported_capturing_modes()
+        except PhoxiError as exc:
+            return GetSupportedCapturingModesResponse(message=str(exc), success=False)
+        modes = [PhoXiSize(Width=w, Height=h) for w, h in sizes]
+        return GetSupportedCapturingModesResponse(supported_capturing_modes=modes, message=OK, success=True)
+
+    def set_coordinate_space(self, request):
+        result = self._call(lambda: self.device.set_coordinate_space(int(request.coordinates_space)))
+        if result["success"]:
+            self.reconfigure.update_configuration({"coordinate_space": int(request.coordinates_space)})
+        return SetCoordinatesSpaceResponse(**result)
+
+    def set_transformation(self, request):
+        def apply():
+            matrix = _matrix_from_tf(request.transform)
+            self.device.set_transformation(matrix, request.coordinates_space, request.set_space, request.save_settings)
+
+        result = self._call(apply)
+        if result["success"] and request.set_space:
+            self.reconfigure.update_configuration({"coordinate_space": int(request.coordinates_space)})
+        return SetTransformationMatrixResponse(**result)
+
+    # ------------------------------------------------------------------------------ reconfigure, status
+    def _reconfigure(self, config, _level):
+        with self.lock:
+            refusal = self.device.reconfigure(config, previous=self.config)
+            if refusal:
+                rospy.logwarn("phoxi_camera: %s", refusal)
+            self.config = {name: config[name] for name in phoxi_config.defaults}
+        return config
+
+    def publish_diagnostics(self):
+        level, message = self.device.status()
+        status = DiagnosticStatus(
+            level=DIAGNOSTIC_LEVELS[level],
+            name="phoxi_camera: PhoXi3Dscanner",
+            message=message,
+            hardware_id=self.device.hardware_identification,
+            values=[
+                KeyValue("model", self.model.name),
+                KeyValue("coordinate_space", COORDINATE_SPACES[self.device.coordinate_space]),
+                KeyValue("frames_taken", str(self.device.next_index)),
+            ],
+        )
+        self.diagnostics.publish(DiagnosticArray(header=Header(stamp=rospy.Time.now()), status=[status]))
+
+
+def main():
+    rospy.init_node("phoxi_camera")
+    try:
+        PhoxiCameraNode()
+    except AgiprobotError as exc:
+        rospy.logfatal("phoxi_camera: %s", exc)
+        raise SystemExit(1) from exc
+    rospy.spin()

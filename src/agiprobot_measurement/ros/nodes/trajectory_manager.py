@@ -1,0 +1,428 @@
+"""trajectory_manager node: plan, store, load and execute measurement trajectories in ROS.
+
+The node maps messages to the core and back; the work is done by
+:class:`~agiprobot_measurement.planning.session.MeasurementSession` (planning, plan files, start adaptation,
+execution loop, measured coverage) and :class:`~agiprobot_measurement.ros.executor.RosSegmentExecutor` (the robot
+controller's action, the scanner's stitching, cancel).
+
+Actions: ~plan_measurement (PlanMeasurement: feedback per stage, cancel at any stage), ~execute_plan
+(ExecutePlan: segment by segment through the robot controller's action; the simulated scanner stitches during
+measurement segments only). Services: ~load_plan, ~store_plan, ~get_coverage_report.
+Topics: ~surface_points (sampled points coloured by predicted uncertainty: red = not measurable, green = low,
+blue = high), ~viewpoints (scan lines), ~planned_path (the scanner's path), ~part (the part's mesh),
+~measured_samples (after execution: green = measured, red = missed), /currently_measured_points (the points the
+current measurement segment measures, during measurement segments only).
+Parameters: ~planning/* (defaults of every goal field, config/trajectory_manager.yaml), ~plan_directory,
+~measured_radius_mm, ~scene / ~scanner / ~robot_config / ~joint_limits / ~named_states (station files),
+~controller_action (/robot_sim/execute_trajectory), ~scanner_namespace (/laser_scanner). The sensor model's
+parameters are put on the parameter server under ~sensor_model as the original did.
+"""
+
+from __future__ import annotations
+
+import traceback
+
+import actionlib
+import numpy as np
+import rospy
+import yaml
+from geometry_msgs.msg import Point
+from sensor_msgs.msg import PointCloud2
+from std_msgs.msg import ColorRGBA, Header
+from visualization_msgs.msg import Marker, MarkerArray
+
+from agiprobot_measurement.errors import AgiprobotError
+from agiprobot_measurement.msg import (
+    ExecuteJointTrajectoryAction,
+    ExecutePlanAction,
+    ExecutePlanFeedback,
+    ExecutePlanResult,
+    PlanMeasurementAction,
+    PlanMeasurementFeedback,
+    PlanMeasurementResult,
+)
+from agiprobot_measurement.planning.coverage import measured_colors, uncertainty_colors
+from agiprobot_measurement.planning.execution import PlanPart
+from agiprobot_measurement.planning.progress import overall_progress
+from agiprobot_measurement.planning.request import PlanRequest, PlanRequestError
+from agiprobot_measurement.planning.session import GoalError, MeasurementSession
+from agiprobot_measurement.planning.trajectory_manager import PlanningCancelled
+from agiprobot_measurement.ros.action_client import ActionClient
+from agiprobot_measurement.ros.conversions import matrix_to_pose, pose_to_matrix, xyz_cloud
+from agiprobot_measurement.ros.executor import RosSegmentExecutor, ScannerClient
+from agiprobot_measurement.ros.joint_states import JointStateCache
+from agiprobot_measurement.ros.params import file_param
+from agiprobot_measurement.srv import (
+    GetCoverageReport,
+    GetCoverageReportResponse,
+    LoadPlan,
+    LoadPlanResponse,
+    StorePlan,
+    StorePlanResponse,
+)
+from agiprobot_measurement.station import ConfigError, Station
+
+__all__ = ["TrajectoryManagerNode", "main", "plan_request_from_goal", "yaml_plain"]
+
+#: colours of the scan-line arrows, the planned path and the part
+SCAN_LINE_RGBA = (1.0, 0.55, 0.0, 1.0)
+PATH_RGBA = (0.3, 0.8, 1.0, 0.8)
+PART_RGBA = (0.8, 0.8, 0.2, 1.0)
+
+
+def part_transform_from_pose(pose) -> np.ndarray:
+    """4x4 (translation mm) of a goal's part_pose (m): an all-zero pose is the identity, a zero quaternion with
+    a position a pure translation. Raises PlanRequestError naming part_pose."""
+    quaternion = [pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w]
+    position = (pose.position.x, pose.position.y, pose.position.z)
+    if np.linalg.norm(quaternion) < 1e-12 and not any(position):
+        return np.eye(4)
+    if np.linalg.norm(quaternion) < 1e-12:
+        fixed = pose.__class__()
+        fixed.position = pose.position
+        fixed.orientation.w = 1.0
+        pose = fixed
+    try:
+        transform = pose_to_matrix(pose)
+    except ValueError as exc:
+        raise PlanRequestError("part_pose", f"part_pose: {exc}") from exc
+    transform[:3, 3] *= 1000.0
+    return transform
+
+
+def plan_request_from_goal(goal, session: MeasurementSession) -> PlanRequest:
+    """The validated request of a PlanMeasurement goal (empty / zero fields take the configured defaults)."""
+    return session.request(
+        part_file=goal.part_file,
+        units=goal.units,
+        sampling_density=goal.sampling_density,
+        orientations_around_boresight=goal.orientations_around_boresight,
+        viewpoint_tilt_mode=goal.viewpoint_tilt_mode,
+        solver_type=goal.solver_type,
+        uncertainty_threshold_mm=goal.uncertainty_threshold_mm,
+        plan_file=goal.plan_file,
+        part_transform_mm=part_transform_from_pose(goal.part_pose),
+    )
+
+
+def yaml_plain(value):
+    """``value`` with numpy scalars as Python numbers and tuples as lists (for yaml.safe_dump)."""
+    if isinstance(value, dict):
+        return {str(k): yaml_plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [yaml_plain(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+class TrajectoryManagerNode:
+    def __init__(self):
+        station = Station.load(
+            robot=file_param("~robot_config"),
+            joint_limits=file_param("~joint_limits"),
+            named_states=file_param("~named_states"),
+            scanner=file_param("~scanner"),
+            scene=file_param("~scene"),
+        )
+        self.session = MeasurementSession(
+            station,
+            dict(rospy.get_param("~planning", {})),
+            plan_directory=rospy.get_param("~plan_directory", "plans"),
+            measured_radius_mm=float(rospy.get_param("~measured_radius_mm", 1.0)),
+        )
+        rospy.set_param("~sensor_model", dict(station.scanner.sensor_parameters))
+        self.joint_states = JointStateCache(self.session.joint_names)
+
+        latched = {"queue_size": 1, "latch": True}
+        self.surface_pub = rospy.Publisher("~surface_points", PointCloud2, **latched)
+        self.measured_pub = rospy.Publisher("~measured_samples", PointCloud2, **latched)
+        self.viewpoint_pub = rospy.Publisher("~viewpoints", MarkerArray, **latched)
+        self.path_pub = rospy.Publisher("~planned_path", Marker, **latched)
+        self.part_pub = rospy.Publisher("~part", MarkerArray, **latched)
+        self.current_pub = rospy.Publisher("/currently_measured_points", PointCloud2, **latched)
+        self.scanner = ScannerClient(rospy.get_param("~scanner_namespace", "/laser_scanner"))
+        self.robot = ActionClient(
+            rospy.get_param("~controller_action", "/robot_sim/execute_trajectory"), ExecuteJointTrajectoryAction
+        )
+        self.plan_server = actionlib.SimpleActionServer(
+            "~plan_measurement", PlanMeasurementAction, execute_cb=self.on_plan, auto_start=False
+        )
+        self.execute_server = actionlib.SimpleActionServer(
+            "~execute_plan", ExecutePlanAction, execute_cb=self.on_execute, auto_start=False
+        )
+        rospy.Service("~load_plan", LoadPlan, self.on_load_plan)
+        rospy.Service("~store_plan", StorePlan, self.on_store_plan)
+        rospy.Service("~get_coverage_report", GetCoverageReport, self.on_get_report)
+        self.plan_server.start()
+        self.execute_server.start()
+        rospy.loginfo("trajectory_manager: ready (plans go to %s)", self.session.plan_directory)
+
+    def _current_state(self, timeout_s: float = 3.0) -> np.ndarray:
+        state = self.joint_states.wait(timeout_s)
+        if state is None:
+            raise GoalError("no /joint_states from the robot: is the station (robot_sim) running?")
+        return state
+
+    # ------------------------------------------------------------------------------------ planning
+    def on_plan(self, goal):
+        result = PlanMeasurementResult(success=False)
+        stage_state = {"stage": "sampling"}
+
+        def progress(stage, fraction, message):
+            if self.plan_server.is_preempt_requested() or rospy.is_shutdown():
+                raise PlanningCancelled(f"cancelled during {stage}")
+            stage_state["stage"] = stage
+            self.plan_server.publish_feedback(
+                PlanMeasurementFeedback(
+                    stage=stage, stage_progress=fraction, progress=overall_progress(stage, fraction), message=message
+                )
+            )
+
+        try:
+            request = plan_request_from_goal(goal, self.session)
+            outcome = self.session.plan_measurement(request, self._current_state(), progress)
+        except PlanningCancelled as exc:
+            result.error = str(exc)
+            rospy.loginfo("trajectory_manager: planning %s", exc)
+            self.plan_server.set_preempted(result, result.error)
+            return
+        except Exception as exc:  # keep serving after any error, with the trace of an unexpected one in the log
+            if isinstance(exc, AgiprobotError):
+                result.error = f"{stage_state['stage']}: {exc}"
+                rospy.logwarn("trajectory_manager: planning failed: %s", result.error)
+            else:
+                result.error = f"internal error during {stage_state['stage']}: {type(exc).__name__}: {exc}"
+                rospy.logerr("trajectory_manager: %s\n%s", result.error, traceback.format_exc())
+            self.plan_server.set_aborted(result, result.error)
+            return
+        self._publish_plan_visuals()
+        report = outcome.report
+        result.success = True
+        result.plan_file = outcome.plan_file
+        result.number_of_views = report.n_views
+        result.coverage = report.coverage_of_coverable
+        result.coverage_of_samples = report.coverage_of_samples
+        result.estimated_execution_time_s = report.estimated_execution_time_s
+        rospy.loginfo(
+            "trajectory_manager: planned %d views covering %.1f %% of %d coverable points (est. %.1f s)%s",
+            report.n_views,
+            100 * report.coverage_of_coverable,
+            report.n_coverable,
+            report.estimated_execution_time_s,
+            f", stored in {outcome.plan_file}" if outcome.plan_file else "",
+        )
+        self.plan_server.set_succeeded(result)
+
+    # ------------------------------------------------------------------------------------ visuals
+    def _publish_plan_visuals(self):
+        session, manager = self.session, self.session.manager
+        header = Header(stamp=rospy.Time.now(), frame_id="world")
+        colors = uncertainty_colors(
+            manager.point_uncertainties(),
+            manager.sensor_model.get_min_uncertainty(),
+            manager.sensor_model.get_max_uncertainty(),
+            session.coverable_mask,
+        )
+        self.surface_pub.publish(xyz_cloud(manager.samples.points / 1000.0, header, colors))
+        self.measured_pub.publish(xyz_cloud(np.zeros((0, 3)), header))
+        self.viewpoint_pub.publish(scan_line_markers(manager.scan_lines_mm(session.views), header))
+        self._publish_path(header)
+        self.part_pub.publish(part_markers(session.part, header))
+
+    def _publish_path(self, header):
+        manager = self.session.manager
+        model = manager.kinematics if manager is not None else None
+        self.path_pub.publish(path_marker(self.session.plan, model, header))
+
+    # ------------------------------------------------------------------------------------ plans
+    def on_load_plan(self, request):
+        try:
+            loaded = self.session.load(request.plan_file)
+        except AgiprobotError as exc:
+            return LoadPlanResponse(False, str(exc), 0, 0.0)
+        if self.session.manager is not None:
+            self._publish_path(Header(stamp=rospy.Time.now(), frame_id="world"))
+        return LoadPlanResponse(True, f"loaded {loaded.path}", len(loaded.plan.segments), loaded.plan.duration)
+
+    def on_store_plan(self, request):
+        try:
+            written = self.session.store(request.plan_file)
+        except (AgiprobotError, OSError) as exc:
+            return StorePlanResponse(False, str(exc), "")
+        return StorePlanResponse(True, f"stored {written}", str(written))
+
+    def on_get_report(self, request):
+        manager = self.session.manager
+        if manager is None:
+            return GetCoverageReportResponse(success=False, message="nothing planned yet", measured_coverage=-1.0)
+        report = manager.coverage_report()
+        measured = self.session.last_measured_coverage
+        data = report.as_dict()
+        data["measured_coverage"] = measured
+        figure = ""
+        if request.figure_file:
+            try:
+                figure = str(self.session.write_figure(request.figure_file))
+            except (AgiprobotError, ValueError, OSError) as exc:
+                return GetCoverageReportResponse(success=False, message=f"figure: {exc}", measured_coverage=-1.0)
+        return GetCoverageReportResponse(
+            figure_file=figure,
+            success=True,
+            message=f"plan: {self.session.plan_source}",
+            number_of_samples=report.n_samples,
+            number_of_coverable=report.n_coverable,
+            number_of_covered=report.n_covered,
+            number_of_views=report.n_views,
+            predicted_coverage=report.coverage_of_coverable,
+            measured_coverage=measured,
+            estimated_execution_time_s=report.estimated_execution_time_s,
+            mean_uncertainty_mm=report.mean_uncertainty_mm,
+            max_uncertainty_mm=report.max_uncertainty_mm,
+            report_yaml=yaml.safe_dump(yaml_plain(data), sort_keys=False),
+        )
+
+    # ------------------------------------------------------------------------------------ execution
+    def on_execute(self, goal):
+        result = ExecutePlanResult(success=False, predicted_coverage=-1.0, measured_coverage=-1.0)
+        session = self.session
+        try:
+            if goal.plan_file:
+                session.load(goal.plan_file)
+            if session.plan is None:
+                raise GoalError("no plan: plan one, load one, or give plan_file")
+            if not self.robot.wait_for_server(rospy.Duration(5.0)):
+                raise GoalError("the robot controller's action server is not available")
+            plan = session.prepared_plan(self._current_state())
+            if session.part is not None:
+                self.scanner.set_target(session.part)
+        except (AgiprobotError, rospy.ROSException) as exc:
+            result.error = str(exc)
+            rospy.logwarn("trajectory_manager: execution refused: %s", exc)
+            self.execute_server.set_aborted(result, result.error)
+            return
+        except Exception as exc:  # keep serving after an unexpected error, with its trace in the log
+            result.error = f"internal error: {type(exc).__name__}: {exc}"
+            rospy.logerr("trajectory_manager: %s\n%s", result.error, traceback.format_exc())
+            self.execute_server.set_aborted(result, result.error)
+            return
+        executor = RosSegmentExecutor(
+            self.robot,
+            self.scanner,
+            current_state=lambda: self.joint_states.latest(),
+            cancel_requested=self.execute_server.is_preempt_requested,
+            on_measure=self._show_measured_points,
+        )
+
+        def on_segment(feedback):
+            phase = "measure" if feedback.kind == "measure" else "connect"
+            self.execute_server.publish_feedback(
+                ExecutePlanFeedback(feedback.number, feedback.total, phase, feedback.done_fraction)
+            )
+
+        self.scanner.start_collecting()
+        try:
+            outcome = session.execute(plan, executor, on_segment)
+        finally:
+            measured_points = self.scanner.finish_collecting()
+        result.segments_executed = outcome.segments_executed
+        coverage = session.measured(measured_points)
+        if coverage is not None:
+            result.predicted_coverage = coverage.predicted_coverage
+            result.measured_coverage = coverage.measured_coverage
+            self.measured_pub.publish(
+                xyz_cloud(
+                    session.samples_mm / 1000.0,
+                    Header(stamp=rospy.Time.now(), frame_id="world"),
+                    measured_colors(coverage.measured),
+                )
+            )
+        if outcome.status == "cancelled":
+            result.error = outcome.describe()
+            self.execute_server.set_preempted(result, result.error)
+        elif not outcome.ok:
+            result.error = outcome.describe()
+            self.execute_server.set_aborted(result, result.error)
+        else:
+            result.success = True
+            self.execute_server.set_succeeded(result)
+        rospy.loginfo(
+            "trajectory_manager: executed %d of %d segments; coverage predicted %.1f %%, measured %.1f %%",
+            result.segments_executed,
+            outcome.total,
+            100 * result.predicted_coverage,
+            100 * result.measured_coverage,
+        )
+
+    def _show_measured_points(self, view, active: bool) -> None:
+        header = Header(stamp=rospy.Time.now(), frame_id="world")
+        if active and view is not None and self.session.samples_mm is not None:
+            self.current_pub.publish(xyz_cloud(self.session.samples_mm[view.measurable_indices] / 1000.0, header))
+        elif not active:
+            self.current_pub.publish(xyz_cloud(np.zeros((0, 3)), header))
+
+
+def scan_line_markers(scan_lines_mm, header) -> MarkerArray:
+    """An arrow and a number per scan line ((start, end) mm), after a DELETEALL of the previous plan's."""
+    markers = MarkerArray()
+    clear = Marker(action=Marker.DELETEALL)
+    clear.header = header
+    markers.markers.append(clear)
+    for i, (start, end) in enumerate(scan_lines_mm):
+        arrow = Marker(header=header, ns="scan_lines", id=i, type=Marker.ARROW, action=Marker.ADD)
+        arrow.points = [Point(*(start / 1000.0)), Point(*(end / 1000.0))]
+        arrow.scale.x, arrow.scale.y, arrow.scale.z = 0.004, 0.01, 0.015
+        arrow.color = ColorRGBA(*SCAN_LINE_RGBA)
+        arrow.pose.orientation.w = 1.0
+        text = Marker(header=header, ns="view_numbers", id=i, type=Marker.TEXT_VIEW_FACING, action=Marker.ADD)
+        text.pose.position = Point(*(start / 1000.0 + [0, 0, 0.02]))
+        text.pose.orientation.w = 1.0
+        text.scale.z = 0.03
+        text.color = ColorRGBA(1.0, 1.0, 1.0, 1.0)
+        text.text = str(i + 1)
+        markers.markers.extend([arrow, text])
+    return markers
+
+
+def path_marker(plan, kinematics, header) -> Marker:
+    """The scanner's path through ``plan`` (every 0.1 s) as a line strip; empty without plan or kinematics."""
+    path = Marker(header=header, ns="planned_path", id=0, type=Marker.LINE_STRIP, action=Marker.ADD)
+    path.scale.x = 0.002
+    path.color = ColorRGBA(*PATH_RGBA)
+    path.pose.orientation.w = 1.0
+    if plan is not None and kinematics is not None:
+        for segment in plan.segments:
+            trajectory = segment.trajectory
+            times = np.linspace(0, trajectory.duration, max(2, int(trajectory.duration / 0.1)))
+            positions, _, _ = trajectory.sample(times)
+            tips = kinematics.fk_batch(positions)[:, :3, 3]
+            path.points.extend(Point(*p) for p in tips)
+    return path
+
+
+def part_markers(part: PlanPart | None, header) -> MarkerArray:
+    """The part's mesh where the plan puts it (empty without a part)."""
+    markers = MarkerArray()
+    if part is not None:
+        placement_mm = part.placement_mm
+        marker = Marker(header=header, ns="part", id=0, type=Marker.MESH_RESOURCE, action=Marker.ADD)
+        marker.mesh_resource = f"file://{part.mesh_file}"
+        scale = np.linalg.norm(placement_mm[:3, 0]) / 1000.0  # the file's unit -> m
+        rigid = placement_mm.copy()
+        rigid[:3, :3] /= np.linalg.norm(placement_mm[:3, :3], axis=0)
+        rigid[:3, 3] /= 1000.0
+        marker.pose = matrix_to_pose(rigid)
+        marker.scale.x = marker.scale.y = marker.scale.z = scale
+        marker.color = ColorRGBA(*PART_RGBA)
+        markers.markers.append(marker)
+    return markers
+
+
+def main():
+    rospy.init_node("trajectory_manager")
+    try:
+        TrajectoryManagerNode()
+    except ConfigError as exc:
+        rospy.logfatal("trajectory_manager: %s", exc)
+        raise SystemExit(1) from exc
+    rospy.spin()
