@@ -23,7 +23,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from agiprobot_measurement.common.files import atomic_write_text
+from agiprobot_measurement.common.config import ConfigError, load_yaml_text
+from agiprobot_measurement.common.files import FileReadError, atomic_write_text, read_text_file
 from agiprobot_measurement.common.geometry import matrix_to_quaternion, transform_points
 from agiprobot_measurement.errors import InputError
 
@@ -113,10 +114,10 @@ def read_flag_points(path: str | Path) -> np.ndarray:
     fewer than 4 points or coplanar points.
     """
     path = Path(path)
-    if not path.is_file():
+    if not path.is_file() and not path.is_dir():
         raise CalibrationError(f"{path}: flag point file not found (one '[x, y, z]' per line, metres, robot base)")
     points = []
-    for number, line in enumerate(path.read_text().splitlines(), start=1):
+    for number, line in enumerate(_read_text(path, "flag point file").splitlines(), start=1):
         if not line.strip() or line.lstrip().startswith("#"):
             continue
         points.append(parse_vector(line, 3, f"{path}:{number}"))
@@ -498,12 +499,17 @@ def write_data_file(path: str | Path, data: CalibrationData) -> Path:
     return atomic_write_text(path, format_data_file(data), make_parents=True)
 
 
+def _read_text(path: Path, what: str) -> str:
+    try:
+        return read_text_file(path, what)
+    except FileReadError as exc:
+        raise CalibrationError(str(exc)) from exc
+
+
 def read_data_file(path: str | Path) -> CalibrationData:
     """Parse a data file; CalibrationError with file and line for anything malformed."""
     path = Path(path)
-    if not path.is_file():
-        raise CalibrationError(f"{path}: data file not found")
-    lines = path.read_text().splitlines()
+    lines = _read_text(path, "data file").splitlines()
     data = CalibrationData()
     robot: dict[str, np.ndarray] = {}
     camera: dict[str, np.ndarray] = {}
@@ -607,9 +613,10 @@ def write_result_yaml(path: str | Path, result: CalibrationResult, parent_frame:
 def read_result_yaml(path: str | Path) -> np.ndarray:
     """The 4x4 matrix of a result YAML (safe_load)."""
     path = Path(path)
-    if not path.is_file():
-        raise CalibrationError(f"{path}: calibration result not found")
-    content = yaml.safe_load(path.read_text())
+    try:
+        content = load_yaml_text(_read_text(path, "calibration result"), str(path))
+    except ConfigError as exc:
+        raise CalibrationError(str(exc)) from exc
     try:
         matrix = np.array(content["matrix"], dtype=float)
     except (TypeError, KeyError, ValueError) as exc:

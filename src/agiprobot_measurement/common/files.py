@@ -15,7 +15,17 @@ from pathlib import Path
 
 from agiprobot_measurement.errors import InputError
 
-__all__ = ["FileRoot", "PathPolicyError", "atomic_write", "atomic_write_bytes", "atomic_write_text", "current_umask"]
+__all__ = [
+    "TEXT_FILE_MAX_BYTES",
+    "FileReadError",
+    "FileRoot",
+    "PathPolicyError",
+    "atomic_write",
+    "atomic_write_bytes",
+    "atomic_write_text",
+    "current_umask",
+    "read_text_file",
+]
 
 
 def current_umask() -> int:
@@ -129,3 +139,34 @@ class FileRoot:
         if path.exists() and not overwrite:
             raise PathPolicyError(f"{self.purpose}: {path} exists; ask for overwrite to replace it")
         return path
+
+
+#: a text input (data file, flag points, result) larger than this is refused unread
+TEXT_FILE_MAX_BYTES = 64 * 1024 * 1024
+
+
+class FileReadError(InputError, FileNotFoundError):
+    """An input file is missing, a directory, too large or not UTF-8 text."""
+
+
+def read_text_file(path: str | Path, what: str = "file", max_bytes: int = TEXT_FILE_MAX_BYTES) -> str:
+    """The UTF-8 text of ``path``; :class:`FileReadError` naming ``what``, the file and the problem otherwise."""
+    path = Path(path)
+    if path.is_dir():
+        raise FileReadError(f"{path}: {what} is a directory, not a file")
+    if not path.is_file():
+        raise FileReadError(f"{path}: {what} not found")
+    try:
+        size = path.stat().st_size
+        if size > max_bytes:
+            raise FileReadError(f"{path}: {what} has {size:,} bytes, more than the limit of {max_bytes:,}")
+        data = path.read_bytes()
+    except OSError as exc:
+        raise FileReadError(f"{path}: cannot read the {what}: {exc.strerror or exc}") from exc
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise FileReadError(
+            f"{path}: the {what} is not UTF-8 text (byte 0x{data[exc.start]:02x} at offset {exc.start}); "
+            "is it a binary file?"
+        ) from exc

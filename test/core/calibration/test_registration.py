@@ -193,3 +193,23 @@ def test_data_file_errors(tmp_path):
     path.write_text("p_robot 3-DoF index:1_2\n[0.1, 0.2, 0.3]\n")
     with pytest.raises(CalibrationError, match="no p_camera"):
         read_data_file(path)
+
+
+def test_unreadable_data_files_name_the_problem(tmp_path):
+    # issue 13 row 12: binary bytes used to give only "'utf-8' codec can't decode byte 0x80"
+    binary = tmp_path / "calibration_data.txt"
+    binary.write_bytes(b"p_robot\x80\x81\x00 binary")
+    with pytest.raises(CalibrationError, match=r"calibration_data\.txt: the data file is not UTF-8 text \(byte 0x80"):
+        read_data_file(binary)
+    with pytest.raises(CalibrationError, match="data file is a directory"):
+        read_data_file(tmp_path)
+    with pytest.raises(CalibrationError, match="data file not found"):
+        read_data_file(tmp_path / "missing.txt")
+    with pytest.raises(CalibrationError, match="calibration result is not UTF-8"):
+        read_result_yaml(binary)
+    bomb = tmp_path / "result.yaml"
+    bomb.write_text("a: &a [1, 1, 1, 1, 1, 1, 1, 1, 1, 1]\n" + "".join(
+        f"l{i}: &l{i} [" + ", ".join([f"*{'a' if i == 0 else f'l{i - 1}'}"] * 10) + "]\n" for i in range(9)
+    ))  # fmt: skip
+    with pytest.raises(CalibrationError, match="expands to more than"):
+        read_result_yaml(bomb)
