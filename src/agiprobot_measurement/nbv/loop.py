@@ -1,0 +1,512 @@
+"""The measurement loop of the report (Fig. 3, Fig. 5) and its three scripts ``circpix``, ``fullpix``, ``stratpix``.
+
+One run: the range finder starts in the home pose and follows the a-priori search trajectory until it measures
+something (abort when nothing is found), takes small sideways steps until the growth point has a full neighbour,
+then expands growth points: ``GetNearestPP`` picks the growth point ``pp`` nearest to the previous one, its
+predicted point becomes the candidate ``cc``, and the strategies (:mod:`.strategies`) plan and classify measurements
+until ``cc`` is resolved. The run ends when the growth points are exhausted (the report's rule), or earlier on an
+optional budget (measurements, time) or when ``Possible_Improvement`` falls below a threshold.
+
+Documented choices where the report is silent:
+
+- Home pose and search trajectory: the source runs along a line below the scene, laser pointing +y, placed so that
+  the far edge of the camera's depth window lies on the scene's middle row (a body in the scene's lower half is
+  seen), from ``x = 0`` to ``x = nx - 1`` in steps of ``search_step_cells``; the sideways steps continue along it
+  by ``side_step_cells``.
+- ``Possible_Improvement(W)`` is the number of remaining scanning candidates (``getcandidates2d`` cells of all
+  growth points): it is what the implemented stop drives to zero.
+- Every cell that was ``cc`` once and is still unknown is marked in the working copy (+0.1 unmeasurable, -0.1
+  otherwise), so it is never a candidate again.
+- ``circpix``: the source moves on the circle around the scene centre through the first hit at the standoff, in
+  steps of ``circ_step_deg`` counter-clockwise and never back. At each stop it measures, one after the other, the
+  candidates it can see (laser and camera path free of known full cells, depth within the camera's field), the
+  one nearest the standoff first; the run ends after the full turn or when the growth points are exhausted.
+
+Termination: each candidate is chosen once, and for one candidate every failed measurement forbids its configuration
+(at most 2 x 360 per aim point and strategy), strategy 2 stops after a full turn, and strategy switches are capped;
+so the number of measurements is finite on any finite grid (and ``max_measurements_per_candidate`` caps it further).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import NbvInputError
+from .grid import EMPTY, FULL, PROBABLY_EMPTY, PROBABLY_FULL, UNKNOWN, MeasuredPoints, dilate8, validate_truth
+from .predicates import compute_direction, outward_normal, predicted_point
+from .range_finder import RangeFinder2D, apply_measurement, cell_of_point, scan
+from .scoring import AIM_MODES, ScoreConfig, aim_points
+from .strategies import (
+    SCRIPTS,
+    TRANSITIONS,
+    Action,
+    NoView,
+    Strategy,
+    classify,
+    label_of,
+    plan_s0,
+    plan_s1,
+    plan_s2,
+    start_orbit,
+)
+from .traversal import first_blocking
+from .visibility import N_SECTORS, make_circle_of_visibility, update_circ
+
+__all__ = ["TERMINATION_REASONS", "MeasurementRecord", "RunConfig", "RunResult", "run"]
+
+TERMINATION_REASONS = (
+    "growth_points_exhausted",
+    "nothing_found",
+    "measurement_budget",
+    "time_budget",
+    "possible_improvement_below_threshold",
+    "circle_completed",
+)
+
+
+def _positive(name: str, value, allow_none: bool = False, allow_zero: bool = False):
+    if value is None and allow_none:
+        return None
+    v = float(value)
+    if not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
+        raise NbvInputError(f"{name} must be a finite number {'>=' if allow_zero else '>'} 0, got {value!r}")
+    return v
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """Parameters of one run (lengths in cells, angles in degrees, times in seconds)."""
+
+    script: str = "fullpix"
+    aim: str = "centre"
+    noise_sigma_cells: float = 0.0
+    seed: int = 0
+    score: ScoreConfig = field(default_factory=ScoreConfig)
+    block_unknown: bool = False
+    contour_points: int = 7
+    s1_reach_cells: float = 3.0
+    s2_step_deg: float = 10.0
+    circ_step_deg: float = 2.0
+    max_switches_per_candidate: int = 4
+    max_measurements_per_candidate: int = 60
+    max_measurements: int | None = None
+    max_time_s: float | None = None
+    min_possible_improvement: int = 0
+    search_step_cells: float = 4.0
+    side_step_cells: float = 1.0
+    eight_connected: bool = False
+
+    def __post_init__(self) -> None:
+        if self.script not in SCRIPTS:
+            raise NbvInputError(f"unknown script {self.script!r}; choose one of {', '.join(SCRIPTS)}")
+        if self.aim not in AIM_MODES:
+            raise NbvInputError(f"unknown aim {self.aim!r}; choose one of {', '.join(AIM_MODES)}")
+        _positive("noise_sigma_cells", self.noise_sigma_cells, allow_zero=True)
+        _positive("s1_reach_cells", self.s1_reach_cells)
+        _positive("s2_step_deg", self.s2_step_deg)
+        _positive("circ_step_deg", self.circ_step_deg)
+        _positive("search_step_cells", self.search_step_cells)
+        _positive("side_step_cells", self.side_step_cells)
+        _positive("max_time_s", self.max_time_s, allow_none=True)
+        for name in ("contour_points", "max_switches_per_candidate", "max_measurements_per_candidate"):
+            if int(getattr(self, name)) < 1:
+                raise NbvInputError(f"{name} must be >= 1, got {getattr(self, name)!r}")
+        if self.max_measurements is not None and int(self.max_measurements) < 1:
+            raise NbvInputError(f"max_measurements must be >= 1 or None, got {self.max_measurements!r}")
+        if int(self.min_possible_improvement) < 0:
+            raise NbvInputError(f"min_possible_improvement must be >= 0, got {self.min_possible_improvement!r}")
+
+
+@dataclass
+class MeasurementRecord:
+    """One measurement: the pose, what came back and how it was classified."""
+
+    pos: np.ndarray
+    point: np.ndarray | None
+    cell: tuple[int, int] | None
+    label: str
+    target: tuple[int, int] | None
+
+
+@dataclass
+class RunResult:
+    """Everything a run produced."""
+
+    truth: np.ndarray
+    model: np.ndarray  # fused measurements, {-1, 0, 1}
+    working: np.ndarray  # the planner's copy with the +-0.1 marks
+    records: list
+    points: MeasuredPoints
+    unmeasurable: list
+    outcomes: Counter
+    termination: str
+    run_time_s: float
+    rf: RangeFinder2D
+    config: RunConfig
+
+    @property
+    def sources(self) -> np.ndarray:
+        return np.array([r.pos[0] for r in self.records]).reshape(-1, 2)
+
+    @property
+    def d0_count(self) -> int:
+        return int(self.outcomes.get("D0", 0))
+
+
+class _BudgetExceeded(Exception):
+    def __init__(self, reason: str):
+        super().__init__(reason)
+        self.reason = reason
+
+
+class _Engine:
+    def __init__(self, truth: np.ndarray, rf: RangeFinder2D, cfg: RunConfig):
+        self.truth = truth
+        self.rf = rf
+        self.cfg = cfg
+        self.shape = truth.shape
+        self.m = np.zeros(self.shape)
+        self.w = np.zeros(self.shape)
+        self.marks = np.zeros(self.shape)
+        self.points = MeasuredPoints()
+        self.records: list[MeasurementRecord] = []
+        self.unmeasurable: list[tuple[int, int]] = []
+        self.outcomes: Counter = Counter()
+        self.rng = np.random.default_rng(cfg.seed)
+        self.t0 = time.perf_counter()
+        self.current_source: np.ndarray | None = None
+        self.circles: dict[tuple[float, float], np.ndarray] = {}
+        self.forbidden: dict[tuple[int, int, int], np.ndarray] = {}
+        self.bbox = None  # (i0, i1, j0, j1) of the known cells, to keep the predicates local
+        self.full_lost = False
+
+    # --- measuring -------------------------------------------------------------------------------------------
+    def _check_budget(self) -> None:
+        cfg = self.cfg
+        if cfg.max_measurements is not None and len(self.records) >= cfg.max_measurements:
+            raise _BudgetExceeded("measurement_budget")
+        if cfg.max_time_s is not None and time.perf_counter() - self.t0 > cfg.max_time_s:
+            raise _BudgetExceeded("time_budget")
+
+    def measure(self, pos: np.ndarray, target, strategy: Strategy | None):
+        """Measure on the ground truth, classify against the model before the update, fuse the return."""
+        self._check_budget()
+        reading = scan(self.truth, pos, self.rf, self.cfg.eight_connected)
+        point = cell = None
+        if reading is not None:
+            d = (pos[2] - pos[0]) / np.hypot(*(pos[2] - pos[0]))
+            if self.cfg.noise_sigma_cells > 0:
+                # depth noise along the laser, the report's real-data failure mode
+                point = reading.point + self.rng.normal(0.0, self.cfg.noise_sigma_cells) * d
+                # a surface point lies on its cell's entry edge: with depth noise the best guess of that cell is the
+                # one half a cell deeper (right for |error| < 0.5 cells instead of only for errors into the body)
+                cell = cell_of_point(point + 0.5 * d, d)
+            else:
+                point, cell = reading.point, reading.cell
+            if not (0 <= cell[0] < self.shape[0] and 0 <= cell[1] < self.shape[1]):
+                point = cell = None
+        kind = classify(cell, target, self.m, self.w)
+        label = label_of(strategy, kind) if strategy is not None else "search"
+        self.outcomes[label] += 1
+        self.records.append(MeasurementRecord(np.array(pos, dtype=float), point, cell, label, target))
+        self.current_source = np.array(pos[0], dtype=float)
+        if point is not None:
+            self._fuse(pos, point, cell)
+        return kind, cell, label
+
+    def _fuse(self, pos, point, cell) -> None:
+        was_full = self.m == FULL  # a full copy is cheap next to the traversal and keeps the bookkeeping exact
+        margin = 0.5 if self.cfg.noise_sigma_cells > 0 else 0.0  # the half cell of the cell guess above
+        free, full_cell = apply_measurement(self.m, pos, point, cell, self.cfg.eight_connected, margin)
+        touched = free if full_cell is None else np.vstack([free, np.array([full_cell])])
+        if len(touched) == 0:
+            return
+        ti, tj = touched[:, 0], touched[:, 1]
+        mv = self.m[ti, tj]
+        self.w[ti, tj] = np.where(mv != UNKNOWN, mv, self.marks[ti, tj])
+        if full_cell is not None:
+            self.points.add(point, full_cell, len(self.records) - 1)
+        newly_full = touched[(self.m[ti, tj] == FULL) & ~was_full[ti, tj]]
+        if (was_full[ti, tj] & (self.m[ti, tj] != FULL)).any():
+            self.full_lost = True
+        self._grow_bbox(touched)
+        self._update_circles(newly_full)
+
+    def _grow_bbox(self, cells: np.ndarray) -> None:
+        i0, j0 = cells.min(axis=0)
+        i1, j1 = cells.max(axis=0) + 1
+        if self.bbox is None:
+            self.bbox = [i0, i1, j0, j1]
+        else:
+            b = self.bbox
+            self.bbox = [min(b[0], i0), max(b[1], i1), min(b[2], j0), max(b[3], j1)]
+
+    def _update_circles(self, newly_full: np.ndarray) -> None:
+        if not self.circles:
+            return
+        if self.full_lost or self.cfg.block_unknown:
+            # a cell stopped being opaque (noise conflict, or unknown -> empty): zeroing cannot undo that, rebuild
+            for xs in list(self.circles):
+                self.circles[xs] = make_circle_of_visibility(self.w, np.array(xs), self.cfg.block_unknown)
+            self.full_lost = False
+        elif len(newly_full):
+            for xs, circ in self.circles.items():
+                update_circ(circ, np.array(xs), newly_full, in_place=True)
+
+    # --- planner state --------------------------------------------------------------------------------------
+    def _window(self, margin: int = 2):
+        i0, i1, j0, j1 = self.bbox
+        return (
+            max(i0 - margin, 0),
+            min(i1 + margin, self.shape[0]),
+            max(j0 - margin, 0),
+            min(j1 + margin, self.shape[1]),
+        )
+
+    def growth_points(self) -> np.ndarray:
+        if self.bbox is None:
+            return np.zeros((0, 2), dtype=int)
+        i0, i1, j0, j1 = self._window()
+        w = self.w[i0:i1, j0:j1]
+        mask = (w == FULL) & dilate8((w == UNKNOWN) & dilate8(w == EMPTY))
+        return np.argwhere(mask) + np.array([i0, j0])
+
+    def possible_improvement(self) -> int:
+        if self.bbox is None:
+            return 0
+        i0, i1, j0, j1 = self._window()
+        w = self.w[i0:i1, j0:j1]
+        return int(((w == UNKNOWN) & dilate8(w == EMPTY) & dilate8(w == FULL)).sum())
+
+    def nearest_growth_point(self, pp_old):
+        pts = self.growth_points()
+        if len(pts) == 0:
+            return None
+        d2 = ((pts - np.asarray(pp_old, dtype=float)) ** 2).sum(axis=1)
+        k = int(np.argmin(d2))
+        return int(pts[k, 0]), int(pts[k, 1])
+
+    def mark(self, cell, value: float) -> None:
+        if self.m[cell] == UNKNOWN:
+            self.marks[cell] = value
+            self.w[cell] = value
+
+    def circles_for(self, aims: np.ndarray) -> np.ndarray:
+        out = np.empty((len(aims), N_SECTORS), dtype=np.uint8)
+        for a, xs in enumerate(aims):
+            key = (float(xs[0]), float(xs[1]))
+            if key not in self.circles:
+                self.circles[key] = make_circle_of_visibility(self.w, xs, self.cfg.block_unknown)
+            out[a] = self.circles[key]
+        return out
+
+    def forbid_array(self, strategy: Strategy, cc, n_aims: int) -> np.ndarray:
+        key = (int(strategy), int(cc[0]), int(cc[1]))
+        if key not in self.forbidden:
+            self.forbidden[key] = np.zeros((n_aims, N_SECTORS, 2), dtype=bool)
+        return self.forbidden[key]
+
+    # --- the report's loop ------------------------------------------------------------------------------------
+    def initial_search(self):
+        rf = self.rf
+        nx, ny = self.shape
+        _, far = rf.depth_window_cells()
+        # the far edge of the camera's depth window on the scene's middle row: the search sees the body's lower half
+        y_line = (ny - 1) / 2 - min(far, 2 * rf.standoff_cells) + 1.0
+        step = self.cfg.search_step_cells
+        xs = np.arange(0.0, nx - 1 + 1e-9, step)
+        hit = None
+        x_hit = None
+        for x in xs:
+            pos = rf.pose_through((x, y_line), (x, y_line + rf.standoff_cells), 1)
+            _, cell, _ = self.measure(pos, None, None)
+            if cell is not None:
+                hit, x_hit = cell, x
+                break
+        if hit is None:
+            return None
+        # small sideways steps until the growth point has a full neighbour (planning needs a contour direction)
+        x = x_hit
+        for _ in range(int(4 * step / self.cfg.side_step_cells) + 8):
+            i0, i1 = max(hit[0] - 1, 0), hit[0] + 2
+            j0, j1 = max(hit[1] - 1, 0), hit[1] + 2
+            if (self.m[i0:i1, j0:j1] == FULL).sum() >= 2:
+                break
+            x += self.cfg.side_step_cells
+            pos = rf.pose_through((x, y_line), (x, y_line + rf.standoff_cells), 1)
+            _, cell, _ = self.measure(pos, None, None)
+            if cell is not None:
+                hit = cell
+        return hit
+
+    def resolve(self, cc, pp, transitions) -> tuple[int, int]:
+        """Run the strategy state machine on ``cc``; returns the growth point to continue from."""
+        cfg = self.cfg
+        strategy = Strategy.S0
+        switches = 0
+        spent = 0
+        orbit = None
+        tried: set[Strategy] = set()
+        self.circles = {}
+        while True:
+            if self.m[cc] != UNKNOWN:
+                # another measurement of this candidate's cycle already decided it
+                self.outcomes["resolved on the way"] += 1
+                return cc if self.m[cc] == FULL else pp
+            aims = aim_points(cc, cfg.aim)
+            direction = compute_direction(self.w, pp, cfg.contour_points)
+            normal = outward_normal(self.w, pp, direction)
+            if strategy == Strategy.S0:
+                plan = plan_s0(
+                    self.m, self.rf, cc, aims, self.circles_for(aims), normal, self.current_source, cfg.score,
+                    self.forbid_array(strategy, cc, len(aims)),
+                )  # fmt: skip
+            elif strategy == Strategy.S1:
+                plan = plan_s1(
+                    self.m, self.w, self.rf, cc, aims, self.circles_for(aims), normal, self.current_source, cfg.score,
+                    self.forbid_array(strategy, cc, len(aims)), cfg.s1_reach_cells,
+                )  # fmt: skip
+            else:
+                if orbit is None:
+                    orbit = start_orbit(pp, normal, direction, cc, self.current_source, cfg.s2_step_deg)
+                plan = plan_s2(self.rf, orbit)
+            tried.add(strategy)
+            if isinstance(plan, NoView):
+                # a candidate is unmeasurable only once every planning strategy has failed to plan it
+                untried = [s for s in (Strategy.S0, Strategy.S1) if s not in tried]
+                if untried and switches < cfg.max_switches_per_candidate:
+                    self.outcomes[f"no view {strategy.name}->{untried[0].name}"] += 1
+                    strategy, switches = untried[0], switches + 1
+                    continue
+                return self._unmeasurable(cc, pp)
+            if spent >= cfg.max_measurements_per_candidate:
+                return self._unmeasurable(cc, pp)
+            _, cell, label = self.measure(plan.pos, cc, strategy)
+            spent += 1
+            action, nxt = transitions[label]
+            if action in (Action.REPLAN, Action.SWITCH) and plan.key is not None:
+                self.forbid_array(strategy, cc, len(aims))[plan.key] = True
+            if action == Action.SUCCESS:
+                self.mark(cc, PROBABLY_EMPTY)
+                return cell if cell is not None and self.m[cell] == FULL else pp
+            if action == Action.RETARGET:
+                self.mark(cc, PROBABLY_EMPTY)
+                return cell if self.m[cell] == FULL else pp
+            if action == Action.REPLAN or action == Action.NEXT_ANGLE:
+                continue
+            if action == Action.SWITCH:
+                switches += 1
+                if switches > cfg.max_switches_per_candidate:
+                    return self._unmeasurable(cc, pp)
+                strategy = nxt
+                orbit = None
+                continue
+            if action == Action.NEXT_CANDIDATE:
+                self.mark(cc, PROBABLY_EMPTY)
+                nxt_cc = predicted_point(self.w, pp, cfg.contour_points) if self.w[pp] == FULL else None
+                if nxt_cc is None:
+                    return pp
+                cc, strategy, switches, spent, orbit, tried = nxt_cc, nxt, 0, 0, None, set()
+                self.circles = {}
+                continue
+            return self._unmeasurable(cc, pp)
+
+    def _unmeasurable(self, cc, pp):
+        self.unmeasurable.append((int(cc[0]), int(cc[1])))
+        self.mark(cc, PROBABLY_FULL)
+        return pp
+
+    def expand(self, first_hit) -> str:
+        cfg = self.cfg
+        transitions = TRANSITIONS[cfg.script]
+        pp = first_hit
+        while True:
+            self._check_budget()
+            if cfg.min_possible_improvement > 0 and self.possible_improvement() < cfg.min_possible_improvement:
+                return "possible_improvement_below_threshold"
+            pp = self.nearest_growth_point(pp)
+            if pp is None:
+                return "growth_points_exhausted"
+            cc = predicted_point(self.w, pp, cfg.contour_points)
+            if cc is None:  # cannot happen for a verified growth point; guards the loop anyway
+                return "growth_points_exhausted"
+            pp = self.resolve(cc, pp, transitions)
+
+    def circle_sweep(self, first_hit) -> str:
+        rf, cfg = self.rf, self.cfg
+        centre = (np.array(self.shape, dtype=float) - 1) / 2
+        rel = np.asarray(first_hit, dtype=float) - centre
+        radius = float(np.hypot(*rel)) + rf.standoff_cells
+        psi0 = math.atan2(rel[1], rel[0])
+        near, far = rf.depth_window_cells()
+        n_steps = math.ceil(360.0 / cfg.circ_step_deg)
+        for k in range(n_steps + 1):
+            psi = psi0 + math.radians(k * cfg.circ_step_deg)
+            src = centre + radius * np.array([math.cos(psi), math.sin(psi)])
+            while True:
+                self._check_budget()
+                if len(self.growth_points()) == 0:
+                    return "growth_points_exhausted"
+                plan = self._circ_plan(src, near, far)
+                if plan is None:
+                    break
+                pos, cc = plan
+                self.measure(pos, cc, Strategy.S0)
+                self.mark(cc, PROBABLY_EMPTY)
+        return "circle_completed"
+
+    def _circ_plan(self, src, near, far):
+        i0, i1, j0, j1 = self._window()
+        w = self.w[i0:i1, j0:j1]
+        cands = np.argwhere((w == UNKNOWN) & dilate8(w == EMPTY) & dilate8(w == FULL)) + np.array([i0, j0])
+        if len(cands) == 0:
+            return None
+        depth = np.hypot(*(cands - src).T)
+        ok = (depth > near) & (depth < far)
+        cands, depth = cands[ok], depth[ok]
+        full = self.m == FULL
+        for k in np.argsort(np.abs(depth - self.rf.standoff_cells), kind="stable")[:30]:
+            cc = (int(cands[k, 0]), int(cands[k, 1]))
+            if first_blocking(full, src, cc, skip=cc)[0] >= 0:
+                continue
+            for side in (1, -1):
+                pos = self.rf.pose_through(src, cc, side)
+                if first_blocking(full, cc, pos[1], skip=cc)[0] < 0:
+                    return pos, cc
+        return None
+
+
+def run(truth: np.ndarray, rf: RangeFinder2D | None = None, config: RunConfig | None = None) -> RunResult:
+    """Reconstruct ``truth`` (FULL / EMPTY grid or boolean mask) with one script; see the module docstring."""
+    cfg = config or RunConfig()
+    truth = validate_truth(truth)
+    rf = rf or RangeFinder2D.from_config()
+    eng = _Engine(truth, rf, cfg)
+    try:
+        first = eng.initial_search()
+        if first is None:
+            reason = "nothing_found"
+        elif cfg.script == "circpix":
+            reason = eng.circle_sweep(first)
+        else:
+            reason = eng.expand(first)
+    except _BudgetExceeded as exc:
+        reason = exc.reason
+    return RunResult(
+        truth=truth,
+        model=eng.m,
+        working=eng.w,
+        records=eng.records,
+        points=eng.points,
+        unmeasurable=eng.unmeasurable,
+        outcomes=eng.outcomes,
+        termination=reason,
+        run_time_s=time.perf_counter() - eng.t0,
+        rf=rf,
+        config=cfg,
+    )

@@ -1,0 +1,169 @@
+#!/usr/bin/env python3
+"""Benchmark of the 2D range-finder planner (Fojtík & Pajdla): six objects x three scripts, noise-free and with
+depth noise, a short and a long laser-camera distance, and the report's section 7.1 remedy (edge-midpoint aiming).
+
+Prints a table and the issue's targets (held or not), and writes every run's summary to a JSON file:
+
+    tools/bench_nbv2d.py                                   # the full matrix, 2 processes
+    tools/bench_nbv2d.py --objects disc triangle --scripts fullpix --jobs 1
+    tools/bench_nbv2d.py --short 40 --long 250 --noise 0.3 --json /tmp/bench_nbv2d.json
+
+Lengths in cells (1 cell = 1 mm); ``--short`` / ``--long`` are RFlength values, the standoff is kept.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+from agiprobot_measurement.nbv.objects import OBJECT_NAMES
+from agiprobot_measurement.nbv.strategies import SCRIPTS
+
+
+def _one(job):
+    from agiprobot_measurement.nbv.evaluation import measurable_boundary, summarize
+    from agiprobot_measurement.nbv.loop import RunConfig, run
+    from agiprobot_measurement.nbv.objects import make_object
+    from agiprobot_measurement.nbv.range_finder import RangeFinder2D
+
+    obj, script, length, aim, noise, seed, baseline = job
+    rf = RangeFinder2D.from_config().with_length(length)
+    truth = make_object(obj)
+    result = run(truth, rf, RunConfig(script=script, aim=aim, noise_sigma_cells=noise, seed=seed))
+    s = summarize(result, measurable_boundary(truth, rf), obj)
+    s["baseline"] = baseline
+    return s
+
+
+def _targets(rows, short_len):
+    out = []
+
+    def sel(**kw):
+        return [r for r in rows if all(r[k] == v for k, v in kw.items())]
+
+    main = [r for r in rows if r["aim"] == "centre"]
+    nf = [r for r in main if r["noise_sigma_cells"] == 0]
+    bad = [r for r in nf if r["termination"] != "growth_points_exhausted"]
+    budget = [r for r in rows if r["termination"] in ("measurement_budget", "time_budget")]
+    out.append(
+        (
+            "every noise-free run ends by exhausting growth points",
+            not bad,
+            f"{len(nf) - len(bad)}/{len(nf)}; others: "
+            + (", ".join(f"{r['object']}/{r['script']}/{r['baseline']}={r['termination']}" for r in bad) or "none"),
+        )
+    )
+    out.append(("no run ends on a budget", not budget, f"{len(budget)} of {len(rows)}"))
+    for noise, limit in ((0.0, 0.95), (None, 0.90)):
+        group = [r for r in main if r["script"] in ("fullpix", "stratpix")]
+        group = [r for r in group if (r["noise_sigma_cells"] == 0) == (noise == 0.0)]
+        worst = min(group, key=lambda r: r["coverage"]) if group else None
+        ok = all(r["coverage"] >= limit for r in group)
+        label = f"coverage >= {limit:.0%} with fullpix/stratpix ({'noise-free' if noise == 0.0 else 'noise'})"
+        fails = [
+            f"{r['object']}/{r['script']}/{r['baseline']}={r['coverage']:.3f}" for r in group if r["coverage"] < limit
+        ]
+        out.append((label, ok, f"min {worst['coverage']:.3f}; below: {', '.join(fails) or 'none'}" if worst else "-"))
+    d0 = [r for r in nf if r["d0_count"] > 0]
+    out.append(
+        (
+            "D0 = 0 noise-free",
+            not d0,
+            ", ".join(f"{r['object']}/{r['script']}/{r['baseline']}={r['d0_count']}" for r in d0) or "all 0",
+        )
+    )
+    for baseline in sorted({r["baseline"] for r in nf}):
+        wins = []
+        for obj in OBJECT_NAMES:
+            f = sel(object=obj, script="fullpix", baseline=baseline, aim="centre", noise_sigma_cells=0.0)
+            s = sel(object=obj, script="stratpix", baseline=baseline, aim="centre", noise_sigma_cells=0.0)
+            if f and s:
+                wins.append(s[0]["path_length_cells"] <= f[0]["path_length_cells"])
+        if wins:
+            out.append(
+                (
+                    f"stratpix path <= fullpix path on >= 5 of 6 objects ({baseline})",
+                    sum(wins) >= 5,
+                    f"{sum(wins)}/{len(wins)}",
+                )
+            )
+    for script in ("fullpix", "stratpix"):
+        agg = {}
+        for key in (("short", "centre"), ("long", "centre"), ("long", "edge_midpoints")):
+            g = sel(script=script, baseline=key[0], aim=key[1], noise_sigma_cells=0.0)
+            if g:
+                agg[key] = (sum(r["unmeasurable_candidates"] for r in g), sum(r["transfer_length_cells"] for r in g))
+        if len(agg) == 3:
+            sc, lc, le = agg[("short", "centre")], agg[("long", "centre")], agg[("long", "edge_midpoints")]
+            out.append((
+                f"7.1 {script}: long > short in unmeasurable and transfer length",
+                lc[0] > sc[0] and lc[1] > sc[1],
+                f"unmeasurable {sc[0]} -> {lc[0]}, transfer length {sc[1]:.0f} -> {lc[1]:.0f}",
+            ))  # fmt: skip
+            out.append((
+                f"7.1 {script}: edge midpoints reduce both at the long baseline",
+                le[0] < lc[0] and le[1] < lc[1],
+                f"unmeasurable {lc[0]} -> {le[0]}, transfer length {lc[1]:.0f} -> {le[1]:.0f}",
+            ))  # fmt: skip
+    slow = max(rows, key=lambda r: r["run_time_s"])
+    out.append(("<= 30 s per 400 x 400 run", slow["run_time_s"] <= 30.0, f"slowest {slow['run_time_s']:.1f} s"))
+    return out
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--objects", nargs="+", default=list(OBJECT_NAMES), choices=OBJECT_NAMES)
+    p.add_argument("--scripts", nargs="+", default=list(SCRIPTS), choices=SCRIPTS)
+    p.add_argument("--short", type=float, default=40.0, help="short RFlength in cells (default 40)")
+    p.add_argument("--long", type=float, default=250.0, help="long RFlength in cells (default 250)")
+    p.add_argument("--noise", type=float, default=0.3, help="depth noise sigma in cells for the noisy runs")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--jobs", type=int, default=2)
+    p.add_argument("--json", type=Path, default=Path("bench_nbv2d.json"), help="where to write the summaries")
+    args = p.parse_args(argv)
+
+    jobs = []
+    for baseline, length in (("short", args.short), ("long", args.long)):
+        for noise in (0.0, args.noise):
+            for obj in args.objects:
+                for script in args.scripts:
+                    jobs.append((obj, script, length, "centre", noise, args.seed, baseline))
+        for obj in args.objects:
+            for script in [s for s in args.scripts if s != "circpix"]:
+                jobs.append((obj, script, length, "edge_midpoints", 0.0, args.seed, baseline))
+    t0 = time.perf_counter()
+    if args.jobs > 1:
+        with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+            rows = list(pool.map(_one, jobs))
+    else:
+        rows = [_one(j) for j in jobs]
+    wall = time.perf_counter() - t0
+
+    head = (f"{'object':12s} {'script':8s} {'base':5s} {'aim':6s} {'noise':>5s} {'cover':>6s} {'meas.':>5s} "
+            f"{'n':>4s} {'path':>7s} {'trans':>5s} {'tr.len':>7s} {'D0':>3s} {'unm':>4s} {'time':>5s}  termination")  # fmt: skip
+    print(head)
+    print("-" * len(head))
+    for r in rows:
+        print(
+            f"{r['object']:12s} {r['script']:8s} {r['baseline']:5s} {r['aim'][:6]:6s} {r['noise_sigma_cells']:5.2f} "
+            f"{r['coverage']:6.3f} {r['measurable_cells']:5d} {r['measurements']:4d} {r['path_length_cells']:7.0f} "
+            f"{r['transfers']:5d} {r['transfer_length_cells']:7.0f} {r['d0_count']:3d} {r['unmeasurable_candidates']:4d} "
+            f"{r['run_time_s']:5.1f}  {r['termination']}"
+        )
+    print(f"\n{len(rows)} runs in {wall:.0f} s wall ({args.jobs} processes)\n")
+    checks = _targets(rows, args.short)
+    for label, ok, detail in checks:
+        print(f"[{'held' if ok else 'NOT held'}] {label}: {detail}")
+    args.json.parent.mkdir(parents=True, exist_ok=True)
+    args.json.write_text(json.dumps({"runs": rows, "targets": [
+        {"target": t, "held": bool(ok), "detail": d} for t, ok, d in checks]}, indent=2))  # fmt: skip
+    print(f"\nwrote {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
