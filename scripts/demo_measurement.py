@@ -44,12 +44,20 @@ def main() -> int:
     out.mkdir(parents=True, exist_ok=True)
     bag, plan_file = out / "measurement_demo.bag", out / "measurement_demo_plan.yaml"
     snapshot, figure, summary = out / "measurement_demo.png", out / "coverage.png", out / "summary.txt"
-    for stale in (bag, snapshot):
+    # the demo owns these files in its output folder: each run replaces them
+    for stale in (bag, snapshot, figure):
         stale.unlink(missing_ok=True)
 
     # a private master so the demo never disturbs (or is disturbed by) another ROS session
     os.environ["ROS_MASTER_URI"] = f"http://127.0.0.1:{free_port()}"
-    launch_cmd = ["roslaunch", "agiprobot_measurement", "measurement.launch", "record:=true", f"bag:={bag}"]
+    launch_cmd = [
+        "roslaunch",
+        "agiprobot_measurement",
+        "measurement.launch",
+        "record:=true",
+        f"bag:={bag}",
+        f"allowed_plan_dirs:={out}",  # the node writes plans and figures only where it is allowed to
+    ]
     if args.gui:
         launch_cmd.append("rviz:=true")
     log_path = out / "measurement_demo.launch.log"
@@ -120,6 +128,7 @@ def run_demo(args, launch, out, bag, plan_file, snapshot, figure, summary, start
             viewpoint_tilt_mode=args.tilt,
             solver_type=args.solver,
             plan_file=str(plan_file),
+            overwrite=True,
         ),
         feedback_cb=plan_feedback,
     )

@@ -2,9 +2,11 @@
 """Plan and execute a measurement through the trajectory_manager node's actions (measurement.launch running).
 
   rosrun agiprobot_measurement measure.py --part parts/objectA_wuerfel.stl --density 0.03 --plan-file cube
-  rosrun agiprobot_measurement measure.py --execute-only plans/cube.yaml
+  rosrun agiprobot_measurement measure.py --execute-only cube
   rosrun agiprobot_measurement measure.py --no-execute --solver greedy
 
+Plan names follow the node's file policy: they resolve under its ~plan_directory (plans/), absolute names only
+inside it or ~allowed_plan_dirs, '..' and '~' are refused, and an existing plan is replaced only with --overwrite.
 Prints the planning stages and the execution's segments as they progress, then the result.
 """
 
@@ -39,6 +41,7 @@ def plan(args) -> bool:
         solver_type=args.solver or "",
         uncertainty_threshold_mm=args.threshold or 0.0,
         plan_file=args.plan_file or "",
+        overwrite=bool(args.overwrite),
     )
     last = {"stage": None}
 
@@ -99,7 +102,8 @@ def main() -> int:
     parser.add_argument("--tilt", help="none, limited or full")
     parser.add_argument("--solver", help="greedy, IP_basic, IP_uncertainty or IP_time")
     parser.add_argument("--threshold", type=float, help="uncertainty threshold, mm")
-    parser.add_argument("--plan-file", help="store the plan under this name")
+    parser.add_argument("--plan-file", help="store the plan under this name (in the node's plan directory)")
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing plan of that name")
     parser.add_argument("--no-execute", action="store_true", help="plan only")
     parser.add_argument("--execute-only", metavar="PLAN", help="execute a stored plan instead of planning")
     parser.add_argument("-v", "--verbose", action="store_true")

@@ -9,6 +9,11 @@ examples:
   plan_measurement.py parts/objectA_wuerfel.stl -o cube_plan.yaml --report cube.png
   plan_measurement.py parts/featuretype.STL --units inch --tilt full --solver greedy --transform 0 0 0 0 0 90
 
+files: -o, --report and --summary follow the package's file policy: names resolve under --output-dir (default:
+the working directory); absolute names must lie inside it; '..' and '~' are refused; an existing file is
+replaced only with --overwrite. A request beyond the work budget (config/trajectory_manager.yaml, section
+budget: samples, candidate viewpoints, memory) is refused before any work, with the estimate.
+
 exit status: 0 planned; 2 bad input or nothing plannable (one 'error: ...' line); 1 internal error;
 130 interrupted (nothing written).
 """
@@ -34,11 +39,12 @@ except ImportError:  # run from a checkout without the catkin environment
 import numpy as np  # noqa: E402
 
 # Only light modules here: bad input is reported before trimesh, FCL and OMPL are loaded (about 1 s).
-from agiprobot_measurement.common.files import atomic_write_text  # noqa: E402
+from agiprobot_measurement.common.files import FileRoot, PathPolicyError, atomic_write_text  # noqa: E402
 from agiprobot_measurement.common.geometry import pose_matrix  # noqa: E402
 from agiprobot_measurement.common.units import UNIT_SCALES_TO_M  # noqa: E402
+from agiprobot_measurement.planning.plan_io import plan_path  # noqa: E402
 from agiprobot_measurement.planning.progress import STAGES  # noqa: E402
-from agiprobot_measurement.planning.request import PlanRequest, PlanRequestError  # noqa: E402
+from agiprobot_measurement.planning.request import PlanRequest, PlanRequestError, load_work_budget  # noqa: E402
 from agiprobot_measurement.planning.set_cover import SOLVER_TYPES  # noqa: E402
 from agiprobot_measurement.planning.viewpoint import TILT_MODES  # noqa: E402
 
@@ -122,24 +128,31 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("-o", "--output", help="write the execution plan here (.yaml is appended if missing)")
     parser.add_argument("--report", help="write a coverage picture here (.png)")
     parser.add_argument("--summary", help="write the summary here (.yaml/.yml: YAML, else text)")
+    parser.add_argument(
+        "--output-dir", default=".", help="the folder -o, --report and --summary names resolve in (working directory)"
+    )
+    parser.add_argument("--overwrite", action="store_true", help="replace existing output files")
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress output")
     parser.add_argument("--debug", action="store_true", help="show tracebacks of internal errors")
     return parser
 
 
-def _output(path: str | None, what: str, suffixes: tuple[str, ...] = ()) -> Path | None:
+def _output(
+    path: str | None, what: str, files: FileRoot, overwrite: bool, suffixes: tuple[str, ...] = ()
+) -> Path | None:
+    """The confined path of an output file (see :class:`FileRoot`), checked before any work starts."""
     if path is None:
         return None
-    target = Path(path)
-    if target.is_dir():
-        raise UsageError(f"{what} {target} is a directory")
-    directory = target.parent
-    if not directory.is_dir():
-        raise UsageError(f"output directory does not exist: {directory} (for {what} {target})")
-    if not os.access(directory, os.W_OK):
-        raise UsageError(f"output directory is not writable: {directory} (for {what} {target})")
+    try:
+        target = files.for_writing(path, overwrite=overwrite)
+    except PathPolicyError as exc:
+        raise UsageError(f"{exc}{' (--overwrite replaces it)' if 'exists' in str(exc) else ''}") from exc
+    if not target.parent.is_dir():
+        raise UsageError(f"output directory does not exist: {Path(path).parent} (for {what} {path})")
+    if not os.access(target.parent, os.W_OK):
+        raise UsageError(f"output directory is not writable: {target.parent} (for {what} {path})")
     if suffixes and target.suffix.lower() not in suffixes:
-        raise UsageError(f"{what} {target} must end in {' or '.join(suffixes)}")
+        raise UsageError(f"{what} {path} must end in {' or '.join(suffixes)}")
     return target
 
 
@@ -175,9 +188,14 @@ def validate(args: argparse.Namespace) -> PlanRequest:
         raise UsageError(str(exc)) from exc
     if args.scene is not None and not Path(args.scene).is_file():
         raise UsageError(f"scene file not found: {args.scene}")
-    args.output = _output(args.output, "plan")
-    args.report = _output(args.report, "report", (".png",))
-    args.summary = _output(args.summary, "summary")
+    output_dir = Path(args.output_dir).expanduser()
+    if not output_dir.is_dir():
+        raise UsageError(f"--output-dir {output_dir} is not a directory")
+    files = FileRoot(output_dir.resolve(), purpose="output file")
+    args.output = _output(None if args.output is None else str(plan_path(args.output)), "plan", files, args.overwrite)
+    args.report = _output(args.report, "report", files, args.overwrite, (".png",))
+    args.summary = _output(args.summary, "summary", files, args.overwrite)
+    args.work_budget = load_work_budget()
     return request
 
 
@@ -355,7 +373,7 @@ def run(args: argparse.Namespace, request: PlanRequest, progress: StageProgress)
 
     t0 = time.perf_counter()
     station = Station.load(scene=args.scene)
-    manager = TrajectoryManager.for_request(request, station, progress=progress)
+    manager = TrajectoryManager.for_request(request, station, progress=progress, work_budget=args.work_budget)
     ordered = manager.plan_request(request)
     total_s = time.perf_counter() - t0
     manager.timings_s["total"] = total_s

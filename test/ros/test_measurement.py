@@ -242,14 +242,20 @@ class MeasurementNodeTest(unittest.TestCase):
         load = rospy.ServiceProxy("/trajectory_manager/load_plan", LoadPlan)
         report = rospy.ServiceProxy("/trajectory_manager/get_coverage_report", GetCoverageReport)
         target = ARTIFACTS / "stored_by_service"
-        reply = store(str(target))
+        Path(str(target) + ".yaml").unlink(missing_ok=True)
+        reply = store(plan_file=str(target))
         self.assertTrue(reply.success, reply.message)
         self.assertEqual(reply.plan_file, str(target) + ".yaml")
+        # an existing plan is replaced only on request
+        again = store(plan_file=str(target))
+        self.assertFalse(again.success)
+        self.assertIn("exists", again.message)
+        self.assertTrue(store(plan_file=str(target), overwrite=True).success)
         loaded = load(reply.plan_file)
         self.assertTrue(loaded.success, loaded.message)
         self.assertGreater(loaded.number_of_segments, 0)
         self.assertFalse(load("/nonexistent.yaml").success)
-        self.assertFalse(store("/nonexistent_dir/plan.yaml").success)
+        self.assertFalse(store(plan_file="/nonexistent_dir/plan.yaml").success)
         figure = ARTIFACTS / "coverage_report.png"
         figure.unlink(missing_ok=True)
         got = report(str(figure))

@@ -23,6 +23,7 @@ from agiprobot_measurement.planning.plan_io import ExecutionPlan, PlanSegment
 from agiprobot_measurement.planning.viewpoint import ViewPoint
 
 __all__ = [
+    "ControllerLost",
     "ExecutionCancelled",
     "ExecutionError",
     "ExecutionOutcome",
@@ -46,6 +47,11 @@ START_TOLERANCE_RAD = 1e-3
 
 class ExecutionError(InternalError):
     """Executing a trajectory failed; the robot has been stopped."""
+
+
+class ControllerLost(ExecutionError):
+    """The robot controller stopped answering during a segment (no joint states, its action server gone); the
+    execution is aborted at once instead of waiting for a result that never comes."""
 
 
 class ExecutionCancelled(RuntimeError):
@@ -105,7 +111,7 @@ class SegmentFeedback:
 
 @dataclass
 class ExecutionOutcome:
-    """How an execution ended: ``status`` 'ok', 'cancelled' or 'failed' (``error`` says why)."""
+    """How an execution ended: ``status`` 'ok', 'cancelled', 'failed' or 'controller_lost' (``error`` says why)."""
 
     status: str
     segments_executed: int
@@ -122,6 +128,11 @@ class ExecutionOutcome:
             return f"cancelled during segment {self.segments_executed + 1} of {self.total}; robot stopped"
         if self.status == "failed":
             return f"segment {self.segments_executed + 1} of {self.total} failed: {self.error}; robot stopped"
+        if self.status == "controller_lost":
+            return (
+                f"controller lost during segment {self.segments_executed + 1} of {self.total}: {self.error}; "
+                "scanning stopped, the plan is kept"
+            )
         return ""
 
 
@@ -143,6 +154,8 @@ def execute_segments(
             executor.execute_segment(trajectory, kind, view)
         except ExecutionCancelled:
             return ExecutionOutcome("cancelled", index, len(segments))
+        except ControllerLost as exc:
+            return ExecutionOutcome("controller_lost", index, len(segments), str(exc))
         except ExecutionError as exc:
             return ExecutionOutcome("failed", index, len(segments), str(exc))
         done_time += trajectory.duration
@@ -179,12 +192,27 @@ class PlanPart:
 
 
 def plan_part(plan: ExecutionPlan) -> PlanPart | None:
-    """The part named in a stored plan's parameters, or None."""
+    """The part named in a stored plan's parameters, or None. A malformed entry raises
+    :class:`~agiprobot_measurement.planning.plan_io.PlanError` naming the plan file and the key."""
+    where = f"{plan.source}: " if plan.source is not None else ""
     params = plan.metadata.get("parameters", {}) if isinstance(plan.metadata, dict) else {}
+    if not isinstance(params, dict):
+        raise plan_io.PlanError(f"{where}metadata 'parameters' must be a mapping, got {type(params).__name__}")
     if "part_file" not in params or "part_transform_mm" not in params:
         return None
-    placement = np.asarray(params["part_transform_mm"], dtype=float).reshape(4, 4)
-    return PlanPart(params["part_file"], params.get("units", "mm"), placement)
+    key = "parameters.part_transform_mm"
+    try:
+        placement = np.asarray(params["part_transform_mm"], dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise plan_io.PlanError(f"{where}{key} must be 16 numbers (a 4x4 matrix, mm): {exc}") from exc
+    if placement.size != 16 or placement.ndim not in (1, 2) or (placement.ndim == 2 and placement.shape != (4, 4)):
+        raise plan_io.PlanError(f"{where}{key} must be 16 numbers (a 4x4 matrix, mm), got shape {placement.shape}")
+    if not np.all(np.isfinite(placement)):
+        raise plan_io.PlanError(f"{where}{key} holds NaN or infinite values")
+    part_file = params["part_file"]
+    if not isinstance(part_file, str) or not part_file:
+        raise plan_io.PlanError(f"{where}parameters.part_file must be a file name, got {part_file!r}")
+    return PlanPart(part_file, str(params.get("units", "mm")), placement.reshape(4, 4))
 
 
 @dataclass

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from agiprobot_measurement.common.config import ConfigError, read_yaml
 from agiprobot_measurement.common.files import atomic_write_text
 from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.motion.trajectory import (
@@ -292,12 +293,25 @@ def plan_from_dicts(document: object, source: str | Path | None = None) -> Execu
     return ExecutionPlan(copy.deepcopy(metadata), segments, Path(source) if source is not None else None)
 
 
-def _plain(value: object, where: str) -> object:
-    """``value`` with numpy scalars/arrays, tuples and paths turned into what ``yaml.safe_dump`` writes."""
+def _plain(value: object, where: str, converted: dict | None = None) -> object:
+    """``value`` with numpy scalars/arrays, tuples and paths turned into what ``yaml.safe_dump`` writes.
+
+    A mapping or list met twice (a loaded file's anchors and aliases) is converted once and shared, so the dumper
+    writes an anchor and aliases again: metadata is kept as loaded, never expanded (an alias bomb stays small)."""
+    converted = {} if converted is None else converted
+    if isinstance(value, dict | list | tuple) and id(value) in converted:
+        return converted[id(value)][1]
     if isinstance(value, dict):
-        return {_plain(k, where): _plain(v, f"{where}.{k}") for k, v in value.items()}
+        out: dict = {}
+        converted[id(value)] = (value, out)
+        for k, v in value.items():
+            out[_plain(k, where, converted)] = _plain(v, f"{where}.{k}", converted)
+        return out
     if isinstance(value, list | tuple):
-        return [_plain(v, f"{where}[{i}]") for i, v in enumerate(value)]
+        items: list = []
+        converted[id(value)] = (value, items)
+        items.extend(_plain(v, f"{where}[{i}]", converted) for i, v in enumerate(value))
+        return items
     if isinstance(value, np.ndarray):
         return _plain(value.tolist(), where)
     if isinstance(value, np.generic):
@@ -352,14 +366,11 @@ def load_execution_plan(path: str | Path) -> ExecutionPlan:
     if not path.exists():
         raise PlanFileNotFoundError(f"{path}: execution plan file not found")
     if not path.is_file():
-        raise PlanError(f"{path}: not a file")
+        raise PlanError(f"{path}: is a directory, not a plan file" if path.is_dir() else f"{path}: not a file")
     try:
-        with path.open("rb") as stream:
-            document = yaml.load(stream, Loader=_Loader)
-    except yaml.YAMLError as exc:
-        raise PlanError(f"{path}: malformed YAML: {exc}") from exc
-    except OSError as exc:
-        raise PlanError(f"{path}: cannot read: {exc}") from exc
+        document = read_yaml(path, loader=_Loader)
+    except ConfigError as exc:
+        raise PlanError(str(exc)) from exc
     return plan_from_dicts(document, path)
 
 

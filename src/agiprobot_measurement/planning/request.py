@@ -27,15 +27,20 @@ from agiprobot_measurement.common.config import ConfigError, read_yaml
 from agiprobot_measurement.common.units import UNIT_SCALES_TO_M
 from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.planning.set_cover import SOLVER_TYPES
-from agiprobot_measurement.planning.viewpoint import TILT_MODES
+from agiprobot_measurement.planning.viewpoint import TILT_MODES, TILT_STEPS
 
 __all__ = [
     "DEFAULTS_FILE",
     "PlanRequest",
     "PlanRequestError",
+    "WorkBudget",
+    "WorkEstimate",
+    "WorkTooLarge",
     "check_choice",
     "check_positive",
+    "estimate_work",
     "load_planning_defaults",
+    "load_work_budget",
 ]
 
 #: the file holding the defaults of every request field (section ``planning``)
@@ -84,12 +89,127 @@ def load_planning_defaults(path: str | Path | None = None) -> dict:
     return dict(section)
 
 
+class WorkTooLarge(PlanRequestError):
+    """A request would cause more work than the configured budget allows; the message gives both."""
+
+
+#: the planner draws this many random points per sample before thinning them (``PartModel.sample``)
+SAMPLING_OVERSAMPLING = 5
+#: the surface one candidate view can measure at most (mm^2): the laser line's width times a long scan line; the
+#: measurability entries of a view are bounded by the samples on it
+VIEW_FOOTPRINT_MM2 = 150.0 * 150.0
+#: bytes per random point while sampling (point, normal, face), per candidate (4x4 pose and its indices) and per
+#: measurability entry (point index, uncertainty, trajectory distance)
+BYTES_PER_DRAWN_POINT = 3 * 8 + 3 * 8 + 8
+BYTES_PER_CANDIDATE = 16 * 8 + 3 * 8
+BYTES_PER_ENTRY = 8 + 8 + 8
+
+
+@dataclass(frozen=True)
+class WorkEstimate:
+    """The largest work a planning run may cause, known before anything is allocated: ``samples`` (area x
+    density), ``candidates`` (samples x orientations x tilts), ``measurability_entries`` (candidates x the
+    samples one view can see) and ``memory_gb``, the arrays those take."""
+
+    area_mm2: float
+    samples: float
+    candidates: float
+    measurability_entries: float
+    memory_gb: float
+
+    def describe(self) -> str:
+        return (
+            f"{_count(self.samples)} samples ({_count(self.area_mm2)} mm^2 x density), {_count(self.candidates)} "
+            f"candidate viewpoints, {_count(self.measurability_entries)} measurability entries, "
+            f"~{_count(self.memory_gb, 2)} GB"
+        )
+
+
+def _count(value: float, decimals: int = 0) -> str:
+    """A count for a message: digits grouped up to a trillion, then in exponent notation."""
+    return f"{value:,.{decimals}f}" if abs(value) < 1e12 else f"{value:.3g}"
+
+
+def estimate_work(
+    area_mm2: float, sampling_density: float, orientations_around_boresight: int, viewpoint_tilt_mode: str
+) -> WorkEstimate:
+    """The :class:`WorkEstimate` of sampling ``area_mm2`` at ``sampling_density`` points/mm^2 with that many
+    orientations and tilts (floats: a hostile density must not overflow an integer)."""
+    samples = float(area_mm2) * float(sampling_density)
+    tilts = 1 if viewpoint_tilt_mode == "none" else len(TILT_STEPS)
+    candidates = samples * float(orientations_around_boresight) * tilts
+    per_view = min(samples, float(sampling_density) * VIEW_FOOTPRINT_MM2)
+    entries = candidates * per_view
+    memory = (
+        samples * SAMPLING_OVERSAMPLING * BYTES_PER_DRAWN_POINT
+        + candidates * BYTES_PER_CANDIDATE
+        + entries * BYTES_PER_ENTRY
+    )
+    return WorkEstimate(float(area_mm2), samples, candidates, entries, memory / 1e9)
+
+
+@dataclass(frozen=True)
+class WorkBudget:
+    """The most work one planning run may cause (section ``budget`` of ``config/trajectory_manager.yaml``)."""
+
+    max_samples: float = 1_000_000
+    max_candidates: float = 20_000_000
+    max_memory_gb: float = 8.0
+
+    @classmethod
+    def from_mapping(cls, data: Mapping | None, where: str = "budget") -> WorkBudget:
+        """A budget from a mapping (missing keys keep the defaults); unknown keys or non-positive values raise
+        :class:`~agiprobot_measurement.common.config.ConfigError` naming ``where`` and the key."""
+        data = dict(data or {})
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - names)
+        if unknown:
+            raise ConfigError(f"{where}: unknown key(s) {', '.join(unknown)}; valid: {', '.join(sorted(names))}")
+        values = {}
+        for key, value in data.items():
+            try:
+                number = float(value)
+            except (TypeError, ValueError):
+                number = float("nan")
+            if not (math.isfinite(number) and number > 0):
+                raise ConfigError(f"{where}.{key} must be a positive number, got {value!r}")
+            values[key] = number
+        return cls(**values)
+
+    def check(self, estimate: WorkEstimate) -> WorkEstimate:
+        """``estimate`` if it fits, else :class:`WorkTooLarge` with the estimate and the exceeded budget."""
+        for field_name, value, limit, what in (
+            ("sampling_density", estimate.samples, self.max_samples, "max_samples"),
+            ("orientations_around_boresight", estimate.candidates, self.max_candidates, "max_candidates"),
+            ("sampling_density", estimate.memory_gb, self.max_memory_gb, "max_memory_gb"),
+        ):
+            if not value <= limit:
+                raise WorkTooLarge(
+                    field_name,
+                    f"request refused before any work: it needs {estimate.describe()}; beyond the budget "
+                    f"{what} = {limit:,.10g} (config/trajectory_manager.yaml, section budget); lower "
+                    "sampling_density, orientations_around_boresight or the tilt mode",
+                )
+        return estimate
+
+
+def load_work_budget(path: str | Path | None = None) -> WorkBudget:
+    """The ``budget`` section of ``config/trajectory_manager.yaml`` (or of ``path``)."""
+    path = Path(path) if path is not None else DEFAULTS_FILE
+    data = read_yaml(path)
+    section = data.get("budget", {}) if isinstance(data, dict) else None
+    if not isinstance(section, dict):
+        raise ConfigError(f"{path}: 'budget' must be a mapping")
+    return WorkBudget.from_mapping(section, f"{path}: budget")
+
+
 @dataclass
 class PlanRequest:
     """One planning run. Field names are those of the configuration file and the PlanMeasurement goal.
 
     ``part_transform_mm``: 4x4 placement of the part's CAD frame relative to the scene file's part pose
-    (translation mm). ``plan_file``: where to store the plan ('' = not stored).
+    (translation mm). ``plan_file``: where to store the plan ('' = not stored); ``overwrite``: replace an
+    existing plan file of that name (else the request is refused before planning).
     """
 
     part_file: str = ""
@@ -110,6 +230,7 @@ class PlanRequest:
     seed: int = 0
     part_transform_mm: np.ndarray = field(default_factory=lambda: np.eye(4))
     plan_file: str = ""
+    overwrite: bool = False
 
     @classmethod
     def field_names(cls) -> list[str]:
@@ -132,6 +253,12 @@ class PlanRequest:
             values[key] = value
         return cls(**values)
 
+    def work_estimate(self, area_mm2: float) -> WorkEstimate:
+        """The largest work this (validated) request causes on a part of ``area_mm2`` measurable mm^2."""
+        return estimate_work(
+            area_mm2, self.sampling_density, self.orientations_around_boresight, self.viewpoint_tilt_mode
+        )
+
     def validate(self, base_dir: str | Path | None = None, labels: Mapping[str, str] | None = None) -> PlanRequest:
         """Check every field; return a copy with typed values and ``part_file`` resolved against ``base_dir``
         (default: the working directory). ``labels`` names fields in messages the caller's way (a CLI's
@@ -146,10 +273,12 @@ class PlanRequest:
         part = Path(self.part_file).expanduser()
         if base_dir is not None and not part.is_absolute():
             part = Path(base_dir) / part
+        if part.is_dir():
+            raise PlanRequestError("part_file", f"{label('part_file')} is a directory, not a mesh file: {part}")
         if not part.exists():
             raise PlanRequestError("part_file", f"part file not found: {part}")
         if not part.is_file():
-            raise PlanRequestError("part_file", f"part is not a file: {part}")
+            raise PlanRequestError("part_file", f"part is not a regular file: {part}")
         units = check_choice(self.units, tuple(UNIT_SCALES_TO_M), "units", label("units"))
         tilt = check_choice(self.viewpoint_tilt_mode, TILT_MODES, "viewpoint_tilt_mode", label("viewpoint_tilt_mode"))
         solver = check_choice(self.solver_type, SOLVER_TYPES, "solver_type", label("solver_type"))
@@ -199,5 +328,6 @@ class PlanRequest:
             seed=int(self.seed),
             part_transform_mm=transform,
             plan_file=str(self.plan_file or ""),
+            overwrite=bool(self.overwrite),
             **positives,
         )

@@ -4,20 +4,25 @@ node's state, without ROS).
 :class:`MeasurementSession` plans from a :class:`~agiprobot_measurement.planning.request.PlanRequest`, loads and
 stores plan files, adapts a plan's start to the robot's current state, executes it through any
 :class:`~agiprobot_measurement.planning.execution.SegmentExecutor` and compares what was measured with what was
-predicted. Relative part paths are resolved against the package root, relative plan names against the plan
-directory. Points are mm, joint values rad.
+predicted. Relative part paths are resolved against the package root. Plan files and coverage figures follow
+the package's one file policy (:class:`~agiprobot_measurement.common.files.FileRoot`): names resolve under the
+plan directory, absolute names only inside it or the allowed directories, ``..`` and ``~`` are refused, and an
+existing file is replaced only when the request asks to overwrite (a figure gets a new version name instead).
+A plan file is installed as the session's plan only once it passed every check, so a refused request keeps the
+current plan. Points are mm, joint values rad.
 """
 
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from agiprobot_measurement._paths import PACKAGE_ROOT
+from agiprobot_measurement.common.files import FileRoot, PathPolicyError
 from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.planning import plan_io
 from agiprobot_measurement.planning.coverage import MeasuredCoverage, measured_coverage
@@ -34,7 +39,7 @@ from agiprobot_measurement.planning.execution import (
     plan_segments,
 )
 from agiprobot_measurement.planning.report import CoverageReport
-from agiprobot_measurement.planning.request import PlanRequest
+from agiprobot_measurement.planning.request import PlanRequest, WorkBudget
 from agiprobot_measurement.planning.trajectory_manager import ProgressCallback, TrajectoryManager
 from agiprobot_measurement.planning.viewpoint import ViewPoint
 
@@ -57,8 +62,10 @@ class MeasurementSession:
     """The station's current plan and what the trajectory_manager does with it.
 
     ``defaults``: the ``planning`` section of ``config/trajectory_manager.yaml`` (what empty request fields
-    take); ``plan_directory``: where plans named without a directory go; ``measured_radius_mm``: a sample counts
-    as measured when a measured point lies this close.
+    take); ``plan_directory``: the root of plan files and figures (relative to the package root unless absolute;
+    created on first use); ``allowed_directories``: where absolute plan and figure names may also point;
+    ``measured_radius_mm``: a sample counts as measured when a measured point lies this close;
+    ``work_budget``: the most work one planning run may cause.
     """
 
     def __init__(
@@ -68,12 +75,18 @@ class MeasurementSession:
         plan_directory: str | Path = "plans",
         measured_radius_mm: float = 1.0,
         package_root: Path = PACKAGE_ROOT,
+        allowed_directories: Sequence[str | Path] = (),
+        work_budget: WorkBudget | None = None,
     ):
         self.station = station
         self.joint_names = list(station.limits.names)
         self.defaults = dict(defaults)
         self.package_root = Path(package_root)
         self.plan_directory = self.resolve(plan_directory)
+        extra = tuple(self.resolve(d) for d in allowed_directories)
+        self.plan_files = FileRoot(self.plan_directory, extra, purpose="plan file")
+        self.figure_files = FileRoot(self.plan_directory, extra, purpose="coverage figure")
+        self.work_budget = work_budget if work_budget is not None else WorkBudget()
         self.measured_radius_mm = float(measured_radius_mm)
         self.lock = threading.Lock()
         self.manager: TrajectoryManager | None = None
@@ -88,21 +101,37 @@ class MeasurementSession:
 
     # ------------------------------------------------------------------------------------ paths
     def resolve(self, path_text: str | Path) -> Path:
-        """A path relative to the package root unless absolute."""
+        """A path relative to the package root unless absolute (configuration, not client input)."""
         path = Path(path_text).expanduser()
         return path if path.is_absolute() else self.package_root / path
 
-    def plan_path(self, name: str) -> Path:
-        """Where to write plan ``name``: relative names go to the plan directory (created on first use)."""
-        path = Path(name).expanduser()
-        if not path.is_absolute():
-            path = self.plan_directory / path
+    def plan_path(self, name: str, overwrite: bool = False) -> Path:
+        """Where to write plan ``name`` (``.yaml`` appended unless it ends in .yaml/.yml), confined to the plan
+        directory (created on first use) and the allowed directories; an existing file is refused unless
+        ``overwrite``. Raises :class:`~agiprobot_measurement.common.files.PathPolicyError` or :class:`GoalError`."""
+        if not str(name or "").strip():
+            raise GoalError("plan_file is empty")
+        path = self.plan_files.for_writing(plan_io.plan_path(str(name).strip()), overwrite=overwrite)
         if not path.parent.is_dir():
             if path.parent == self.plan_directory:
                 path.parent.mkdir(parents=True, exist_ok=True)
             else:
                 raise GoalError(f"plan directory does not exist: {path.parent}")
         return path
+
+    def plan_file_to_read(self, name: str) -> Path:
+        """The stored plan ``name`` names: the same file :meth:`store` writes for that name (``name`` or
+        ``name.yaml``), confined like writing; ``FileNotFoundError`` / ``PathPolicyError`` otherwise."""
+        text = str(name or "").strip()
+        if not text:
+            raise GoalError("plan_file is empty")
+        suffixed = plan_io.plan_path(text)
+        try:
+            return self.plan_files.for_reading(suffixed)
+        except FileNotFoundError:
+            if str(suffixed) == text:
+                raise
+            return self.plan_files.for_reading(text)
 
     # ------------------------------------------------------------------------------------ planning
     def request(self, **fields) -> PlanRequest:
@@ -114,13 +143,18 @@ class MeasurementSession:
     ) -> PlanningOutcome:
         """Plan ``request`` (validated) from ``start_state``; store it when it names a plan file; make it the
         session's plan."""
-        manager = TrajectoryManager.for_request(request, self.station, progress=progress, start_state=start_state)
+        # a plan file that cannot be written is refused before minutes of planning, and checked again when written
+        if request.plan_file:
+            self.plan_path(request.plan_file, overwrite=request.overwrite)
+        manager = TrajectoryManager.for_request(
+            request, self.station, progress=progress, start_state=start_state, work_budget=self.work_budget
+        )
         ordered = manager.plan_request(request)
         segments = manager.convert_viewpointlist_to_execution_plan(ordered)
         plan = plan_io.ExecutionPlan(manager.plan_metadata(), segments)
         written = ""
         if request.plan_file:
-            manager.store_execution_plan(str(self.plan_path(request.plan_file)), segments)
+            manager.store_execution_plan(str(self.plan_path(request.plan_file, request.overwrite)), segments)
             written = str(manager.last_plan_path)
         report = manager.coverage_report()
         with self.lock:
@@ -138,46 +172,53 @@ class MeasurementSession:
         return PlanningOutcome(report, written)
 
     # ------------------------------------------------------------------------------------ plan files
-    def load(self, name: str) -> LoadedPlan:
-        """Read a stored plan (relative to the package root, else to the plan directory) and make it the
-        session's plan; its predicted coverage is unknown."""
-        path = self.resolve(name) if not Path(name).is_absolute() else Path(name)
-        if not path.exists() and not Path(name).is_absolute():
-            path = self.plan_directory / name
-        loaded = load_plan(path, self.station.limits, self.joint_names)
+    def read(self, name: str) -> LoadedPlan:
+        """Read and check a stored plan (see :meth:`plan_file_to_read`) without making it the session's plan."""
+        try:
+            path = self.plan_file_to_read(name)
+        except FileNotFoundError as exc:
+            raise plan_io.PlanFileNotFoundError(str(exc)) from exc
+        return load_plan(path, self.station.limits, self.joint_names)
+
+    def adopt(self, loaded: LoadedPlan) -> LoadedPlan:
+        """Make a plan from :meth:`read` the session's plan; its predicted coverage is unknown."""
         with self.lock:
             self.plan, self.plan_source, self.views, self.part = loaded.plan, str(loaded.path), [], loaded.part
             self.samples_mm = self.predicted_mask = self.coverable_mask = None
             self.last_measured_coverage = -1.0
         return loaded
 
-    def store(self, name: str) -> Path:
-        """Write the session's plan; returns the path written."""
+    def load(self, name: str) -> LoadedPlan:
+        """Read a stored plan and make it the session's plan (a refused one leaves the current plan)."""
+        return self.adopt(self.read(name))
+
+    def store(self, name: str, overwrite: bool = False) -> Path:
+        """Write the session's plan to ``name`` (see :meth:`plan_path`); returns the path written."""
         if self.plan is None:
             raise GoalError("no plan to store: plan or load one first")
-        if not name:
-            raise GoalError("plan_file is empty")
-        return plan_io.store_execution_plan(self.plan_path(name), self.plan)
+        return plan_io.store_execution_plan(self.plan_path(name, overwrite), self.plan)
 
     # ------------------------------------------------------------------------------------ execution
-    def connection_planner(self, state: np.ndarray) -> TrajectoryManager:
-        """The manager that plans motions from ``state``: the planning run's, else one with the plan's part in
-        the collision world."""
-        if self.manager is not None:
+    def connection_planner(self, state: np.ndarray, part: PlanPart | None = None) -> TrajectoryManager:
+        """The manager that plans motions from ``state``: the planning run's (unless ``part`` names another
+        plan's part), else one with the plan's part in the collision world."""
+        if self.manager is not None and part is None:
             return self.manager
+        part = part if part is not None else self.part
         manager = TrajectoryManager(self.station, start_state=state)
-        if self.part is not None:
-            manager.set_collision_part(self.part)
+        if part is not None:
+            manager.set_collision_part(part)
         return manager
 
-    def prepared_plan(self, state: np.ndarray) -> plan_io.ExecutionPlan:
-        """The session's plan starting at the robot's current ``state`` (rad)."""
-        if self.plan is None:
+    def prepared_plan(self, state: np.ndarray, candidate: LoadedPlan | None = None) -> plan_io.ExecutionPlan:
+        """The session's plan (or ``candidate``, a plan read but not adopted yet) starting at the robot's current
+        ``state`` (rad)."""
+        plan = candidate.plan if candidate is not None else self.plan
+        if plan is None:
             raise GoalError("no plan: plan one, load one, or give plan_file")
-        plan = self.plan
         if np.abs(plan.segments[0].trajectory.start - state).max() <= 1e-3:
             return plan
-        manager = self.connection_planner(state)
+        manager = self.connection_planner(state, candidate.part if candidate is not None else None)
         return adapt_plan_start(plan, state, lambda start, goal: manager.connect(start, goal, planning_time_s=1.0))
 
     def execute(
@@ -201,18 +242,32 @@ class MeasurementSession:
         return result
 
     # ------------------------------------------------------------------------------------ reports
-    def write_figure(self, name: str) -> Path:
-        """The coverage picture of the planning run as a PNG (relative names go to the plan directory)."""
-        path = Path(name).expanduser()
-        if not path.is_absolute():
-            path = self.plan_directory / path
+    def figure_path(self, name: str, overwrite: bool = False) -> Path:
+        """Where the figure ``name`` (.png) goes under the file policy; an existing file is kept and the figure
+        gets the next free version name (``name_2.png``, ...) unless ``overwrite``."""
+        path = self.figure_files.resolve(name)
         if path.suffix.lower() != ".png":
             raise GoalError(f"the figure must be a .png file, got {path.name}")
         if not path.parent.is_dir():
-            raise GoalError(f"directory does not exist: {path.parent}")
+            if path.parent == self.plan_directory:
+                path.parent.mkdir(parents=True, exist_ok=True)
+            else:
+                raise GoalError(f"directory does not exist: {path.parent}")
+        if path.is_dir():
+            raise PathPolicyError(f"coverage figure: {path} is a directory")
+        version = 1
+        candidate = path
+        while candidate.exists() and not overwrite:
+            version += 1
+            candidate = path.with_name(f"{path.stem}_{version}{path.suffix}")
+        return self.figure_files.for_writing(candidate, overwrite=overwrite)
+
+    def write_figure(self, name: str, overwrite: bool = False) -> Path:
+        """The coverage picture of the planning run as a PNG (see :meth:`figure_path`); returns the path written."""
         manager = self.manager
         if manager is None:
             raise GoalError("nothing planned yet")
+        path = self.figure_path(name, overwrite)
         measured = self.last_measured_coverage
         report = manager.coverage_report()
         title = f"{report.n_views} views, predicted coverage {100 * report.coverage_of_coverable:.1f} %" + (

@@ -67,7 +67,14 @@ from agiprobot_measurement.planning.part_loading import LoadedPart, PartLoadErro
 from agiprobot_measurement.planning.plan_io import PlanSegment
 from agiprobot_measurement.planning.progress import STAGES
 from agiprobot_measurement.planning.report import CoverageReport, coverable_mask, point_uncertainties
-from agiprobot_measurement.planning.request import PlanRequest, check_choice, check_positive
+from agiprobot_measurement.planning.request import (
+    PlanRequest,
+    WorkBudget,
+    WorkEstimate,
+    check_choice,
+    check_positive,
+    estimate_work,
+)
 from agiprobot_measurement.planning.set_cover import SOLVER_TYPES, SetCoverResult, solve_set_cover
 from agiprobot_measurement.planning.viewpoint import (
     TILT_MODES,
@@ -129,8 +136,11 @@ class TrajectoryManager:
         seed: int = 0,
         start_state: np.ndarray | str = "home",
         preferred_state: np.ndarray | str = "up",
+        work_budget: WorkBudget | None = None,
     ):
         self.station = station or Station.load()
+        self.work_budget = work_budget if work_budget is not None else WorkBudget()
+        self.last_work_estimate: WorkEstimate | None = None
         if not (math.isfinite(scan_speed_mm_s) and scan_speed_mm_s > 0):
             raise ValueError(f"scan_speed_mm_s must be a positive number, got {scan_speed_mm_s}")
         self.scan_speed_mm_s = float(scan_speed_mm_s)
@@ -302,6 +312,10 @@ class TrajectoryManager:
         )
         timings = self.timings_s
         t0 = time.perf_counter()
+        # the largest work of this run, refused beyond the budget before anything is allocated
+        self.last_work_estimate = self.work_budget.check(
+            estimate_work(part.measurable_area, density, int(orientations_around_boresight), viewpoint_tilt_mode)
+        )
         self._report("sampling", 0.0, f"sampling at {density} points/mm^2")
         samples = part.sample(density, seed=self.seed)
         if len(samples) == 0:
@@ -826,14 +840,17 @@ class TrajectoryManager:
         station: Station | None = None,
         progress: ProgressCallback | None = None,
         start_state: np.ndarray | str = "home",
+        work_budget: WorkBudget | None = None,
     ) -> TrajectoryManager:
-        """A manager with the request's scan speed and seed (``request`` validated already)."""
+        """A manager with the request's scan speed and seed (``request`` validated already) and ``work_budget``
+        (default: :class:`~agiprobot_measurement.planning.request.WorkBudget`'s)."""
         return cls(
             station,
             scan_speed_mm_s=request.scan_speed_mm_s,
             progress=progress,
             seed=request.seed,
             start_state=start_state,
+            work_budget=work_budget,
         )
 
     def plan_request(self, request: PlanRequest) -> list[ViewPoint]:

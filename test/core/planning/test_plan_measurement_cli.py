@@ -43,6 +43,12 @@ def run_cli(args, cwd, timeout=120):
         ([CUBE, "--report", "no_such_dir/report.png"], "output directory does not exist: no_such_dir"),
         ([CUBE, "--report", "report.jpg"], "must end in .png"),
         ([CUBE, "--scene", "no_scene.yaml"], "scene file not found: no_scene.yaml"),
+        # the file policy: names resolve under --output-dir (the working directory)
+        ([CUBE, "-o", "../escaped_plan"], "'..' is not allowed"),
+        ([CUBE, "-o", "~/escaped_plan"], "'~' is not expanded"),
+        ([CUBE, "-o", "/etc/escaped_plan"], "outside the allowed folder"),
+        ([CUBE, "--report", "/etc/escaped.png"], "outside the allowed folder"),
+        ([CUBE, "--output-dir", "no_such_dir", "-o", "plan"], "--output-dir no_such_dir is not a directory"),
     ],
 )
 def test_bad_input_gives_one_error_line_and_exit_status_2(tmp_path, args, expected):
@@ -107,3 +113,25 @@ def test_ctrl_c_exits_cleanly(tmp_path):
     assert process.returncode == 130, stderr
     assert "interrupted" in stderr and "Traceback" not in stderr
     assert not any(tmp_path.iterdir()), "an interrupted run writes no plan"
+
+
+def test_existing_outputs_are_kept_unless_overwrite(tmp_path):
+    existing = tmp_path / "plan.yaml"
+    existing.write_text("keep me")
+    result = run_cli([CUBE, *FAST, "-o", "plan"], tmp_path)
+    assert result.returncode == 2 and "exists" in result.stderr and "--overwrite" in result.stderr, result.stderr
+    assert existing.read_text() == "keep me"
+    out = tmp_path / "out"
+    out.mkdir()
+    result = run_cli([CUBE, *FAST, "--output-dir", out, "-o", "plan", "--overwrite", "-q"], tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert load_execution_plan(out / "plan.yaml").segments
+    assert existing.read_text() == "keep me"
+
+
+def test_a_huge_density_is_refused_before_any_work(tmp_path):
+    started = time.monotonic()
+    result = run_cli([CUBE, "--density", "1000", "-q"], tmp_path)
+    assert result.returncode == 2, result.stderr
+    assert "max_samples" in result.stderr and "samples" in result.stderr
+    assert "Traceback" not in result.stderr and time.monotonic() - started < 60

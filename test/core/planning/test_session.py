@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import yaml
 
+from agiprobot_measurement.common.files import PathPolicyError
 from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.planning.execution import (
     ExecutionCancelled,
@@ -70,8 +71,10 @@ def test_bad_request_fields_are_input_errors(planned):
     session = planned[0]
     with pytest.raises(InputError, match="sampling_density"):
         session.request(sampling_density=-1.0)
-    with pytest.raises(GoalError, match="plan directory does not exist"):
+    with pytest.raises(PathPolicyError, match="outside the allowed folder"):
         session.plan_path("/nonexistent_dir/plan.yaml")
+    with pytest.raises(GoalError, match="plan directory does not exist"):
+        session.plan_path("nonexistent_dir/plan.yaml")
 
 
 def test_execution_of_the_planned_views(planned, station):

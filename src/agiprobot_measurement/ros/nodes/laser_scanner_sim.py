@@ -41,6 +41,10 @@ __all__ = ["LaserScannerSim", "main"]
 _TF_ERRORS = (tf2_ros.LookupException, tf2_ros.ExtrapolationException, tf2_ros.ConnectivityException)
 
 
+#: tf older than this (s) when stitching is switched off means the robot stopped publishing: no wait for it
+TF_STALL_S = 1.0
+
+
 class LaserScannerSim:
     def __init__(self):
         scanner = load_scanner_config(rospy.get_param("~scanner", None) or None)
@@ -103,7 +107,7 @@ class LaserScannerSim:
             # the measurement lasts until now: wait for tf to reach this instant (a busy machine delivers it
             # late), then scan the profiles still due before switching off
             stop = rospy.Time.now()
-            self.tf_buffer.can_transform(self.world_frame, self.emitter_frame, stop, rospy.Duration(5.0))
+            self._wait_for_tf(stop, timeout_s=5.0)
         with self.scan_lock:
             if stop is not None:
                 self._scan(until=stop)
@@ -118,6 +122,21 @@ class LaserScannerSim:
         return SetStitchingResponse(
             True, f"stitching {'on' if self.stitching else 'off'}; {profiles} profiles", profiles
         )
+
+    def _wait_for_tf(self, stamp: rospy.Time, timeout_s: float) -> bool:
+        """Wait up to ``timeout_s`` for the emitter's tf at ``stamp``, but only while tf keeps arriving: a robot
+        whose controller died publishes none for ``TF_STALL_S``, and switching off must not wait for it."""
+        deadline = rospy.Time.now() + rospy.Duration(timeout_s)
+        while not rospy.is_shutdown() and rospy.Time.now() < deadline:
+            if self.tf_buffer.can_transform(self.world_frame, self.emitter_frame, stamp, rospy.Duration(0.05)):
+                return True
+            try:
+                latest = self.tf_buffer.lookup_transform(self.world_frame, self.emitter_frame, rospy.Time(0))
+            except tf2_ros.TransformException:
+                return False
+            if (rospy.Time.now() - latest.header.stamp).to_sec() > TF_STALL_S:
+                return False
+        return False
 
     def clear(self, _request):
         with self.lock:

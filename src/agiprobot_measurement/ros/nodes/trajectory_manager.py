@@ -12,15 +12,24 @@ Topics: ~surface_points (sampled points coloured by predicted uncertainty: red =
 blue = high), ~viewpoints (scan lines), ~planned_path (the scanner's path), ~part (the part's mesh),
 ~measured_samples (after execution: green = measured, red = missed), /currently_measured_points (the points the
 current measurement segment measures, during measurement segments only).
-Parameters: ~planning/* (defaults of every goal field, config/trajectory_manager.yaml), ~plan_directory,
-~measured_radius_mm, ~scene / ~scanner / ~robot_config / ~joint_limits / ~named_states (station files),
+Parameters: ~planning/* (defaults of every goal field, config/trajectory_manager.yaml), ~budget/* (the most
+work one planning run may cause: max_samples, max_candidates, max_memory_gb), ~plan_directory (the root of plan
+files and figures), ~allowed_plan_dirs (where absolute plan and figure names may also point; default ROS_HOME and /tmp),
+~controller_heartbeat_timeout_s (1.0: an execution aborts when /joint_states is older), ~measured_radius_mm, ~scene / ~scanner / ~robot_config / ~joint_limits / ~named_states (station files),
 ~controller_action (/robot_sim/execute_trajectory), ~scanner_namespace (/laser_scanner). The sensor model's
 parameters are put on the parameter server under ~sensor_model as the original did.
+
+Files follow the package's one file policy (:class:`~agiprobot_measurement.common.files.FileRoot`): plan and
+figure names resolve under ~plan_directory; absolute names only inside it or ~allowed_plan_dirs; ``..`` and ``~``
+are refused; store_plan and PlanMeasurement replace an existing plan only with ``overwrite: true``, a figure
+gets a new version name. A refused ExecutePlan keeps the node's current plan.
 """
 
 from __future__ import annotations
 
+import os
 import traceback
+from pathlib import Path
 
 import actionlib
 import numpy as np
@@ -44,12 +53,12 @@ from agiprobot_measurement.msg import (
 from agiprobot_measurement.planning.coverage import measured_colors, uncertainty_colors
 from agiprobot_measurement.planning.execution import PlanPart
 from agiprobot_measurement.planning.progress import overall_progress
-from agiprobot_measurement.planning.request import PlanRequest, PlanRequestError
+from agiprobot_measurement.planning.request import PlanRequest, PlanRequestError, WorkBudget
 from agiprobot_measurement.planning.session import GoalError, MeasurementSession
 from agiprobot_measurement.planning.trajectory_manager import PlanningCancelled
 from agiprobot_measurement.ros.action_client import ActionClient
 from agiprobot_measurement.ros.conversions import matrix_to_pose, pose_to_matrix, xyz_cloud
-from agiprobot_measurement.ros.executor import RosSegmentExecutor, ScannerClient
+from agiprobot_measurement.ros.executor import ControllerWatch, RosSegmentExecutor, ScannerClient
 from agiprobot_measurement.ros.joint_states import JointStateCache
 from agiprobot_measurement.ros.params import file_param
 from agiprobot_measurement.srv import (
@@ -62,7 +71,7 @@ from agiprobot_measurement.srv import (
 )
 from agiprobot_measurement.station import ConfigError, Station
 
-__all__ = ["TrajectoryManagerNode", "main", "plan_request_from_goal", "yaml_plain"]
+__all__ = ["TrajectoryManagerNode", "coverage_summary", "main", "plan_request_from_goal", "yaml_plain"]
 
 #: colours of the scan-line arrows, the planned path and the part
 SCAN_LINE_RGBA = (1.0, 0.55, 0.0, 1.0)
@@ -101,6 +110,7 @@ def plan_request_from_goal(goal, session: MeasurementSession) -> PlanRequest:
         solver_type=goal.solver_type,
         uncertainty_threshold_mm=goal.uncertainty_threshold_mm,
         plan_file=goal.plan_file,
+        overwrite=goal.overwrite,
         part_transform_mm=part_transform_from_pose(goal.part_pose),
     )
 
@@ -125,11 +135,16 @@ class TrajectoryManagerNode:
             scanner=file_param("~scanner"),
             scene=file_param("~scene"),
         )
+        allowed = rospy.get_param("~allowed_plan_dirs", []) or [os.environ.get("ROS_HOME") or "~/.ros", "/tmp"]
+        if isinstance(allowed, str):
+            allowed = allowed.split()
         self.session = MeasurementSession(
             station,
             dict(rospy.get_param("~planning", {})),
             plan_directory=rospy.get_param("~plan_directory", "plans"),
             measured_radius_mm=float(rospy.get_param("~measured_radius_mm", 1.0)),
+            allowed_directories=[Path(d).expanduser() for d in allowed],
+            work_budget=WorkBudget.from_mapping(rospy.get_param("~budget", {}), "~budget"),
         )
         rospy.set_param("~sensor_model", dict(station.scanner.sensor_parameters))
         self.joint_states = JointStateCache(self.session.joint_names)
@@ -145,6 +160,9 @@ class TrajectoryManagerNode:
         self.robot = ActionClient(
             rospy.get_param("~controller_action", "/robot_sim/execute_trajectory"), ExecuteJointTrajectoryAction
         )
+        self.controller = ControllerWatch(
+            self.joint_states, self.robot, float(rospy.get_param("~controller_heartbeat_timeout_s", 1.0))
+        )
         self.plan_server = actionlib.SimpleActionServer(
             "~plan_measurement", PlanMeasurementAction, execute_cb=self.on_plan, auto_start=False
         )
@@ -156,7 +174,11 @@ class TrajectoryManagerNode:
         rospy.Service("~get_coverage_report", GetCoverageReport, self.on_get_report)
         self.plan_server.start()
         self.execute_server.start()
-        rospy.loginfo("trajectory_manager: ready (plans go to %s)", self.session.plan_directory)
+        rospy.loginfo(
+            "trajectory_manager: ready (plans go to %s; absolute names may also point into %s)",
+            self.session.plan_directory,
+            ", ".join(str(r) for r in self.session.plan_files.extra_roots) or "nothing else",
+        )
 
     def _current_state(self, timeout_s: float = 3.0) -> np.ndarray:
         state = self.joint_states.wait(timeout_s)
@@ -171,7 +193,8 @@ class TrajectoryManagerNode:
 
         def progress(stage, fraction, message):
             if self.plan_server.is_preempt_requested() or rospy.is_shutdown():
-                raise PlanningCancelled(f"cancelled during {stage}")
+                # the stage the client last heard of, not the one about to start
+                raise PlanningCancelled(f"cancelled during {stage_state['stage']}")
             stage_state["stage"] = stage
             self.plan_server.publish_feedback(
                 PlanMeasurementFeedback(
@@ -247,7 +270,7 @@ class TrajectoryManagerNode:
 
     def on_store_plan(self, request):
         try:
-            written = self.session.store(request.plan_file)
+            written = self.session.store(request.plan_file, overwrite=request.overwrite)
         except (AgiprobotError, OSError) as exc:
             return StorePlanResponse(False, str(exc), "")
         return StorePlanResponse(True, f"stored {written}", str(written))
@@ -287,16 +310,22 @@ class TrajectoryManagerNode:
         result = ExecutePlanResult(success=False, predicted_coverage=-1.0, measured_coverage=-1.0)
         session = self.session
         try:
-            if goal.plan_file:
-                session.load(goal.plan_file)
-            if session.plan is None:
+            # a plan file is adopted only once everything accepted it: a refused goal keeps the current plan
+            candidate = session.read(goal.plan_file) if goal.plan_file else None
+            if candidate is None and session.plan is None:
                 raise GoalError("no plan: plan one, load one, or give plan_file")
             if not self.robot.wait_for_server(rospy.Duration(5.0)):
                 raise GoalError("the robot controller's action server is not available")
-            plan = session.prepared_plan(self._current_state())
-            if session.part is not None:
-                self.scanner.set_target(session.part)
-        except (AgiprobotError, rospy.ROSException) as exc:
+            problem = self.controller.problem()
+            if problem:
+                raise GoalError(f"the robot controller is not running: {problem}")
+            plan = session.prepared_plan(self._current_state(), candidate)
+            part = candidate.part if candidate is not None else session.part
+            if part is not None:
+                self.scanner.set_target(part)
+            if candidate is not None:
+                session.adopt(candidate)
+        except (AgiprobotError, rospy.ROSException, rospy.ServiceException) as exc:
             result.error = str(exc)
             rospy.logwarn("trajectory_manager: execution refused: %s", exc)
             self.execute_server.set_aborted(result, result.error)
@@ -312,6 +341,7 @@ class TrajectoryManagerNode:
             current_state=lambda: self.joint_states.latest(),
             cancel_requested=self.execute_server.is_preempt_requested,
             on_measure=self._show_measured_points,
+            controller_problem=self.controller.problem,
         )
 
         def on_segment(feedback):
@@ -323,9 +353,18 @@ class TrajectoryManagerNode:
         self.scanner.start_collecting()
         try:
             outcome = session.execute(plan, executor, on_segment)
-        finally:
-            measured_points = self.scanner.finish_collecting()
+        except BaseException:
+            self.scanner.finish_collecting()
+            raise
         result.segments_executed = outcome.segments_executed
+        if outcome.status == "controller_lost":
+            # the client hears at once; what was measured without a robot is not worth waiting for
+            result.error = outcome.describe()
+            rospy.logwarn("trajectory_manager: execution aborted: %s", result.error)
+            self.execute_server.set_aborted(result, result.error)
+            self.scanner.finish_collecting(profile_wait_s=0.0, cloud_wait_s=0.0)
+            return
+        measured_points = self.scanner.finish_collecting()
         coverage = session.measured(measured_points)
         if coverage is not None:
             result.predicted_coverage = coverage.predicted_coverage
@@ -342,16 +381,16 @@ class TrajectoryManagerNode:
             self.execute_server.set_preempted(result, result.error)
         elif not outcome.ok:
             result.error = outcome.describe()
+            rospy.logwarn("trajectory_manager: execution aborted: %s", result.error)
             self.execute_server.set_aborted(result, result.error)
         else:
             result.success = True
             self.execute_server.set_succeeded(result)
         rospy.loginfo(
-            "trajectory_manager: executed %d of %d segments; coverage predicted %.1f %%, measured %.1f %%",
+            "trajectory_manager: executed %d of %d segments; %s",
             result.segments_executed,
             outcome.total,
-            100 * result.predicted_coverage,
-            100 * result.measured_coverage,
+            coverage_summary(result.predicted_coverage, result.measured_coverage),
         )
 
     def _show_measured_points(self, view, active: bool) -> None:
@@ -360,6 +399,13 @@ class TrajectoryManagerNode:
             self.current_pub.publish(xyz_cloud(self.session.samples_mm[view.measurable_indices] / 1000.0, header))
         elif not active:
             self.current_pub.publish(xyz_cloud(np.zeros((0, 3)), header))
+
+
+def coverage_summary(predicted: float, measured: float) -> str:
+    """The coverage part of the execution log line; a negative share is unknown (a loaded plan has no samples)."""
+    if predicted < 0 and measured < 0:
+        return "coverage not known (a loaded plan has no sample points to compare)"
+    return f"coverage predicted {100 * predicted:.1f} %, measured {100 * measured:.1f} %"
 
 
 def scan_line_markers(scan_lines_mm, header) -> MarkerArray:
