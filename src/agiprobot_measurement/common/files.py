@@ -92,7 +92,9 @@ class FileRoot:
 
     def __post_init__(self):
         object.__setattr__(self, "root", Path(self.root).expanduser().resolve())
-        object.__setattr__(self, "extra_roots", tuple(Path(r).expanduser().resolve() for r in self.extra_roots))
+        extra = dict.fromkeys(Path(r).expanduser().resolve() for r in self.extra_roots)  # ordered, no repeats
+        extra.pop(self.root, None)
+        object.__setattr__(self, "extra_roots", tuple(extra))
 
     @property
     def roots(self) -> tuple[Path, ...]:

@@ -99,3 +99,8 @@ def test_file_root_reading_and_writing(tmp_path):
         policy.for_writing("base", suffix=".yaml")
     assert policy.for_writing("base", overwrite=True, suffix=".yaml") == tmp_path / "base.yaml"
     assert policy.for_writing("new", suffix=".yaml") == tmp_path / "new.yaml"
+
+
+def test_file_root_lists_each_root_once(tmp_path):
+    policy = files.FileRoot(tmp_path, extra_roots=(tmp_path, tmp_path / "a", tmp_path / "a"))
+    assert policy.roots == (tmp_path.resolve(), (tmp_path / "a").resolve())

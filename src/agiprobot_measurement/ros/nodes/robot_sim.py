@@ -127,9 +127,10 @@ class RobotSimNode:
     def publish(self, _event=None):
         try:
             self.controller.publish_state()
-        except rospy.ROSException:
-            # the timer can fire once more after shutdown has closed the topic
-            if not rospy.is_shutdown():
+        except rospy.ROSException as exc:
+            # the timer can fire once more while shutdown closes the topics (before is_shutdown() turns true)
+            closing = rospy.is_shutdown() or rospy.core.is_shutdown_requested() or "closed topic" in str(exc)
+            if not closing:
                 raise
 
     def set_joint_state(self, request):
