@@ -9,6 +9,8 @@ manual services (flag points at the robot's pose, samples, remove, save, load) k
 current sample by sample; with use_auto_judge false a run waits for the operator's answer at every detection.
 """
 
+import threading
+import time
 import unittest
 from pathlib import Path
 
@@ -204,6 +206,30 @@ class CalibrationNodeTest(unittest.TestCase):
         self.assertIn("coarse: 4 flag points", response.message)
         self.assertEqual(len(questions), 4, questions)  # one question per flag point
         self.assertTrue(all(q.startswith("accepted: flag point") for q in questions), questions)
+
+    def test_7_cheap_service_under_load(self):
+        # issue 13: 200 calls from 1 and from 4 concurrent clients, zero failures, the rate printed
+        for clients in (1, 4):
+            counts = [[0, 0] for _ in range(clients)]
+
+            def client(index, counts=counts):
+                proxy = rospy.ServiceProxy("/calibration/list_samples", Trigger)
+                for _ in range(200):
+                    try:
+                        counts[index][0 if proxy().success else 1] += 1
+                    except rospy.ServiceException:
+                        counts[index][1] += 1
+
+            threads = [threading.Thread(target=client, args=(i,)) for i in range(clients)]
+            start = time.monotonic()
+            for thread in threads:
+                thread.start()
+            for thread in threads:
+                thread.join()
+            seconds = time.monotonic() - start
+            ok, failed = sum(c[0] for c in counts), sum(c[1] for c in counts)
+            print(f"/calibration/list_samples {clients} client(s): {ok / seconds:.1f} calls/s, {failed} failed")
+            self.assertEqual((ok, failed), (200 * clients, 0))
 
 
 if __name__ == "__main__":

@@ -17,6 +17,12 @@ Documented choices where the report is silent:
   growth points): it is what the implemented stop drives to zero.
 - Every cell that was ``cc`` once and is still unknown is marked in the working copy (+0.1 unmeasurable, -0.1
   otherwise), so it is never a candidate again.
+- With depth noise, the laser's free part stops half a cell before the point and the return path's free part starts
+  half a cell (+ ``noise_return_margin_sigmas`` x sigma) after it: a point measured too deep lies inside the body,
+  and carving the first stretch of its return path would erase the surface just measured.
+- A candidate is unmeasurable only once every planning strategy has failed to plan it. In ``fullpix`` (recovery
+  S0 <-> S1 only) a strategy that planned before may plan again when the other finds no view, its failed
+  configurations being forbidden (``retry_planned_strategies``); in ``stratpix`` a strategy is not re-entered.
 - ``circpix``: the source moves on the circle around the scene centre through the first hit at the standoff, in
   steps of ``circ_step_deg`` counter-clockwise and never back. At each stop it measures, one after the other, the
   candidates it can see (laser and camera path free of known full cells, depth within the camera's field), the
@@ -100,6 +106,13 @@ class RunConfig:
     search_step_cells: float = 4.0
     side_step_cells: float = 1.0
     eight_connected: bool = False
+    # with noise, the part of the return path within this many noise sigmas (plus the half cell of the cell guess)
+    # of the point is left uncarved: a point measured too deep lies in the body and its return path starts there
+    noise_return_margin_sigmas: float = 0.0
+    # fullpix: after a strategy finds no view, one that planned before may plan again (see ``_Engine.resolve``)
+    retry_planned_strategies: bool = True
+    # where strategy 2's orbit begins: "normal" (the outward normal of pp) or "sensor" (where the sensor is)
+    s2_start: str = "normal"
 
     def __post_init__(self) -> None:
         if self.script not in SCRIPTS:
@@ -112,6 +125,9 @@ class RunConfig:
         _positive("circ_step_deg", self.circ_step_deg)
         _positive("search_step_cells", self.search_step_cells)
         _positive("side_step_cells", self.side_step_cells)
+        _positive("noise_return_margin_sigmas", self.noise_return_margin_sigmas, allow_zero=True)
+        if self.s2_start not in ("normal", "sensor"):
+            raise NbvInputError(f"s2_start must be 'normal' or 'sensor', got {self.s2_start!r}")
         _positive("max_time_s", self.max_time_s, allow_none=True)
         for name in ("contour_points", "max_switches_per_candidate", "max_measurements_per_candidate"):
             if int(getattr(self, name)) < 1:
@@ -221,8 +237,10 @@ class _Engine:
 
     def _fuse(self, pos, point, cell) -> None:
         was_full = self.m == FULL  # a full copy is cheap next to the traversal and keeps the bookkeeping exact
-        margin = 0.5 if self.cfg.noise_sigma_cells > 0 else 0.0  # the half cell of the cell guess above
-        free, full_cell = apply_measurement(self.m, pos, point, cell, self.cfg.eight_connected, margin)
+        sigma = self.cfg.noise_sigma_cells
+        margin = 0.5 if sigma > 0 else 0.0  # the half cell of the cell guess above
+        back_margin = margin + self.cfg.noise_return_margin_sigmas * sigma if sigma > 0 else 0.0
+        free, full_cell = apply_measurement(self.m, pos, point, cell, self.cfg.eight_connected, margin, back_margin)
         touched = free if full_cell is None else np.vstack([free, np.array([full_cell])])
         if len(touched) == 0:
             return
@@ -352,6 +370,7 @@ class _Engine:
         spent = 0
         orbit = None
         tried: set[Strategy] = set()
+        planned: set[Strategy] = set()
         self.circles = {}
         while True:
             if self.m[cc] != UNKNOWN:
@@ -373,17 +392,23 @@ class _Engine:
                 )  # fmt: skip
             else:
                 if orbit is None:
-                    orbit = start_orbit(pp, normal, direction, cc, self.current_source, cfg.s2_step_deg)
+                    orbit = start_orbit(pp, normal, direction, cc, self.current_source, cfg.s2_step_deg, cfg.s2_start)
                 plan = plan_s2(self.rf, orbit)
-            tried.add(strategy)
             if isinstance(plan, NoView):
-                # a candidate is unmeasurable only once every planning strategy has failed to plan it
+                # a candidate is unmeasurable only once every planning strategy has failed to plan it. In fullpix,
+                # whose only recovery is S0 <-> S1, a strategy that planned before (its failed configurations now
+                # forbidden) may plan again; in stratpix strategy 2 is the recovery and a strategy that planned
+                # once is not re-entered (the report: strategy 2 fails after a full turn)
+                tried.add(strategy)
+                if cfg.script != "fullpix" or not cfg.retry_planned_strategies:
+                    tried |= planned
                 untried = [s for s in (Strategy.S0, Strategy.S1) if s not in tried]
                 if untried and switches < cfg.max_switches_per_candidate:
                     self.outcomes[f"no view {strategy.name}->{untried[0].name}"] += 1
                     strategy, switches = untried[0], switches + 1
                     continue
                 return self._unmeasurable(cc, pp)
+            planned.add(strategy)
             if spent >= cfg.max_measurements_per_candidate:
                 return self._unmeasurable(cc, pp)
             _, cell, label = self.measure(plan.pos, cc, strategy)
@@ -411,7 +436,7 @@ class _Engine:
                 nxt_cc = predicted_point(self.w, pp, cfg.contour_points) if self.w[pp] == FULL else None
                 if nxt_cc is None:
                     return pp
-                cc, strategy, switches, spent, orbit, tried = nxt_cc, nxt, 0, 0, None, set()
+                cc, strategy, switches, spent, orbit, tried, planned = nxt_cc, nxt, 0, 0, None, set(), set()
                 self.circles = {}
                 continue
             return self._unmeasurable(cc, pp)

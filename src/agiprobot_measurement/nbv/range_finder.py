@@ -248,12 +248,19 @@ def cell_of_point(point_xy, laser_dir) -> tuple[int, int]:
 
 
 def measurement_cells(
-    model_shape, pos, point_xy, cell=None, eight_connected: bool = False, laser_margin_cells: float = 0.0
+    model_shape,
+    pos,
+    point_xy,
+    cell=None,
+    eight_connected: bool = False,
+    laser_margin_cells: float = 0.0,
+    return_margin_cells: float = 0.0,
 ):
     """Cells a return proves free (laser before the point, point -> camera) and the cell proven full.
 
     ``laser_margin_cells`` leaves that much of the laser before the point uncarved (a noisy point may lie in front
-    of the surface). Returns ``(free_cells k x 2, full_cell)``; ``full_cell`` is ``None`` outside the grid.
+    of the surface); ``return_margin_cells`` leaves that much of the return path next to the point uncarved (a
+    point measured too deep lies inside the body, and the first stretch of its return path crosses body cells). Returns ``(free_cells k x 2, full_cell)``; ``full_cell`` is ``None`` outside the grid.
     """
     p = _check_pose(pos)
     src, cam, aim = p
@@ -266,7 +273,12 @@ def measurement_cells(
     inside = 0 <= cell[0] < model_shape[0] and 0 <= cell[1] < model_shape[1]
     trace = line8_cells if eight_connected else supercover_cells
     laser = trace(src, x - max(_END_NUDGE, laser_margin_cells) * d, model_shape)
-    back = trace(x, cam, model_shape)
+    to_cam = cam - x
+    dist_cam = float(np.hypot(*to_cam))
+    if return_margin_cells > 0 and dist_cam > return_margin_cells:
+        back = trace(x + return_margin_cells * to_cam / dist_cam, cam, model_shape)
+    else:
+        back = trace(x, cam, model_shape)
     free = np.concatenate([laser, back]) if len(back) else laser
     if inside and len(free):
         free = free[~((free[:, 0] == cell[0]) & (free[:, 1] == cell[1]))]
@@ -274,13 +286,21 @@ def measurement_cells(
 
 
 def apply_measurement(
-    model: np.ndarray, pos, point_xy, cell=None, eight_connected: bool = False, laser_margin_cells: float = 0.0
+    model: np.ndarray,
+    pos,
+    point_xy,
+    cell=None,
+    eight_connected: bool = False,
+    laser_margin_cells: float = 0.0,
+    return_margin_cells: float = 0.0,
 ):
     """Fuse one return into ``model`` in place (``sgn(M + U)`` on the cells the return touches).
 
     Returns ``(free_cells, full_cell)`` as :func:`measurement_cells`.
     """
-    free, full_cell = measurement_cells(model.shape, pos, point_xy, cell, eight_connected, laser_margin_cells)
+    free, full_cell = measurement_cells(
+        model.shape, pos, point_xy, cell, eight_connected, laser_margin_cells, return_margin_cells
+    )
     if len(free):
         fi, fj = free[:, 0], free[:, 1]
         model[fi, fj] = np.sign(model[fi, fj] + EMPTY)

@@ -5,6 +5,10 @@
 - Kolmost (perpendicularity), eq. (4): ``w cos(a) + 1 - w`` with ``a`` the angle between the contour's outward
   normal and the direction to the source, ``w = 0.5`` by default. Documented choice: the value is clipped to
   [0, 1], which changes nothing for ``w <= 0.5`` and keeps every term in [0, 1] as the report requires.
+- Option: a source on the inner side of the contour line (angle to the outward normal > 90 deg) looks through the
+  body the contour bounds; ``ScoreConfig.front_only=True`` gives such views Viditelnost 0. Default off: on the
+  benchmark it helps the U-shape's slot (fullpix 0.824 -> 0.848) but costs elsewhere (rotated rectangle, stratpix,
+  long baseline, edge midpoints: 0.987 -> 0.263), so the report's circle alone decides.
 - Pohyb (motion): the report gives no formula. ``"angular"`` (default) is ``1 - dtheta / pi`` with ``dtheta`` the
   angle, seen from the aim point, between the candidate source and the current source; ``"distance"`` is
   ``exp(-d / scale)`` of the source displacement ``d`` (``scale`` defaults to the standoff); ``"none"`` is 1.
@@ -41,6 +45,8 @@ class ScoreConfig:
     kolmost_weight: float = 0.5
     motion: str = "angular"
     motion_scale_cells: float | None = None
+    # option: views from behind the contour line (angle to the outward normal > 90 deg) are invisible
+    front_only: bool = False
 
     def __post_init__(self) -> None:
         w = float(self.kolmost_weight)
@@ -137,6 +143,10 @@ def score_views(
     vis = (circles[a_idx, sec] > 0) & (circles[a_idx, cam_sec] > 0)
     if forbidden is not None:
         vis &= ~forbidden[a_idx, sec, (1 - side) // 2]
+    if term is None and normal is not None and cfg.front_only:
+        # a source behind the contour line looks at the candidate through the body that the contour bounds: the
+        # circle cannot show that (the body's inside is unknown, not full), so such a view is taken as not visible
+        vis &= (np.cos(phis) * normal[0] + np.sin(phis) * normal[1]) >= 0.0
     k = kolmost(normal, phis, cfg.kolmost_weight) if term is None else term[a_idx, sec]
     p = pohyb(src, aims[a_idx], current_source, cfg, rf.standoff_cells)
     score = vis * k * p

@@ -285,11 +285,14 @@ class OrbitState:
         return math.ceil(2 * math.pi / self.step_rad - 1e-9)
 
 
-def start_orbit(pp, normal, direction, cc, current_source, step_deg: float) -> OrbitState:
+def start_orbit(pp, normal, direction, cc, current_source, step_deg: float, start_at: str = "normal") -> OrbitState:
     """Begin the orbit on the outward normal of ``pp`` (where strategy 0 looked from) and turn towards where the
     contour goes on (``direction``, else towards ``cc``); without a normal, start where the sensor is."""
     p = np.asarray(pp, dtype=float)
-    if normal is not None:
+    at_sensor = current_source is not None and np.hypot(*(np.asarray(current_source) - p)) > 0
+    if start_at == "sensor" and at_sensor:
+        start = np.asarray(current_source, dtype=float) - p
+    elif normal is not None:
         start = np.asarray(normal, dtype=float)
     elif current_source is not None and np.hypot(*(np.asarray(current_source) - p)) > 0:
         start = np.asarray(current_source, dtype=float) - p

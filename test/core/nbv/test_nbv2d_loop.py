@@ -135,3 +135,13 @@ def test_command_writes_picture_and_summary(tmp_path):
     bad = subprocess.run([*cmd[:2], "--object", "disc", "--script", "nope", "--out", str(out)],
                          capture_output=True, text=True, timeout=120)  # fmt: skip
     assert bad.returncode == 2 and "unknown script" in bad.stderr
+
+
+def test_noise_return_margin_must_be_non_negative():
+    from agiprobot_measurement.nbv.errors import NbvInputError
+    from agiprobot_measurement.nbv.loop import RunConfig
+
+    with pytest.raises(NbvInputError):
+        RunConfig(noise_return_margin_sigmas=-1.0)
+    with pytest.raises(NbvInputError):
+        RunConfig(noise_return_margin_sigmas=float("nan"))

@@ -135,3 +135,18 @@ def test_bad_parameters_raise():
         rangef2d(np.zeros((5, 5)), np.zeros((2, 2)), _rf())
     with pytest.raises(NbvInputError, match="NaN"):
         rangef2d(np.zeros((5, 5)), np.full((3, 2), np.nan), _rf())
+
+
+def test_return_margin_leaves_the_start_of_the_return_path_uncarved():
+    from agiprobot_measurement.nbv.range_finder import measurement_cells
+
+    pos = np.array([[10.0, 0.0], [0.0, 0.0], [10.0, 10.0]])
+    point = np.array([10.0, 9.5])
+    free0, _ = measurement_cells((20, 20), pos, point)
+    free3, _ = measurement_cells((20, 20), pos, point, return_margin_cells=3.0)
+    carved0 = {tuple(int(v) for v in c) for c in free0}
+    carved3 = {tuple(int(v) for v in c) for c in free3}
+    spared = carved0 - carved3
+    assert carved3 <= carved0 and spared
+    # only cells within the margin of the point on its way back to the camera are spared
+    assert all(np.hypot(c[0] - point[0], c[1] - point[1]) < 3.0 + 1.5 for c in spared)

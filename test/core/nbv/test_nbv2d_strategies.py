@@ -45,3 +45,20 @@ def test_transition_tables_cover_every_label_of_their_strategies():
     assert full["E0"] == (Action.SWITCH, Strategy.S1) and strat["E0"] == (Action.SWITCH, Strategy.S2)
     assert full["C1"][0] is Action.NEXT_CANDIDATE
     assert strat["B2"] == (Action.SWITCH, Strategy.S1) and strat["D2"][0] is Action.NEXT_ANGLE
+
+
+def test_views_from_behind_the_contour_line_are_not_visible():
+    from agiprobot_measurement.nbv.range_finder import RangeFinder2D
+    from agiprobot_measurement.nbv.scoring import ScoreConfig, score_views
+    from agiprobot_measurement.nbv.visibility import N_SECTORS
+
+    rf = RangeFinder2D.from_config()
+    aims = np.array([[50.0, 50.0]])
+    circles = np.ones((1, N_SECTORS), dtype=np.uint8)
+    normal = np.array([1.0, 0.0])  # the empty side is +x
+    views = score_views(rf, aims, circles, normal, None, ScoreConfig(front_only=True))
+    cos_a = np.cos(np.radians(views.sector + 0.5))
+    assert not views.visibility[cos_a < 0].any()
+    assert views.visibility[cos_a > 0].any()
+    loose = score_views(rf, aims, circles, normal, None, ScoreConfig())
+    assert loose.visibility[cos_a < 0].any()
