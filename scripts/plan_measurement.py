@@ -38,10 +38,12 @@ except ImportError:  # run from a checkout without the catkin environment
 
 import numpy as np  # noqa: E402
 
-# Only light modules here: bad input is reported before trimesh, FCL and OMPL are loaded (about 1 s).
 from agiprobot_measurement.common.files import FileRoot, PathPolicyError, atomic_write_text  # noqa: E402
 from agiprobot_measurement.common.geometry import pose_matrix  # noqa: E402
 from agiprobot_measurement.common.units import UNIT_SCALES_TO_M  # noqa: E402
+
+# Only light modules here: bad input is reported before trimesh, FCL and OMPL are loaded (about 1 s).
+from agiprobot_measurement.errors import InputError  # noqa: E402
 from agiprobot_measurement.planning.plan_io import plan_path  # noqa: E402
 from agiprobot_measurement.planning.progress import STAGES  # noqa: E402
 from agiprobot_measurement.planning.request import PlanRequest, PlanRequestError, load_work_budget  # noqa: E402
@@ -65,7 +67,7 @@ OPTION_LABELS = {
 BAR_FORMAT = "{desc} {percentage:3.0f}%|{bar:30}| "
 
 
-class UsageError(Exception):
+class UsageError(InputError):
     """Bad command-line input: reported as one 'error: ...' line, exit status 2."""
 
 
