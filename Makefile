@@ -35,7 +35,7 @@ rostest: setup
 
 # The speed figures the issues name (minutes, not part of `make test`): planning pipeline on the cube, motion layer.
 bench: setup
-	@$(ENV) && python3 tools/bench_planning.py && python3 tools/bench_motion.py
+	@$(ENV) && python3 scripts/bench_planning.py && python3 scripts/bench_motion.py
 
 clean:
 	rm -rf "$$(bash tools/workspace_path.sh)" .test_results .ros_home demo_output

@@ -6,9 +6,9 @@ every frame, the scene (objects, part, robot) concatenated into one mesh, a fres
 rays, noise, normals and texture. ``--messages`` adds building the driver's messages (cloud, images, camera info).
 Targets of the issue: high resolution <= 2 s per frame, low resolution <= 0.6 s per frame (2-core machine).
 
-  python3 tools/bench_phoxi.py                  # 5 frames each of high and low resolution, model of the config
-  python3 tools/bench_phoxi.py --frames 10 --model M --messages
-  python3 tools/bench_phoxi.py --ptx            # time V2/save_last_frame of one high-resolution frame (.ptx, .ply)
+  python3 scripts/bench_phoxi.py                  # 5 frames each of high and low resolution, model of the config
+  python3 scripts/bench_phoxi.py --frames 10 --model M --messages
+  python3 scripts/bench_phoxi.py --ptx            # time V2/save_last_frame of one high-resolution frame (.ptx, .ply)
 """
 
 from __future__ import annotations

@@ -4,9 +4,9 @@
 The presets mirror the original's cube benchmark (1,500 samples; 3, 6 and 12 orientations around the
 boresight, without and with the 9 tilts): see reference/measurement_planning.md. Example:
 
-    tools/bench_set_cover.py                       # o3 o6 o12 o12-all, every solver
-    tools/bench_set_cover.py --presets full --solvers greedy IP_basic
-    tools/bench_set_cover.py --points 3000 --orientations 12 --valid-fraction 0.5
+    scripts/bench_set_cover.py                       # o3 o6 o12 o12-all, every solver
+    scripts/bench_set_cover.py --presets full --solvers greedy IP_basic
+    scripts/bench_set_cover.py --points 3000 --orientations 12 --valid-fraction 0.5
 """
 
 from __future__ import annotations

@@ -3,8 +3,8 @@
 
 Usage (after ``source tools/env.sh``)::
 
-    python3 tools/bench_robot_model.py                      # real robot's settings, 2000 poses
-    python3 tools/bench_robot_model.py --settings config/mild_robot_model_services_sim.yaml --poses 5000
+    python3 scripts/bench_robot_model.py                      # real robot's settings, 2000 poses
+    python3 scripts/bench_robot_model.py --settings config/mild_robot_model_services_sim.yaml --poses 5000
 
 Requested camera poses are reachable by construction: the camera poses of random robot states within the PTU limits
 whose base stands on an allowed cell of the map. An exact IK solve succeeds when it returns a state whose camera faces

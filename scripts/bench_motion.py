@@ -3,8 +3,8 @@
 
 Usage (after ``source tools/env.sh``)::
 
-    python3 tools/bench_motion.py                  # every benchmark
-    python3 tools/bench_motion.py --only ik_closed_form cartesian --poses 50000
+    python3 scripts/bench_motion.py                  # every benchmark
+    python3 scripts/bench_motion.py --only ik_closed_form cartesian --poses 50000
 
 Each benchmark is a function ``(context, args) -> list[Row]`` listed in ``BENCHMARKS``; add collision or
 planner benchmarks by writing such a function and registering it there.

@@ -5,8 +5,8 @@ Prints full-robot collision checks per second (batch, random and valid states; s
 seeded pairs of random valid states, the planner's success rate and planning times (median, mean, p90, max).
 By default the planner is RRTConnect with the straight-line shortcut off, so every pair is planned by OMPL.
 
-    tools/bench_collision_planning.py                      # 100 pairs, RRTConnect
-    tools/bench_collision_planning.py --pairs 20 --planner PRM --direct
+    scripts/bench_collision_planning.py                      # 100 pairs, RRTConnect
+    scripts/bench_collision_planning.py --pairs 20 --planner PRM --direct
 """
 
 from __future__ import annotations

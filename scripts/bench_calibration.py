@@ -9,8 +9,8 @@ robot's (select_consistent_flags); coarse = flag points only. Fine = flag points
 frames and once with a fraction of the path frames spoiled (a plate occludes part of the flange and a decoy disc
 of the flange's size sits 8 cm beside it: a wrong cluster); the clean frames are shared by both runs.
 
-    tools/bench_calibration.py                          # 20 seeds, 20 % spoiled, 2 workers
-    tools/bench_calibration.py --seeds 3 --workers 4 --fractions 0.5
+    scripts/bench_calibration.py                          # 20 seeds, 20 % spoiled, 2 workers
+    scripts/bench_calibration.py --seeds 3 --workers 4 --fractions 0.5
 
 The station is that of launch/calibration.launch (config/calibration_scene.yaml: the chessboard lies on the table in
 every frame). Test mode (--no-chessboard skips it): the chessboard's 8 x 11 inner corners found in the texture image

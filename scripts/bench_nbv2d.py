@@ -4,9 +4,9 @@ depth noise, a short and a long laser-camera distance, and the report's section 
 
 Prints a table and the issue's targets (held or not), and writes every run's summary to a JSON file:
 
-    tools/bench_nbv2d.py                                   # the full matrix, 2 processes
-    tools/bench_nbv2d.py --objects disc triangle --scripts fullpix --jobs 1
-    tools/bench_nbv2d.py --short 40 --long 250 --noise 0.3 --json /tmp/bench_nbv2d.json
+    scripts/bench_nbv2d.py                                   # the full matrix, 2 processes
+    scripts/bench_nbv2d.py --objects disc triangle --scripts fullpix --jobs 1
+    scripts/bench_nbv2d.py --short 40 --long 250 --noise 0.3 --json /tmp/bench_nbv2d.json
 
 Lengths in cells (1 cell = 1 mm); ``--short`` / ``--long`` are RFlength values, the standoff is kept.
 """
