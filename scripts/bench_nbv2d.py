@@ -2,7 +2,9 @@
 """Benchmark of the 2D range-finder planner (Fojtík & Pajdla): six objects x three scripts, noise-free and with
 depth noise, a short and a long laser-camera distance, and the report's section 7.1 remedy (edge-midpoint aiming).
 
-Prints a table and the issue's targets (held or not), and writes every run's summary to a JSON file:
+Prints a table and the issue's targets (held or not), and writes every run's summary to a JSON file. Coverage and
+D0 are judged separately for the centre-aim runs (the report's planner, the whole matrix) and the noise-free
+edge-midpoint runs (the report's section 7.1 remedy), so that neither aim hides the other:
 
     scripts/bench_nbv2d.py                                   # the full matrix, 2 processes
     scripts/bench_nbv2d.py --objects disc triangle --scripts fullpix --jobs 1
@@ -47,35 +49,44 @@ def _targets(rows, short_len):
 
     main = [r for r in rows if r["aim"] == "centre"]
     nf = [r for r in main if r["noise_sigma_cells"] == 0]
-    bad = [r for r in nf if r["termination"] != "growth_points_exhausted"]
+    all_runs_nf = [r for r in rows if r["noise_sigma_cells"] == 0]
+    bad = [r for r in all_runs_nf if r["termination"] != "growth_points_exhausted"]
     budget = [r for r in rows if r["termination"] in ("measurement_budget", "time_budget")]
     out.append(
         (
             "every noise-free run ends by exhausting growth points",
             not bad,
-            f"{len(nf) - len(bad)}/{len(nf)}; others: "
+            f"{len(all_runs_nf) - len(bad)}/{len(all_runs_nf)}; others: "
             + (", ".join(f"{r['object']}/{r['script']}/{r['baseline']}={r['termination']}" for r in bad) or "none"),
         )
     )
     out.append(("no run ends on a budget", not budget, f"{len(budget)} of {len(rows)}"))
-    for noise, limit in ((0.0, 0.95), (None, 0.90)):
-        group = [r for r in main if r["script"] in ("fullpix", "stratpix")]
+    # coverage: the matrix runs aim at cell centres (the report's planner); the noise-free edge-midpoint runs (the
+    # report's section 7.1 remedy) are judged separately, so that neither aim hides the other
+    for aim, noise, limit in (("centre", 0.0, 0.95), ("edge_midpoints", 0.0, 0.95), ("centre", None, 0.90)):
+        group = [r for r in rows if r["aim"] == aim and r["script"] in ("fullpix", "stratpix")]
         group = [r for r in group if (r["noise_sigma_cells"] == 0) == (noise == 0.0)]
         worst = min(group, key=lambda r: r["coverage"]) if group else None
         ok = all(r["coverage"] >= limit for r in group)
-        label = f"coverage >= {limit:.0%} with fullpix/stratpix ({'noise-free' if noise == 0.0 else 'noise'})"
+        label = (
+            f"coverage >= {limit:.0%} with fullpix/stratpix ({'noise-free' if noise == 0.0 else 'noise'}, aim {aim})"
+        )
         fails = [
             f"{r['object']}/{r['script']}/{r['baseline']}={r['coverage']:.3f}" for r in group if r["coverage"] < limit
         ]
-        out.append((label, ok, f"min {worst['coverage']:.3f}; below: {', '.join(fails) or 'none'}" if worst else "-"))
-    d0 = [r for r in nf if r["d0_count"] > 0]
-    out.append(
-        (
-            "D0 = 0 noise-free",
-            not d0,
-            ", ".join(f"{r['object']}/{r['script']}/{r['baseline']}={r['d0_count']}" for r in d0) or "all 0",
-        )
-    )
+        if group:
+            out.append((label, ok, f"min {worst['coverage']:.3f}; below: {', '.join(fails) or 'none'}"))
+    for aim in ("centre", "edge_midpoints"):
+        group = [r for r in all_runs_nf if r["aim"] == aim]
+        d0 = [r for r in group if r["d0_count"] > 0]
+        if group:
+            out.append(
+                (
+                    f"D0 = 0 noise-free (aim {aim}, all scripts)",
+                    not d0,
+                    ", ".join(f"{r['object']}/{r['script']}/{r['baseline']}={r['d0_count']}" for r in d0) or "all 0",
+                )
+            )
     for baseline in sorted({r["baseline"] for r in nf}):
         wins = []
         for obj in OBJECT_NAMES:

@@ -71,9 +71,8 @@ def bench_saving(model_name: str | None, repeats: int) -> int:
         device = PhoxiDevice(
             model, scene_geometry(station.scene), out, settings=ScanSettings(resolution=RESOLUTION_HIGH)
         )
-        device.connect()
+        device.connect(device.hardware_identification)
         frame = device.trigger(config.pose)
-        device.mark_published(frame)
         intr = model.intrinsics(RESOLUTION_HIGH)
         print(f"PhoXi {model.name} {intr.width}x{intr.height}, {frame.stats['valid']:,} valid points")
         results = {}

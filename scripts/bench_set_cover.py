@@ -38,6 +38,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--solvers", nargs="+", choices=SOLVER_TYPES, default=list(SOLVER_TYPES))
     parser.add_argument("--backend", choices=("highs", "cbc"), default="highs")
     parser.add_argument("--time-limit", type=float, default=60.0, help="per IP solve, s")
+    parser.add_argument("--mip-gap", type=float, default=0.0, help="relative gap at which an IP may stop (0)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--repeat", type=int, default=1, help="solve each case this often, report the fastest")
     args = parser.parse_args(argv)
@@ -77,6 +78,7 @@ def main(argv: list[str] | None = None) -> int:
                     durations_s=inst.durations_s,
                     time_limit_s=args.time_limit,
                     backend=args.backend,
+                    mip_gap=args.mip_gap,
                 )
                 if best is None or result.solve_time_s < best.solve_time_s:
                     best = result

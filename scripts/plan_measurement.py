@@ -8,6 +8,12 @@ bar per stage and prints a summary. Writes the execution plan only with -o, the 
 examples:
   plan_measurement.py parts/objectA_wuerfel.stl -o cube_plan.yaml --report cube.png
   plan_measurement.py parts/featuretype.STL --units inch --tilt full --solver greedy --transform 0 0 0 0 0 90
+  plan_measurement.py ../shared/parts/plate_holes.STL --place fixture --tilt auto --time-limit 120
+
+placement: the part's CAD frame goes to the scene's part pose (config/scene.yaml, on the fixture's top) times
+--transform; --place fixture instead sets the part's lowest point on the fixture's top, centred, turned by
+--transform's rotation and shifted by its translation. A part that overlaps the table, the fixture, another
+scene object or the robot is refused with the object, the depth and the lift that clears it.
 
 files: -o, --report and --summary follow the package's file policy: names resolve under --output-dir (default:
 the working directory); absolute names must lie inside it; '..' and '~' are refused; an existing file is
@@ -46,9 +52,14 @@ from agiprobot_measurement.common.units import UNIT_SCALES_TO_M  # noqa: E402
 from agiprobot_measurement.errors import InputError  # noqa: E402
 from agiprobot_measurement.planning.plan_io import plan_path  # noqa: E402
 from agiprobot_measurement.planning.progress import STAGES  # noqa: E402
-from agiprobot_measurement.planning.request import PlanRequest, PlanRequestError, load_work_budget  # noqa: E402
+from agiprobot_measurement.planning.request import (  # noqa: E402
+    PLACEMENTS,
+    REQUEST_TILT_MODES,
+    PlanRequest,
+    PlanRequestError,
+    load_work_budget,
+)
 from agiprobot_measurement.planning.set_cover import SOLVER_TYPES  # noqa: E402
-from agiprobot_measurement.planning.viewpoint import TILT_MODES  # noqa: E402
 
 EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 #: how the request's fields are named in messages: by their options
@@ -60,7 +71,12 @@ OPTION_LABELS = {
     "sampling_density": "--density (points/mm^2)",
     "uncertainty_threshold_mm": "--threshold (mm)",
     "scan_speed_mm_s": "--scan-speed (mm/s)",
-    "set_cover_time_limit_s": "--time-limit (s)",
+    "set_cover_time_limit_s": "--ip-time-limit (s)",
+    "time_limit_s": "--time-limit (s)",
+    "set_cover_mip_gap": "--mip-gap",
+    "placement": "--place",
+    "min_reachable_share": "--min-reachable-share",
+    "tessellation_tolerance_mm": "--tessellation-tolerance (mm)",
     "orientations_around_boresight": "--orientations",
     "part_transform_mm": "--transform",
 }
@@ -96,7 +112,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--tilt",
         default=d.viewpoint_tilt_mode,
-        help=f"viewpoint tilt mode: {', '.join(TILT_MODES)} ({d.viewpoint_tilt_mode})",
+        help=f"viewpoint tilt mode: {', '.join(REQUEST_TILT_MODES)} ({d.viewpoint_tilt_mode}); auto tries none, then "
+        "full when the cover is large or coverage short, and reports the choice",
     )
     parser.add_argument("--solver", default=d.solver_type, help=f"set cover solver: {', '.join(SOLVER_TYPES)}")
     parser.add_argument(
@@ -108,8 +125,38 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--time-limit",
         type=float,
+        default=d.time_limit_s,
+        help=f"time limit of the whole plan in s ({d.time_limit_s:g}): the best verified plan and its gap then",
+    )
+    parser.add_argument(
+        "--ip-time-limit",
+        type=float,
         default=d.set_cover_time_limit_s,
         help=f"time limit of one IP solve in s ({d.set_cover_time_limit_s:g})",
+    )
+    parser.add_argument(
+        "--mip-gap",
+        type=float,
+        default=d.set_cover_mip_gap,
+        help=f"relative optimality gap at which an IP solve may stop ({d.set_cover_mip_gap:g})",
+    )
+    parser.add_argument(
+        "--place",
+        default=d.placement,
+        help=f"placement of the part: {', '.join(PLACEMENTS)} ({d.placement}); fixture = lowest point on the "
+        "fixture's top, centred",
+    )
+    parser.add_argument(
+        "--min-reachable-share",
+        type=float,
+        default=d.min_reachable_share,
+        help=f"warn when fewer samples have a reachable anchor ({d.min_reachable_share:g})",
+    )
+    parser.add_argument(
+        "--tessellation-tolerance",
+        type=float,
+        default=d.tessellation_tolerance_mm,
+        help="linear deflection of STEP tessellation in mm (0 = the reader's default)",
     )
     parser.add_argument(
         "--transform",
@@ -178,7 +225,12 @@ def validate(args: argparse.Namespace) -> PlanRequest:
         viewpoint_tilt_mode=args.tilt,
         solver_type=args.solver,
         uncertainty_threshold_mm=args.threshold,
-        set_cover_time_limit_s=args.time_limit,
+        set_cover_time_limit_s=args.ip_time_limit,
+        time_limit_s=args.time_limit,
+        set_cover_mip_gap=args.mip_gap,
+        placement=args.place,
+        min_reachable_share=args.min_reachable_share,
+        tessellation_tolerance_mm=args.tessellation_tolerance,
         scan_speed_mm_s=args.scan_speed,
         seed=args.seed,
         add_wbk_mirrors=not args.no_mirrors,
@@ -290,7 +342,9 @@ def summarise(args, manager, report, times: dict, total_s: float, outputs: dict)
     elif result is not None and result.proven_optimal:
         gap_text = "0 % (proven optimal)"
     else:
-        gap_text = f"{100.0 * report.solver_gap:.2f} % (time limit {args.time_limit:g} s)"
+        gap_text = f"{100.0 * report.solver_gap:.2f} % (allowed {100 * args.mip_gap:g} %)"
+    if report.time_limit_hit:
+        gap_text += f"; the time limit ({args.time_limit:g} s) stopped the verification"
     samples = report.n_samples
     unconnected = f", {report.unconnected_views} could not be connected" if report.unconnected_views else ""
     rows = [
@@ -299,9 +353,18 @@ def summarise(args, manager, report, times: dict, total_s: float, outputs: dict)
         ("candidates", f"{report.n_candidates} ({args.orientations} orientations, tilt {args.tilt})"),
         ("valid viewpoints", f"{report.n_valid_candidates}"),
         ("views chosen", f"{report.n_views} ({args.solver}{unconnected})"),
+        ("placement", f"{args.place}, reachable anchors for {_share(report.reachable_share)} of the samples"),
+        ("tilt", str(manager.parameters.get("tilt_choice", args.tilt))),
+        ("measurable (metrology)", f"{report.n_coverable_metrology} of {samples} samples"),
         (
-            "coverage of coverable",
-            f"{100.0 * report.coverage_of_coverable:.1f} % ({report.n_covered} of {report.n_coverable})",
+            "measurable, executable",
+            f"{report.n_coverable} of {samples} samples"
+            + (f" ({report.n_unverified} more not verified: time limit)" if report.n_unverified else ""),
+        ),
+        (
+            "covered",
+            f"{report.n_covered} = {100.0 * report.coverage_of_coverable:.1f} % of executable, "
+            f"{100.0 * report.coverage_of_metrology:.1f} % of measurable",
         ),
         ("coverage of all samples", f"{100.0 * report.coverage_of_samples:.1f} % ({report.n_covered} of {samples})"),
         (
@@ -316,6 +379,8 @@ def summarise(args, manager, report, times: dict, total_s: float, outputs: dict)
         ),
         ("solver gap", gap_text),
     ]
+    for text in report.warnings:
+        rows.append(("warning", text))
     for stage in STAGES:
         rows.append((f"time: {stage}", f"{times[stage]:.2f} s"))
     rows.append(("time: total", f"{total_s:.2f} s"))
@@ -328,6 +393,9 @@ def summarise(args, manager, report, times: dict, total_s: float, outputs: dict)
             "density_points_per_mm2": args.density,
             "orientations": args.orientations,
             "tilt": args.tilt,
+            "placement": args.place,
+            "time_limit_s": args.time_limit,
+            "mip_gap": args.mip_gap,
             "solver": args.solver,
             "threshold_mm": args.threshold,
             "scan_speed_mm_s": args.scan_speed,
@@ -340,8 +408,15 @@ def summarise(args, manager, report, times: dict, total_s: float, outputs: dict)
         "valid_viewpoints": report.n_valid_candidates,
         "views": report.n_views,
         "unconnected_views": report.unconnected_views,
+        "coverable_metrology": report.n_coverable_metrology,
         "coverable": report.n_coverable,
+        "coverable_executable": report.n_coverable,
+        "unverified": report.n_unverified,
         "covered": report.n_covered,
+        "reachable_share": report.reachable_share,
+        "tilt_choice": manager.parameters.get("tilt_choice", args.tilt),
+        "time_limit_hit": report.time_limit_hit,
+        "warnings": list(report.warnings),
         "coverage_of_coverable": round(report.coverage_of_coverable, 6),
         "coverage_of_samples": round(report.coverage_of_samples, 6),
         "estimated_execution_time_s": round(report.estimated_execution_time_s, 3),
@@ -353,6 +428,10 @@ def summarise(args, manager, report, times: dict, total_s: float, outputs: dict)
         "outputs": {k: str(v) if isinstance(v, Path) else None for k, v in outputs.items()},
     }
     return rows, data
+
+
+def _share(value) -> str:
+    return "?" if value is None else f"{100.0 * value:.1f} %"
 
 
 def _finite_or_none(value: float):
@@ -405,6 +484,8 @@ def run(args: argparse.Namespace, request: PlanRequest, progress: StageProgress)
             manager.sensor_model.get_max_uncertainty(),
             title=title,
             mesh=manager.target_mesh,
+            metrology_coverable=manager.metrology_coverable_mask(),
+            executable_coverable=manager.coverable_mask(),
         )
     if args.summary is not None:
         outputs["summary"] = args.summary

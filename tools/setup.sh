@@ -41,15 +41,30 @@ fi
 WS="$(bash tools/workspace_path.sh)"
 mkdir -p "$WS/src"
 [ "$(readlink "$WS/src/agiprobot_measurement")" = "$ROOT" ] || ln -sfn "$ROOT" "$WS/src/agiprobot_measurement"
+# The interface packages of packages/ (phoxi_camera, asr_robot_model_services): catkin does not look for packages
+# inside another package's folder, so each gets its own link beside the repository's.
+for pkg_dir in "$ROOT"/packages/*/; do
+  pkg_dir="${pkg_dir%/}"
+  [ -f "$pkg_dir/package.xml" ] || continue
+  link="$WS/src/$(basename "$pkg_dir")"
+  [ "$(readlink "$link")" = "$pkg_dir" ] || ln -sfn "$pkg_dir" "$link"
+done
 # First-build trap: without this folder catkin records an empty PYTHONPATH in setup_cached.sh.
 mkdir -p "$WS/devel/lib/python3/dist-packages"
 
 # Rebuild only when something that the build consumes changed (interfaces, CMake, package, entry points).
-BUILD_HASH="$( { ls nodes scripts tools; cat CMakeLists.txt package.xml setup.py msg/* srv/* action/* test/ros/*.test 2>/dev/null || true; } \
-  | sha256sum | cut -d' ' -f1)"
+BUILD_HASH="$( { ls nodes scripts tools packages packages/*/nodes; cat CMakeLists.txt package.xml setup.py msg/* srv/* \
+  action/* test/ros/*.test packages/*/CMakeLists.txt packages/*/package.xml packages/*/msg/* packages/*/srv/* \
+  packages/*/srv/*/* 2>/dev/null || true; } | sha256sum | cut -d' ' -f1)"
 if [ "$(cat "$WS/.build.sha256" 2>/dev/null)" != "$BUILD_HASH" ] || [ ! -f "$WS/devel/setup.bash" ]; then
   log "building the catkin workspace $WS"
   set +u; export PATH="$ROOT/.venv/bin:$PATH"; set -u
+  # genpy's msg/srv __init__.py imports every generated module in its folder: drop them so that the build writes
+  # them again, and a type that moved to another package (or was removed) is not imported from a stale file.
+  rm -rf "$WS"/devel/lib/python3/dist-packages/*/{msg,srv}
+  # the same for catkin's devel-space relays of node scripts: a relay of a removed or moved node would shadow the
+  # package that has it now (rosrun lists both); CMake writes the relays of the present ones again
+  { grep -l "creates a relay to a python script source file" "$WS"/devel/lib/*/* 2>/dev/null || true; } | xargs -r rm -f
   catkin_make --force-cmake -C "$WS" -DPYTHON_EXECUTABLE="$ROOT/.venv/bin/python3" -DCATKIN_ENABLE_TESTING=ON \
     -DCMAKE_BUILD_TYPE=Release > "$WS/build.log" 2>&1 \
     || { tail -40 "$WS/build.log"; log "ERROR: catkin_make failed (full log: $WS/build.log)"; exit 1; }

@@ -5,19 +5,18 @@ import math
 import numpy as np
 import rospy
 import tf2_ros
+from asr_robot_model_services.srv import (
+    CalculateCameraPose,
+    CalculateCameraPoseCorrection,
+    GetDistance,
+    GetPose,
+    IsPositionAllowed,
+)
 
 from agiprobot_measurement.mild.state import RobotState
 from agiprobot_measurement.ros.conversions import transform_to_matrix
 from agiprobot_measurement.ros.mild_messages import state_to_msg
-from agiprobot_measurement.srv import (
-    CalculateCameraPose,
-    CalculateCameraPoseCorrection,
-    CalculateRobotState,
-    GetDistance,
-    GetPose,
-    IsPositionAllowed,
-    SetMildState,
-)
+from agiprobot_measurement.srv import CalculateRobotState, SetMildState
 
 NS = "/asr_robot_model_services"
 SERVICE_TYPES = {

@@ -19,7 +19,7 @@ import rostest
 import yaml
 from actionlib_msgs.msg import GoalStatus
 from geometry_msgs.msg import Pose
-from sensor_msgs.msg import JointState, PointCloud2
+from sensor_msgs.msg import JointState, PointCloud, PointCloud2
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
@@ -82,6 +82,15 @@ class MeasurementNodeTest(unittest.TestCase):
             self.assertIn(stage, stages, f"no feedback for stage {stage}")
         self.assertGreaterEqual(result.coverage, 0.99)
         self.assertGreater(result.number_of_views, 0)
+        # the three numbers: covered <= coverable by executable views <= metrologically coverable <= samples
+        self.assertLessEqual(result.number_covered, result.number_coverable_executable)
+        self.assertLessEqual(result.number_coverable_executable, result.number_coverable_metrology)
+        self.assertLessEqual(result.number_coverable_metrology, result.number_of_samples)
+        self.assertAlmostEqual(result.coverage, result.number_covered / result.number_coverable_executable, places=6)
+        self.assertGreaterEqual(result.optimality_gap, 0.0)
+        self.assertFalse(result.time_limit_hit)
+        self.assertEqual(result.tilt_mode_used, "none")
+        self.assertGreater(result.reachable_share, 0.9)
         self.assertEqual(result.plan_file, str(plan_file))
         plan = load_execution_plan(plan_file)
         self.assertEqual(len(plan.segments), 2 * result.number_of_views)
@@ -98,8 +107,8 @@ class MeasurementNodeTest(unittest.TestCase):
             rospy.Subscriber("/laser_scanner/profile", PointCloud2, lambda m: profiles.append(time.monotonic())),
             rospy.Subscriber(
                 "/currently_measured_points",
-                PointCloud2,
-                lambda m: current.append((time.monotonic(), m.width * m.height)),
+                PointCloud,  # as the original published it
+                lambda m: current.append((time.monotonic(), len(m.points))),
             ),
         ]
         snapshot = {}
@@ -206,6 +215,9 @@ class MeasurementNodeTest(unittest.TestCase):
         nan_pose = Pose()
         nan_pose.position.x = float("nan")
         nan_pose.orientation.w = 1.0
+        sunk = Pose()
+        sunk.position.z = -0.03  # 30 mm into the fixture
+        sunk.orientation.w = 1.0
         cases = [
             (quick_goal(part_file="/nonexistent/part.stl"), "not found"),
             (quick_goal(sampling_density=-0.5), "sampling_density"),
@@ -214,6 +226,8 @@ class MeasurementNodeTest(unittest.TestCase):
             (quick_goal(units="furlong"), "furlong"),
             (quick_goal(part_pose=far), "reach"),
             (quick_goal(part_pose=nan_pose), "NaN"),
+            (quick_goal(part_pose=sunk), "overlaps scene object 'fixture'"),
+            (quick_goal(placement="shelf"), "placement"),
         ]
         for goal, reason in cases:
             state, result = self._plan(goal, timeout_s=120)

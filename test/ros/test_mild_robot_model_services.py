@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""rostest: asr_robot_model_services on the simulated MILD (RobotModelServiceSim.launch, visualizeIK on).
+"""rostest: asr_robot_model_services on the simulated MILD (RobotModelServiceSim.launch: the original's simulation
+settings, pan +-20 deg, visualizeIK on).
 
 Every service under its exact name and type, the rosservice command-line forms, errors for bad requests while the
 node keeps serving, poses read from the simulated robot's tf, the IK round trip driven on the simulated robot, and
@@ -31,12 +32,12 @@ from agiprobot_measurement.ros.conversions import pose_to_matrix
 from agiprobot_measurement.ros.mild_messages import state_to_msg, yaw_of
 
 EXPECTED_TYPES = {
-    "CalculateCameraPose": "agiprobot_measurement/CalculateCameraPose",
-    "CalculateCameraPoseCorrection": "agiprobot_measurement/CalculateCameraPoseCorrection",
-    "GetDistance": "agiprobot_measurement/GetDistance",
-    "GetRobotPose": "agiprobot_measurement/GetPose",
-    "GetCameraPose": "agiprobot_measurement/GetPose",
-    "IsPositionAllowed": "agiprobot_measurement/IsPositionAllowed",
+    "CalculateCameraPose": "asr_robot_model_services/CalculateCameraPose",
+    "CalculateCameraPoseCorrection": "asr_robot_model_services/CalculateCameraPoseCorrection",
+    "GetDistance": "asr_robot_model_services/GetDistance",
+    "GetRobotPose": "asr_robot_model_services/GetPose",
+    "GetCameraPose": "asr_robot_model_services/GetPose",
+    "IsPositionAllowed": "asr_robot_model_services/IsPositionAllowed",
     "CalculateRobotState": "agiprobot_measurement/CalculateRobotState",
 }
 
@@ -161,8 +162,10 @@ class RobotModelServicesTest(unittest.TestCase):
     def test_ik_round_trip_on_the_simulated_robot(self):
         rng = np.random.default_rng(12)
         source = RobotState(0.0, 0.0, 0.0, 1.0, 1.0)
+        pan = math.radians(rospy.get_param(f"{NS}/panMin")), math.radians(rospy.get_param(f"{NS}/panMax"))
         for _ in range(5):
-            generating = RobotState(rng.uniform(-3, 3), rng.uniform(-0.7, 0.4), rng.uniform(0, 6.28),
+            # any heading: the base turns where the +-20 deg pan cannot
+            generating = RobotState(rng.uniform(*pan), rng.uniform(-0.7, 0.4), rng.uniform(0, 6.28),
                                     rng.uniform(1, 4), rng.uniform(0.5, 3))  # fmt: skip
             requested = pose_to_matrix(self.srv["CalculateCameraPose"](state_to_msg(generating)).cameraFrame)
             reply = self.srv["CalculateRobotState"](

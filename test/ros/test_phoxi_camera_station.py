@@ -12,6 +12,7 @@ import rostest
 import tf2_ros
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from phoxi_camera.srv import GetFrame, IsConnected, TriggerImage
 from phoxi_test_utils import FrameRecorder, reconfigure, service
 from station_test_utils import place_robot
 
@@ -21,7 +22,7 @@ from agiprobot_measurement.sensors.phoxi.device import load_camera_config, trans
 from agiprobot_measurement.sensors.phoxi.models import RESOLUTION_LOW, load_scanner_model
 from agiprobot_measurement.sensors.phoxi.renderer import ScanSettings, StructuredLightScanner
 from agiprobot_measurement.sensors.phoxi.scene_geometry import RobotGeometry, SceneGeometry, scene_geometry
-from agiprobot_measurement.srv import SetJointState, TriggerImage
+from agiprobot_measurement.srv import SetJointState
 from agiprobot_measurement.station import Station
 from agiprobot_measurement.station.urdf_model import UrdfModel
 
@@ -33,6 +34,9 @@ class PhoxiStationTest(unittest.TestCase):
     def setUpClass(cls):
         rospy.init_node("test_phoxi_camera_station")
         cls.trigger = service("trigger_image", TriggerImage)
+        cls.get_frame = service("get_frame", GetFrame)
+        # the station's launch file names the simulated scanner: connected from the start, unlike the driver's default
+        cls.connected_at_start = service("is_connected", IsConnected)().connected
         reconfigure(resolution=RESOLUTION_LOW)
         cls.recorder = FrameRecorder(["pointcloud", "depth_map", "confidence_map"])
         cls.tf_buffer = tf2_ros.Buffer()
@@ -41,8 +45,10 @@ class PhoxiStationTest(unittest.TestCase):
         cls.station = Station.load()
 
     def _frame(self):
-        reply = self.trigger()
+        reply = self.trigger()  # triggers only; get_frame(id) publishes, as the driver
         self.assertTrue(reply.success, reply.message)
+        published = self.get_frame(in_=reply.id)
+        self.assertTrue(published.success, published.message)
         messages = self.recorder.wait_for(reply.id)
         self.assertIsNotNone(messages, f"frame {reply.id} was not published")
         points, _, _ = phoxi_messages.pointcloud2_arrays(messages["pointcloud"])
@@ -55,6 +61,9 @@ class PhoxiStationTest(unittest.TestCase):
         ).transform
         t, q = transform.translation, transform.rotation
         return transform_from_quaternion([t.x, t.y, t.z], [q.x, q.y, q.z, q.w])
+
+    def test_the_station_launch_connects_to_the_simulated_scanner(self):
+        self.assertTrue(self.connected_at_start)
 
     def test_sensor_frame_is_on_tf_at_the_configured_pose(self):
         np.testing.assert_allclose(self._sensor_pose(), self.config.pose, atol=1e-9)

@@ -9,16 +9,9 @@ import unittest
 
 import rospy
 import rostest
+from asr_robot_model_services.srv import GetDistance, GetPose, IsPositionAllowed
 from geometry_msgs.msg import Point
-
-from agiprobot_measurement.srv import (
-    GetDeviceList,
-    GetDistance,
-    GetHardwareIdentification,
-    GetPose,
-    IsConnected,
-    IsPositionAllowed,
-)
+from phoxi_camera.srv import GetDeviceList, GetHardwareIdentification, IsConnected
 
 CALLS_PER_CLIENT = 200
 SERVICES = {

@@ -7,7 +7,8 @@ with ``p_robot = H p_camera``.
 
 Here: flag points (file, checks), the zig-zag path, RANSAC over 4-pair draws (determinant check, direct linear
 solution), the SVD / Umeyama solution with a proper rotation, the robust refinement over the inliers, the data
-file of the original (read / written atomically), the result YAML and accuracy metrics.
+file (the project's layout and the original calibration's, both read and written, atomically), the result YAML and
+accuracy metrics.
 
 Units: metres for points and transforms, mm only where a name says so (``*_mm``), degrees where it says ``*_deg``.
 """
@@ -25,12 +26,14 @@ import yaml
 
 from agiprobot_measurement.common.config import ConfigError, load_yaml_text
 from agiprobot_measurement.common.files import FileReadError, atomic_write_text, read_text_file
-from agiprobot_measurement.common.geometry import matrix_to_quaternion, transform_points
+from agiprobot_measurement.common.geometry import matrix_to_quaternion, matrix_to_rpy, transform_points
 from agiprobot_measurement.errors import InputError
 
 __all__ = [
     "COPLANAR_TOLERANCE_M",
+    "DATA_FORMATS",
     "MIN_FLAG_POINTS",
+    "ORIGINAL_BLOCK_END",
     "CalibrationData",
     "CalibrationError",
     "CalibrationResult",
@@ -44,7 +47,13 @@ __all__ = [
     "fit_circle_lsq",
     "fit_circle_ransac",
     "format_data_file",
+    "format_flag_points",
+    "format_original_data_file",
     "homogeneous",
+    "original_block",
+    "original_matrix_rows",
+    "original_pair_block",
+    "original_transform_blocks",
     "parse_vector",
     "plane_basis",
     "pose_error",
@@ -57,6 +66,7 @@ __all__ = [
     "select_consistent_flags",
     "umeyama",
     "write_data_file",
+    "write_flag_points",
     "write_result_yaml",
     "zigzag_path",
 ]
@@ -74,15 +84,21 @@ COPLANAR_TOLERANCE_M = 0.01
 _VECTOR_RE = re.compile(r"^\s*\[([^\]]*)\]\s*$")
 
 
-def parse_vector(text: str, length: int, where: str) -> np.ndarray:
-    """``[a, b, c]`` -> array; CalibrationError naming ``where`` otherwise."""
+def parse_vector(text: str, length: int | None, where: str) -> np.ndarray:
+    """``[a, b, c]`` (or the original writer's ``[a, b, c, ]``) -> array of ``length`` values (None: any number);
+    CalibrationError naming ``where`` otherwise."""
     match = _VECTOR_RE.match(text)
     if not match:
         raise CalibrationError(f"{where}: expected '[x, y, z]', got {text.strip()!r}")
+    items = match.group(1).split(",")
+    if len(items) > 1 and not items[-1].strip():  # the original writes a separator after every value
+        items = items[:-1]
     try:
-        values = [float(v) for v in match.group(1).split(",")]
+        values = [float(v) for v in items]
     except ValueError as exc:
         raise CalibrationError(f"{where}: not a list of numbers: {text.strip()!r}") from exc
+    if length is None:
+        length = len(values)
     if len(values) != length or not all(math.isfinite(v) for v in values):
         raise CalibrationError(f"{where}: expected {length} finite numbers, got {text.strip()!r}")
     return np.array(values)
@@ -444,6 +460,10 @@ def pose_error(estimate: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
 
 
 # ---------------------------------------------------------------------------------------------- data file
+#: the data file layouts :func:`write_data_file` writes; :func:`read_data_file` reads both
+DATA_FORMATS = ("project", "original")
+
+
 @dataclass
 class Sample:
     """One pair: flange centre in the robot base frame and in the camera frame (metres); index = timestamp id."""
@@ -456,12 +476,14 @@ class Sample:
 
 @dataclass
 class CalibrationData:
-    """The content of a data file: samples, H_coarse (or None) and the acceptance criteria (point counts)."""
+    """The content of a data file: samples, H_coarse and H_final (or None) and the acceptance criteria (point
+    counts: the smallest of the flag points')."""
 
     samples: list[Sample] = field(default_factory=list)
     h_coarse: np.ndarray | None = None
     criteria_plane: int | None = None
     criteria_line: int | None = None
+    h_final: np.ndarray | None = None
 
     def arrays(self, flag_only: bool = False) -> tuple[np.ndarray, np.ndarray, list[str]]:
         chosen = [s for s in self.samples if s.flag or not flag_only]
@@ -474,8 +496,24 @@ def _vector_text(values) -> str:
     return "[" + ", ".join(repr(float(v)) for v in values) + "]"
 
 
-def format_data_file(data: CalibrationData) -> str:
-    """The documented text format; flag samples are listed in an extra ``flag_points`` block of indices."""
+def _check_format(format: str) -> str:
+    if format not in DATA_FORMATS:
+        raise CalibrationError(f"data file format must be one of {', '.join(DATA_FORMATS)}, got {format!r}")
+    return format
+
+
+def format_data_file(data: CalibrationData, format: str = "project") -> str:
+    """The data file's text.
+
+    ``project``: the documented blocks (``p_robot 3-DoF index:<id>`` + ``[x, y, z]``, ``p_camera ...``), flag samples
+    in an extra ``flag_points`` block of indices, 3-row ``H_coarse`` / ``H_final``, ``criteria:plane`` / ``line``.
+    ``original``: what the original calibration's reader (``utils.read_data``) parses, laid out as its writer lays it
+    out: criteria, the flag pairs (index prefixed ``flag<i>_``), ``H_coarse`` with 4 rows ``[a, b, c, d, ]`` followed
+    by ``Trans_coarse`` / ``Rot_coarse``, the other pairs, ``H_final``; every block followed by an empty line and a
+    line holding one space (the original's separator); 3-DoF pairs.
+    """
+    if _check_format(format) == "original":
+        return format_original_data_file(data)
     lines = []
     for s in data.samples:
         lines += [f"p_robot 3-DoF index:{s.index}", _vector_text(s.p_robot_m)]
@@ -484,10 +522,11 @@ def format_data_file(data: CalibrationData) -> str:
     flags = [s.index for s in data.samples if s.flag]
     if flags:
         lines += ["flag_points", "[" + ", ".join(flags) + "]", ""]
-    if data.h_coarse is not None:
-        lines.append("H_coarse")
-        lines += [_vector_text(row) for row in np.asarray(data.h_coarse)[:3]]
-        lines.append("")
+    for title, matrix in (("H_coarse", data.h_coarse), ("H_final", data.h_final)):
+        if matrix is not None:
+            lines.append(title)
+            lines += [_vector_text(row) for row in np.asarray(matrix)[:3]]
+            lines.append("")
     if data.criteria_plane is not None:
         lines += ["criteria:plane", str(int(data.criteria_plane))]
     if data.criteria_line is not None:
@@ -495,8 +534,81 @@ def format_data_file(data: CalibrationData) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_data_file(path: str | Path, data: CalibrationData) -> Path:
-    return atomic_write_text(path, format_data_file(data), make_parents=True)
+#: what the original writer puts after every block: a newline and a line holding one space
+ORIGINAL_BLOCK_END = "\n \n"
+
+
+def original_block(title: str, value_lines: list[str]) -> str:
+    """One block as the original writer lays it out: title, value lines, :data:`ORIGINAL_BLOCK_END`."""
+    return "".join(line + "\n" for line in [title, *value_lines]) + ORIGINAL_BLOCK_END
+
+
+def original_matrix_rows(matrix) -> list[str]:
+    """The original's matrix rows: every value followed by ``", "`` inside the brackets (``[a, b, c, d, ]``)."""
+    return ["[" + "".join(f"{float(v)!r}, " for v in row) + "]" for row in np.asarray(matrix, dtype=float)]
+
+
+def original_pair_block(index: str, p_robot, p_camera) -> str:
+    """A point pair as the original writes it; the robot header says 6-DoF for a 7-value pose (x, y, z, quaternion
+    xyzw), as the original's, and 3-DoF for a position."""
+    p_robot = np.asarray(p_robot, dtype=float).reshape(-1)
+    dof = "6-DoF" if len(p_robot) in (6, 7) else "3-DoF"
+    lines = [
+        f"p_robot {dof} index:{index}",
+        _vector_text(p_robot),
+        f"p_camera 3-DoF index:{index}",
+        _vector_text(np.asarray(p_camera, dtype=float).reshape(-1)),
+    ]
+    return "".join(line + "\n" for line in lines) + ORIGINAL_BLOCK_END
+
+
+def original_transform_blocks(matrix, suffix: str) -> str:
+    """``Trans<suffix>`` ``[x, y, z]`` and ``Rot<suffix>`` ``(roll, pitch, yaw)`` (rad, static x-y-z axes) of H."""
+    h = np.asarray(matrix, dtype=float)
+    rpy = matrix_to_rpy(h[:3, :3])
+    rot = "(" + ", ".join(repr(float(v)) for v in rpy) + ")"
+    return original_block(f"Trans{suffix}", [_vector_text(h[:3, 3])]) + original_block(f"Rot{suffix}", [rot])
+
+
+def format_original_data_file(data: CalibrationData) -> str:
+    """The original layout (see :func:`format_data_file`)."""
+    parts = []
+    if data.criteria_plane is not None and data.criteria_line is not None:
+        parts.append(original_block("criteria:plane", [str(int(data.criteria_plane))]))
+        parts.append(original_block("criteria:line", [str(int(data.criteria_line))]))
+    flags = [s for s in data.samples if s.flag]
+    for i, s in enumerate(flags):
+        index = s.index if s.index.startswith("flag") else f"flag{i}_{s.index}"
+        parts.append(original_pair_block(index, s.p_robot_m, s.p_camera_m))
+    if data.h_coarse is not None:
+        parts.append(original_block("H_coarse", original_matrix_rows(data.h_coarse)))
+        parts.append(original_transform_blocks(data.h_coarse, "_coarse"))
+    for s in data.samples:
+        if not s.flag:
+            parts.append(original_pair_block(s.index, s.p_robot_m, s.p_camera_m))
+    if data.h_final is not None:
+        parts.append(original_block("H_final", original_matrix_rows(data.h_final)))
+        parts.append(original_transform_blocks(data.h_final, ""))
+    return "".join(parts)
+
+
+def write_data_file(path: str | Path, data: CalibrationData, format: str = "project") -> Path:
+    """The data file (:func:`format_data_file` in ``format``), written atomically."""
+    return atomic_write_text(path, format_data_file(data, format), make_parents=True)
+
+
+def format_flag_points(points_m, format: str = "project") -> str:
+    """A flag point (target) file: one ``[x, y, z]`` per line (metres, robot base). ``project`` starts with a ``#``
+    comment; ``original`` has nothing but the point lines (the original's target reader parses every line)."""
+    lines = [_vector_text(p) for p in np.asarray(points_m, dtype=float).reshape(-1, 3)]
+    if _check_format(format) == "project":
+        lines.insert(0, "# flag points: flange centre (tool0 origin), [x, y, z] metres, robot base frame")
+    return "\n".join(lines) + "\n"
+
+
+def write_flag_points(path: str | Path, points_m, format: str = "project") -> Path:
+    """Write a flag point file (:func:`format_flag_points`) atomically."""
+    return atomic_write_text(path, format_flag_points(points_m, format), make_parents=True)
 
 
 def _read_text(path: Path, what: str) -> str:
@@ -506,15 +618,41 @@ def _read_text(path: Path, what: str) -> str:
         raise CalibrationError(str(exc)) from exc
 
 
+_PAIR_HEADER_RE = re.compile(r"^p_(robot|camera) ([36])-DoF index:(\S+)$")
+_MATRIX_TITLES = {"H_coarse": "h_coarse", "H_final": "h_final", "H": "h_final"}
+_TRANSFORM_TITLE_RE = re.compile(r"^(Trans|Rot)(_\w+)?$")
+_CRITERIA_RE = re.compile(r"^(?:criteria|circle):(plane|line)$")
+
+
+def _pair_vector(text: str, dof: str, where: str) -> np.ndarray:
+    """The position of a pair line: 3 values (3-DoF), or 7 (x, y, z, quaternion; 6 with roll-pitch-yaw) of a 6-DoF
+    pose, of which the position is kept."""
+    if dof == "3":
+        return parse_vector(text, 3, where)
+    values = parse_vector(text, None, where)
+    if len(values) not in (6, 7):
+        raise CalibrationError(f"{where}: a 6-DoF pose needs 7 values [x, y, z, qx, qy, qz, qw], got {text.strip()!r}")
+    return values[:3]
+
+
 def read_data_file(path: str | Path) -> CalibrationData:
-    """Parse a data file; CalibrationError with file and line for anything malformed."""
+    """Parse a data file, the project's or the original calibration's layout; CalibrationError with file and line
+    for anything malformed.
+
+    Accepted besides the project's blocks: ``p_robot 6-DoF index:<id>`` with 7 values (the position is used),
+    4-row ``H_coarse`` / ``H_final`` / ``H`` (rows may end ``, ]``), ``Trans*`` / ``Rot*`` blocks (derived from H,
+    skipped), criteria blocks separated by blank or blank-looking lines, repeated criteria (the smallest counts,
+    as the original reads them). Without a ``flag_points`` block, samples whose index starts with ``flag`` (the
+    original's flag points) are the flag samples.
+    """
     path = Path(path)
     lines = _read_text(path, "data file").splitlines()
     data = CalibrationData()
     robot: dict[str, np.ndarray] = {}
     camera: dict[str, np.ndarray] = {}
     order: list[str] = []
-    flags: set[str] = set()
+    flags: set[str] | None = None
+    criteria: dict[str, list[int]] = {"plane": [], "line": []}
     i = 0
 
     def next_line(what: str) -> str:
@@ -525,29 +663,39 @@ def read_data_file(path: str | Path) -> CalibrationData:
     while i < len(lines):
         line = lines[i].strip()
         where = f"{path}:{i + 2}"
-        header = re.match(r"^p_(robot|camera) 3-DoF index:(\S+)$", line)
+        header = _PAIR_HEADER_RE.match(line)
+        criterion = _CRITERIA_RE.match(line)
         if header:
-            vector = parse_vector(next_line(line), 3, where)
-            kind, index = header.groups()
+            kind, dof, index = header.groups()
+            vector = _pair_vector(next_line(line), dof, where)
             (robot if kind == "robot" else camera)[index] = vector
             if index not in order:
                 order.append(index)
             i += 2
-        elif line == "H_coarse":
-            if i + 3 >= len(lines):
-                raise CalibrationError(f"{path}:{i + 1}: H_coarse needs 3 rows")
-            rows = [parse_vector(lines[i + k], 4, f"{path}:{i + 1 + k}") for k in (1, 2, 3)]
-            data.h_coarse = np.vstack([*rows, np.array([0.0, 0.0, 0.0, 1.0])])
-            i += 4
-        elif line in ("criteria:plane", "criteria:line"):
+        elif line in _MATRIX_TITLES:
+            rows = []
+            while len(rows) < 4 and i + 1 + len(rows) < len(lines):
+                row_line = lines[i + 1 + len(rows)]
+                if not row_line.strip().startswith("["):
+                    break
+                rows.append(parse_vector(row_line, 4, f"{path}:{i + 2 + len(rows)}"))
+            if len(rows) < 3:
+                raise CalibrationError(f"{path}:{i + 1}: {line} needs 3 or 4 rows '[a, b, c, d]'")
+            consumed = len(rows)
+            if consumed == 3:  # the project's layout: the affine row is implied
+                rows.append(np.array([0.0, 0.0, 0.0, 1.0]))
+            setattr(data, _MATRIX_TITLES[line], np.vstack(rows))
+            i += 1 + consumed
+        elif _TRANSFORM_TITLE_RE.match(line):
+            if not next_line(line).strip():
+                raise CalibrationError(f"{where}: {line} without a value")
+            i += 2
+        elif criterion:
             try:
                 value = int(next_line(line).strip())
             except ValueError as exc:
                 raise CalibrationError(f"{where}: {line} needs an integer") from exc
-            if line == "criteria:plane":
-                data.criteria_plane = value
-            else:
-                data.criteria_line = value
+            criteria[criterion.group(1)].append(value)
             i += 2
         elif line == "flag_points":
             text = next_line(line).strip()
@@ -563,7 +711,10 @@ def read_data_file(path: str | Path) -> CalibrationData:
         if index not in robot or index not in camera:
             missing = "p_camera" if index not in camera else "p_robot"
             raise CalibrationError(f"{path}: sample {index} has no {missing}")
-        data.samples.append(Sample(index, robot[index], camera[index], index in flags))
+        flag = index.startswith("flag") if flags is None else index in flags
+        data.samples.append(Sample(index, robot[index], camera[index], flag))
+    data.criteria_plane = min(criteria["plane"]) if criteria["plane"] else None
+    data.criteria_line = min(criteria["line"]) if criteria["line"] else None
     return data
 
 

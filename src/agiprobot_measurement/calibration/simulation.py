@@ -6,6 +6,12 @@ tool orientation from the config) and renders one scanner frame with
 truth). :class:`SimulatedJointDriver` and :class:`SimulatedCamera` are the ROS node's robot and camera over it, so
 that :mod:`~agiprobot_measurement.calibration.procedure` runs in pytest; ``scripts/bench_calibration.py`` uses the
 station directly. Metres and rad throughout.
+
+Two options of the station (both off by default): ``true_kinematics`` (a
+:class:`~agiprobot_measurement.motion.kinematics.DhCorrection`, e.g. from ``config/ur10e_kinematics_correction.yaml``):
+the links are rendered where a robot with that kinematic error puts them, while IK and everything the robot reports
+stay nominal, as on a real station; ``board`` (a :class:`~agiprobot_measurement.calibration.hand_eye.FlangeBoard`):
+a chessboard plate on the flange, the target of the OpenCV hand-eye peers.
 """
 
 from __future__ import annotations
@@ -23,7 +29,7 @@ from agiprobot_measurement.calibration.interfaces import CameraFrame, StepError
 from agiprobot_measurement.common.config import read_yaml
 from agiprobot_measurement.common.geometry import look_at
 from agiprobot_measurement.motion.ik import make_ik_solver
-from agiprobot_measurement.motion.kinematics import KinematicModel
+from agiprobot_measurement.motion.kinematics import DhCorrection, KinematicModel, TrueKinematics
 from agiprobot_measurement.motion.trajectory import JointTrajectory
 from agiprobot_measurement.sensors.phoxi.renderer import (
     RobotGeometry,
@@ -43,6 +49,7 @@ __all__ = [
     "nominal_camera_pose",
     "perturbed_pose",
     "simulated_robot_and_camera",
+    "true_kinematics_from_config",
 ]
 
 
@@ -54,6 +61,9 @@ class SimulatedStation:
     model_name: str = "L"
     noise_seed: int = 0
     scene_path: str | Path | None = None  # None: config/scene.yaml
+    true_kinematics: DhCorrection | None = None  # None: the robot is the nominal model
+    deviation_scale: float = 1.0  # TrueKinematics.deviation_scale of the true robot
+    board: object | None = None  # hand_eye.FlangeBoard on the flange, or None (the bare flange disc)
 
     def __post_init__(self):
         self.station = Station.load(scene=self.scene_path)
@@ -67,6 +77,15 @@ class SimulatedStation:
         self.world_from_base = self.urdf.fixed_transform("world", "base_link")
         self.limits = load_joint_limits()
         self.seed_q = np.array([0.0, -1.5707, 1.5707, -1.5707, -1.5707, 0.0])
+        self.true_world_kinematics = None
+        if self.true_kinematics is not None:
+            self.true_world_kinematics = TrueKinematics(
+                self.world_kinematics, self.station.robot, self.true_kinematics, self.deviation_scale
+            )
+            self.true_base_kinematics = TrueKinematics(
+                self.kinematics, self.station.robot, self.true_kinematics, self.deviation_scale
+            )
+        self._board_geometry = None if self.board is None else self.board.geometry()
 
     @property
     def camera_in_base(self) -> np.ndarray:
@@ -80,20 +99,54 @@ class SimulatedStation:
         q, ok = self.ik.solve_nearest(pose, self.seed_q)
         return np.asarray(q) if ok else None
 
+    def reported_flange_pose(self, q: np.ndarray) -> np.ndarray:
+        """base_link <- tool0 as the robot reports it at ``q``: the nominal model, whatever the true kinematics."""
+        return self.kinematics.fk(np.asarray(q, dtype=float))
+
+    def true_flange_pose(self, q: np.ndarray) -> np.ndarray:
+        """base_link <- tool0 where the flange really is at ``q``."""
+        if self.true_world_kinematics is None:
+            return self.reported_flange_pose(q)
+        return self.true_base_kinematics.fk(np.asarray(q, dtype=float))
+
+    def joints_placing(self, flange_pose_base: np.ndarray) -> np.ndarray | None:
+        """The joint state at which the TRUE flange is at ``flange_pose_base`` (base_link <- tool0): nominal IK, then
+        Gauss-Newton on the true kinematics; None without an IK solution."""
+        q, ok = self.ik.solve_nearest(np.asarray(flange_pose_base, dtype=float), self.seed_q)
+        if not ok:
+            return None
+        if self.true_world_kinematics is None:
+            return np.asarray(q)
+        return self.true_base_kinematics.solve_near(np.asarray(flange_pose_base, dtype=float), np.asarray(q))
+
     def link_poses(self, q: np.ndarray) -> dict:
-        poses = self.world_kinematics.link_poses_batch(np.atleast_2d(q))
+        model = self.world_kinematics if self.true_world_kinematics is None else self.true_world_kinematics
+        poses = model.link_poses_batch(np.atleast_2d(q))
         out = {name: value[0] for name, value in poses.items()}
         out["flange_disc_link"] = out["tool0"] @ self.urdf.fixed_transform("tool0", "flange_disc_link")
         return out
 
     def capture(self, q: np.ndarray, frame_index: int, extra=None):
         """One frame (renderer.Frame) with the robot at ``q``; ``extra``: more SceneGeometry (world)."""
-        parts = [self.scene, self.robot.posed(self.link_poses(q))]
+        links = self.link_poses(q)
+        parts = [self.scene, self.robot.posed(links)]
+        if self._board_geometry is not None:
+            parts.append(self._board_geometry.transformed(links["tool0"]))
         if extra is not None:
             parts.append(extra)
         geometry = SceneGeometry.concatenate(parts)
         settings = ScanSettings(seed=self.noise_seed)
         return self.scanner.capture(geometry, self.camera_pose_world, settings, frame_index=frame_index)
+
+
+def true_kinematics_from_config(path=None) -> dict:
+    """The :class:`SimulatedStation` keyword arguments of a kinematics correction file (default
+    ``config/ur10e_kinematics_correction.yaml``): ``true_kinematics`` and ``deviation_scale`` when the file's
+    ``true_kinematics`` is true, else none (the nominal robot)."""
+    from agiprobot_measurement.motion.kinematics import load_kinematics_correction
+
+    enabled, correction, scale = load_kinematics_correction(path)
+    return {"true_kinematics": correction, "deviation_scale": scale} if enabled else {}
 
 
 def perturbed_pose(pose: np.ndarray, rng, translation_m: float = 0.05, rotation_rad: float = 0.05) -> np.ndarray:

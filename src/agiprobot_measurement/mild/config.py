@@ -2,11 +2,20 @@
 asr_robot_model_services' parameters (config/mild_*.yaml, or the node's private parameters), checked and converted
 to SI units (degrees in the files become radians here, metres stay metres). Errors are ConfigError naming the file
 or parameter namespace and the key.
+
+Absent parameters take the original node's defaults (RobotModel_Service.cpp: panMin -60, panMax 60, tiltMin -45,
+tiltMax 45 deg, robotModelId 1; MILDRobotModel.cpp: colThresh 40; DebugHelper: no debugLevels = ALL). The original
+reads the other keys without a default (an unset C++ variable); here they take the values of the original's
+param/robot_model_services_settings_real.yaml, and an absent IKAngleRating is, as there, an unknown rating name: a
+warning and SIMPLE. The frame names default to the original's param/robot_model_frames.yaml. The costmap's
+inflation is read from the original's ``global_costmap`` parameters (costmap_params.yaml) when the package's own
+keys are absent, with costmap_2d's defaults for what that file leaves out.
 """
 
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -18,6 +27,8 @@ from agiprobot_measurement.mild.occupancy_map import OccupancyMap
 
 __all__ = [
     "APPROXIMATED_IK",
+    "DEBUG_LEVELS",
+    "DEFAULTS",
     "EXACT_IK",
     "FRAME_KEYS",
     "LP_SOLVERS",
@@ -33,6 +44,8 @@ __all__ = [
 ]
 
 RATING_NAMES = ("SIMPLE", "ANGLE_APPROXIMATION", "NAVIGATION_PATH")
+#: DebugHelper's categories; ``[ALL]``, ``[NONE]`` or a list of categories (an empty list means ALL)
+DEBUG_LEVELS = ("PARAMETERS", "RATING", "ROBOT_MODEL", "MAP", "IK_RATING")
 LP_SOLVERS = ("glpk", "highs", "closed_form")
 #: robotModelId values: MILDRobotModelWithExactIK, MILDRobotModelWithApproximatedIK
 EXACT_IK, APPROXIMATED_IK = 1, 2
@@ -68,13 +81,17 @@ class FrameNames:
     camera_right_frame: str = "camera_right_frame"
 
     @classmethod
-    def from_mapping(cls, mapping: object, where: str) -> FrameNames:
+    def from_mapping(cls, mapping: object, where: str, require_all: bool = True) -> FrameNames:
+        """``require_all=False``: absent keys take the original's names (the node's parameters may omit them)."""
         if not isinstance(mapping, dict):
             raise ConfigError(f"{where}: expected a mapping of frame names")
         values = {}
         for key in FRAME_KEYS:
             if key not in mapping:
-                raise ConfigError(f"{where}: missing key '{key}'")
+                if require_all:
+                    raise ConfigError(f"{where}: missing key '{key}'")
+                values[key] = getattr(cls, key)
+                continue
             name = mapping[key]
             if not isinstance(name, str) or not name.strip("/"):
                 raise ConfigError(f"{where}: '{key}' must be a frame name, got {name!r}")
@@ -193,7 +210,16 @@ class RobotModelSettings:
     inflation_radius_m: float = 0.60
     cost_scaling_per_m: float = 5.0
     ik_visualization_topic: str = "/asr_robot_model_services/IK_Visualization"
+    debug_levels: frozenset[str] = frozenset(DEBUG_LEVELS)
+    # speedFactorPTU, speedFactorBaseMove, speedFactorBaseRot (dimensionless; None = not set): read and logged as
+    # the original does, which uses them in no answer
+    speed_factors: tuple[float | None, float | None, float | None] = (None, None, None)
+    defaulted: tuple[str, ...] = ()  # the keys that were absent and took their default
     warnings: tuple[str, ...] = ()
+
+    def debug(self, level: str) -> bool:
+        """Whether DebugHelper's category ``level`` (PARAMETERS, RATING, ROBOT_MODEL, MAP, IK_RATING) is on."""
+        return level in self.debug_levels
 
     @property
     def view_distance_m(self) -> float:
@@ -205,6 +231,97 @@ class RobotModelSettings:
 
 
 _REQUIRED = object()
+
+#: What an absent key becomes (the original's units: degrees, metres). The first six are the original code's own
+#: defaults; the rest are param/robot_model_services_settings_real.yaml's values (the original has no default).
+DEFAULTS = {
+    "robotModelId": EXACT_IK,
+    "panMin": -60.0,
+    "panMax": 60.0,
+    "tiltMin": -45.0,
+    "tiltMax": 45.0,
+    "colThresh": 40.0,
+    "mSigma": 2.0,
+    "mOmegaPan": 1.0,
+    "mOmegaTilt": 1.0,
+    "mOmegaRot": 10.0,
+    "mOmegaBase": 135.0,
+    "tolerance": 0.00003,
+    "useGlobalPlanner": False,
+    "ncp": 0.4,
+    "fcp": 1.5,
+    "visualizeIK": False,
+    "panAngleSamplingStepsPerIteration": 3,
+    "inverseKinematicIterationAccuracy": 0.01,
+}
+# costmap_2d's defaults (Costmap2D.cfg robot_radius, InflationLayer inflation_radius and cost_scaling_factor)
+COSTMAP_ROBOT_RADIUS_M, COSTMAP_INFLATION_RADIUS_M, COSTMAP_COST_SCALING_PER_M = 0.46, 0.55, 10.0
+
+
+def _debug_levels(value: object, where: str) -> frozenset[str]:
+    """DebugHelper::parseLevels: nothing or [] = ALL, [ALL], [NONE], or a list of categories; a string
+    "[PARAMETERS, MAP]" is split as DebugHelper::setLevels(string) does."""
+    if value is None:
+        return frozenset(DEBUG_LEVELS)
+    if isinstance(value, str):
+        value = [part for part in re.split(r"[\s,]+", value.strip("\"',[]{} ")) if part]
+        value = [part.strip("\"',[]{} ").upper() for part in value]
+    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+        raise ConfigError(f"{where}: 'debugLevels' must be a list of names, got {value!r}")
+    if not value or value == ["ALL"]:
+        return frozenset(DEBUG_LEVELS)
+    if value == ["NONE"]:
+        return frozenset()
+    for name in value:
+        if name not in DEBUG_LEVELS:
+            raise ConfigError(
+                f"{where}: invalid debug level {name!r} in 'debugLevels' ([ALL], [NONE] or a list of "
+                f"{', '.join(DEBUG_LEVELS)})"
+            )
+    return frozenset(value)
+
+
+def _costmap_radii(mapping: dict, where: str) -> tuple[float, float, float]:
+    """(inscribed radius m, inflation radius m, cost scaling 1/m): the package's keys, else the original's
+    ``global_costmap`` (robot_radius; inflation_layer/inflation_radius, cost_scaling_factor, or the old-style keys
+    directly under global_costmap), else costmap_2d's defaults."""
+    costmap = mapping.get("global_costmap", {})
+    if costmap is None:
+        costmap = {}
+    if not isinstance(costmap, dict):
+        raise ConfigError(f"{where}: 'global_costmap' must be a mapping (costmap_2d parameters)")
+    layer = costmap.get("inflation_layer", {}) or {}
+    if not isinstance(layer, dict):
+        raise ConfigError(f"{where}: 'global_costmap/inflation_layer' must be a mapping")
+    inner = f"{where} (global_costmap)"
+
+    def from_costmap(key: str, default: float) -> float:
+        if key in layer:
+            return _number(layer, key, f"{inner}/inflation_layer", minimum=0)
+        return _number(costmap, key, inner, default=default, minimum=0)
+
+    inscribed = _number(
+        mapping,
+        "inscribedRadius_m",
+        where,
+        default=_number(costmap, "robot_radius", inner, default=COSTMAP_ROBOT_RADIUS_M, minimum=0),
+        minimum=0,
+    )
+    inflation = _number(
+        mapping,
+        "inflationRadius_m",
+        where,
+        default=from_costmap("inflation_radius", COSTMAP_INFLATION_RADIUS_M),
+        minimum=0,
+    )
+    scaling = _number(
+        mapping,
+        "costScalingFactor_per_m",
+        where,
+        default=from_costmap("cost_scaling_factor", COSTMAP_COST_SCALING_PER_M),
+        minimum=0,
+    )
+    return inscribed, inflation, scaling
 
 
 def _number(mapping: dict, key: str, where: str, default=_REQUIRED, minimum=None, strictly_positive=False) -> float:
@@ -242,38 +359,46 @@ def _flag(mapping: dict, key: str, where: str, default=_REQUIRED) -> bool:
 
 
 def settings_from_mapping(mapping: object, where: str) -> RobotModelSettings:
-    """Check and convert the parameters (a YAML file's or the node's private rosparams); errors name ``where``."""
+    """Check and convert the parameters (a YAML file's or the node's private rosparams); errors name ``where``.
+    Absent keys take :data:`DEFAULTS` (listed in ``defaulted``); present keys of a wrong type or value are errors."""
     if not isinstance(mapping, dict):
         raise ConfigError(f"{where}: expected a mapping of parameters")
     warnings: list[str] = []
-    model_id = mapping.get("robotModelId", _REQUIRED)
-    if model_id is _REQUIRED:
-        raise ConfigError(f"{where}: missing key 'robotModelId'")
+    defaulted = tuple(key for key in DEFAULTS if key not in mapping)
+
+    def number(key: str, **checks) -> float:
+        return _number(mapping, key, where, default=float(DEFAULTS[key]), **checks)
+
+    def flag(key: str) -> bool:
+        return _flag(mapping, key, where, default=DEFAULTS[key])
+
+    model_id = mapping.get("robotModelId", DEFAULTS["robotModelId"])
     if isinstance(model_id, bool) or model_id not in (EXACT_IK, APPROXIMATED_IK):
         raise ConfigError(
             f"{where}: robotModelId {model_id!r} is not a valid robot model id "
             f"(1 = MILDRobotModelWithExactIK, 2 = MILDRobotModelWithApproximatedIK)"
         )
-    limits = {key: _number(mapping, key, where) for key in ("panMin", "panMax", "tiltMin", "tiltMax")}
+    limits = {key: number(key) for key in ("panMin", "panMax", "tiltMin", "tiltMax")}
     for low, high in (("panMin", "panMax"), ("tiltMin", "tiltMax")):
         if limits[low] >= limits[high]:
             raise ConfigError(f"{where}: need {low} < {high} (degrees), got {limits[low]} and {limits[high]}")
     if limits["tiltMin"] <= -90 or limits["tiltMax"] >= 90:
         raise ConfigError(f"{where}: tilt limits must lie within (-90, 90) degrees")
-    ncp = _number(mapping, "ncp", where, strictly_positive=True)
-    fcp = _number(mapping, "fcp", where, strictly_positive=True)
+    ncp = number("ncp", strictly_positive=True)
+    fcp = number("fcp", strictly_positive=True)
     if ncp >= fcp:
         raise ConfigError(f"{where}: need ncp < fcp (metres), got {ncp} and {fcp}")
-    rating = mapping.get("IKAngleRating", _REQUIRED)
-    if rating is _REQUIRED:
-        raise ConfigError(f"{where}: missing key 'IKAngleRating'")
-    if rating not in RATING_NAMES:
+    rating = mapping.get("IKAngleRating", "")
+    if "IKAngleRating" not in mapping:
+        warnings.append("IKAngleRating is not set; using SIMPLE (the original's choice for a name it does not know)")
+        rating = "SIMPLE"
+    elif rating not in RATING_NAMES:
         warnings.append(
             f"'{rating}' is not a valid IK rating algorithm (IKAngleRating: one of {', '.join(RATING_NAMES)}); "
             "using SIMPLE instead"
         )
         rating = "SIMPLE"
-    steps = _number(mapping, "panAngleSamplingStepsPerIteration", where, minimum=2)
+    steps = number("panAngleSamplingStepsPerIteration", minimum=2)
     iterations = _number(mapping, "panAngleSamplingMaxIterations", where, default=6, minimum=1)
     if steps != int(steps) or iterations != int(iterations):
         raise ConfigError(f"{where}: panAngleSamplingStepsPerIteration and panAngleSamplingMaxIterations are integers")
@@ -284,39 +409,51 @@ def settings_from_mapping(mapping: object, where: str) -> RobotModelSettings:
     fovy = _number(mapping, "fovy_deg", where, default=20.0, strictly_positive=True)
     if fovx >= 180 or fovy >= 180:
         raise ConfigError(f"{where}: fovx_deg and fovy_deg must be below 180")
-    col_thresh = _number(mapping, "colThresh", where, minimum=0)
+    col_thresh = number("colThresh", minimum=0)
     if col_thresh > 100:
         raise ConfigError(f"{where}: colThresh is an occupancy value in [0, 100], got {col_thresh}")
-    inscribed = _number(mapping, "inscribedRadius_m", where, default=0.30, minimum=0)
-    inflation = _number(mapping, "inflationRadius_m", where, default=0.60, minimum=0)
+    inscribed, inflation, scaling = _costmap_radii(mapping, where)
     if inscribed > inflation:
-        raise ConfigError(f"{where}: need inscribedRadius_m <= inflationRadius_m, got {inscribed} and {inflation}")
+        raise ConfigError(
+            f"{where}: need inscribed radius <= inflation radius (inscribedRadius_m or global_costmap/robot_radius, "
+            f"inflationRadius_m or global_costmap inflation_radius), got {inscribed} m and {inflation} m"
+        )
+    speed_factors = tuple(
+        None if key not in mapping else _number(mapping, key, where, strictly_positive=True)
+        for key in ("speedFactorPTU", "speedFactorBaseMove", "speedFactorBaseRot")
+    )
+    topic = mapping.get("IKVisualization", "/asr_robot_model_services/IK_Visualization")
+    if not isinstance(topic, str) or not topic.strip("/"):
+        raise ConfigError(f"{where}: 'IKVisualization' must be a topic name, got {topic!r}")
     return RobotModelSettings(
         robot_model_id=int(model_id),
         pan_limits_rad=(math.radians(limits["panMin"]), math.radians(limits["panMax"])),
         tilt_limits_rad=(math.radians(limits["tiltMin"]), math.radians(limits["tiltMax"])),
-        sigma_m=_number(mapping, "mSigma", where, strictly_positive=True),
+        sigma_m=number("mSigma", strictly_positive=True),
         col_thresh=col_thresh,
-        omega_pan=_number(mapping, "mOmegaPan", where, minimum=0),
-        omega_tilt=_number(mapping, "mOmegaTilt", where, minimum=0),
-        omega_rot=_number(mapping, "mOmegaRot", where, minimum=0),
-        omega_base=_number(mapping, "mOmegaBase", where, minimum=0),
-        tolerance_m=_number(mapping, "tolerance", where, minimum=0),
-        use_global_planner=_flag(mapping, "useGlobalPlanner", where),
+        omega_pan=number("mOmegaPan", minimum=0),
+        omega_tilt=number("mOmegaTilt", minimum=0),
+        omega_rot=number("mOmegaRot", minimum=0),
+        omega_base=number("mOmegaBase", minimum=0),
+        tolerance_m=number("tolerance", minimum=0),
+        use_global_planner=flag("useGlobalPlanner"),
         ncp_m=ncp,
         fcp_m=fcp,
-        visualize_ik=_flag(mapping, "visualizeIK", where),
+        visualize_ik=flag("visualizeIK"),
         ik_angle_rating=str(rating),
         pan_sampling_steps=int(steps),
-        ik_iteration_accuracy=_number(mapping, "inverseKinematicIterationAccuracy", where, strictly_positive=True),
+        ik_iteration_accuracy=number("inverseKinematicIterationAccuracy", strictly_positive=True),
         pan_sampling_max_iterations=int(iterations),
         lp_solver=solver,
         fovx_rad=math.radians(fovx),
         fovy_rad=math.radians(fovy),
         inscribed_radius_m=inscribed,
         inflation_radius_m=inflation,
-        cost_scaling_per_m=_number(mapping, "costScalingFactor_per_m", where, default=5.0, minimum=0),
-        ik_visualization_topic=str(mapping.get("IKVisualization", "/asr_robot_model_services/IK_Visualization")),
+        cost_scaling_per_m=scaling,
+        ik_visualization_topic=topic,
+        debug_levels=_debug_levels(mapping.get("debugLevels"), where),
+        speed_factors=speed_factors,
+        defaulted=defaulted,
         warnings=tuple(warnings),
     )
 

@@ -137,7 +137,7 @@ class OccupancyMap:
     inscribed_radius_m: float = 0.3
     inflation_radius_m: float = 0.6
     cost_scaling_per_m: float = 5.0
-    source: Path | None = None
+    source: Path | str | None = None  # the map file, or the topic it came from
     costmap: np.ndarray = field(init=False, repr=False)
     _planners: dict = field(init=False, repr=False, default_factory=dict)
 

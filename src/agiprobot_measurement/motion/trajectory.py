@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from agiprobot_measurement.common.message_shape import MessageShape, message_shape
 from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.station import JointLimits
 
@@ -259,6 +260,19 @@ class JointTrajectory:
             "joint_names": list(self.joint_names),
             "points": points,
         }
+
+    @property
+    def joint_trajectory(self) -> MessageShape:
+        """This trajectory as a ``trajectory_msgs/JointTrajectory``-shaped snapshot: the original's views hold
+        ``moveit_msgs/RobotTrajectory`` objects, and code written for it reads ``traj.joint_trajectory.points``."""
+        return message_shape(self.to_dict())
+
+    @property
+    def multi_dof_joint_trajectory(self) -> MessageShape:
+        """The empty ``MultiDOFJointTrajectory`` part of the RobotTrajectory shape (a fixed-base arm has none)."""
+        return message_shape(
+            {"header": {"frame_id": "", "seq": 0, "stamp": {"nsecs": 0, "secs": 0}}, "joint_names": [], "points": []}
+        )
 
     # ------------------------------------------------------------------------------ interpolation
     def knot_velocities(self) -> np.ndarray:

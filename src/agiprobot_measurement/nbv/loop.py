@@ -20,13 +20,19 @@ Documented choices where the report is silent:
 - With depth noise, the laser's free part stops half a cell before the point and the return path's free part starts
   half a cell (+ ``noise_return_margin_sigmas`` x sigma) after it: a point measured too deep lies inside the body,
   and carving the first stretch of its return path would erase the surface just measured.
+- The camera-in-front rule of :mod:`.scoring` applies to ``getcandidates2d`` candidates only, not to the general
+  candidates of a contour end (beyond an apex the outer side of the continuation is not known yet).
 - A candidate is unmeasurable only once every planning strategy has failed to plan it. In ``fullpix`` (recovery
   S0 <-> S1 only) a strategy that planned before may plan again when the other finds no view, its failed
   configurations being forbidden (``retry_planned_strategies``); in ``stratpix`` a strategy is not re-entered.
 - ``circpix``: the source moves on the circle around the scene centre through the first hit at the standoff, in
   steps of ``circ_step_deg`` counter-clockwise and never back. At each stop it measures, one after the other, the
-  candidates it can see (laser and camera path free of known full cells, depth within the camera's field), the
-  one nearest the standoff first; the run ends after the full turn or when the growth points are exhausted.
+  candidates it can see (laser and camera path free of known full cells, depth within the camera's field, no known
+  full cell on the laser behind the candidate before the first cell not known empty, nor within 5 cells of it:
+  either would make an empty candidate answer with an already seen cell), the one nearest the standoff first. "Never turning back" is kept literally: the
+  source keeps going round in the same sense, for up to ``circ_max_laps`` laps, and stops after a lap that could
+  measure nothing. The candidates still left then cannot be planned from the circle: they are marked unmeasurable
+  (the report's rule for a candidate without a plannable view), which exhausts the growth points.
 
 Termination: each candidate is chosen once, and for one candidate every failed measurement forbids its configuration
 (at most 2 x 360 per aim point and strategy), strategy 2 stops after a full turn, and strategy switches are capped;
@@ -38,13 +44,13 @@ from __future__ import annotations
 import math
 import time
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from .errors import NbvInputError
-from .grid import EMPTY, FULL, PROBABLY_EMPTY, PROBABLY_FULL, UNKNOWN, MeasuredPoints, dilate8, validate_truth
-from .predicates import compute_direction, outward_normal, predicted_point
+from .grid import EMPTY, FULL, PROBABLY_EMPTY, PROBABLY_FULL, UNKNOWN, MeasuredPoints, validate_truth
+from .predicates import compute_direction, driving_candidate_mask, growth_mask, outward_normal, predicted_point
 from .range_finder import RangeFinder2D, apply_measurement, cell_of_point, scan
 from .scoring import AIM_MODES, ScoreConfig, aim_points
 from .strategies import (
@@ -54,6 +60,7 @@ from .strategies import (
     NoView,
     Strategy,
     classify,
+    is_strict_candidate,
     label_of,
     plan_s0,
     plan_s1,
@@ -98,6 +105,8 @@ class RunConfig:
     s1_reach_cells: float = 3.0
     s2_step_deg: float = 10.0
     circ_step_deg: float = 2.0
+    # circpix: laps on the circle (always onward); the sweep also stops after a lap that measured nothing
+    circ_max_laps: int = 3
     max_switches_per_candidate: int = 4
     max_measurements_per_candidate: int = 60
     max_measurements: int | None = None
@@ -111,8 +120,13 @@ class RunConfig:
     noise_return_margin_sigmas: float = 0.0
     # fullpix: after a strategy finds no view, one that planned before may plan again (see ``_Engine.resolve``)
     retry_planned_strategies: bool = True
+    # strategy 0 may take a view whose first not-known-empty cell behind cc is not known full when no view has a
+    # clear stretch behind cc (see strategies.plan_s0)
+    s0_loose_d0_check: bool = True
     # where strategy 2's orbit begins: "normal" (the outward normal of pp) or "sensor" (where the sensor is)
     s2_start: str = "normal"
+    # how far strategy 2 orbits before it gives up (degrees; the report: a full turn, 360)
+    s2_max_turn_deg: float = 360.0
 
     def __post_init__(self) -> None:
         if self.script not in SCRIPTS:
@@ -122,6 +136,7 @@ class RunConfig:
         _positive("noise_sigma_cells", self.noise_sigma_cells, allow_zero=True)
         _positive("s1_reach_cells", self.s1_reach_cells)
         _positive("s2_step_deg", self.s2_step_deg)
+        _positive("s2_max_turn_deg", self.s2_max_turn_deg)
         _positive("circ_step_deg", self.circ_step_deg)
         _positive("search_step_cells", self.search_step_cells)
         _positive("side_step_cells", self.side_step_cells)
@@ -129,7 +144,7 @@ class RunConfig:
         if self.s2_start not in ("normal", "sensor"):
             raise NbvInputError(f"s2_start must be 'normal' or 'sensor', got {self.s2_start!r}")
         _positive("max_time_s", self.max_time_s, allow_none=True)
-        for name in ("contour_points", "max_switches_per_candidate", "max_measurements_per_candidate"):
+        for name in ("contour_points", "max_switches_per_candidate", "max_measurements_per_candidate", "circ_max_laps"):
             if int(getattr(self, name)) < 1:
                 raise NbvInputError(f"{name} must be >= 1, got {getattr(self, name)!r}")
         if self.max_measurements is not None and int(self.max_measurements) < 1:
@@ -290,16 +305,13 @@ class _Engine:
         if self.bbox is None:
             return np.zeros((0, 2), dtype=int)
         i0, i1, j0, j1 = self._window()
-        w = self.w[i0:i1, j0:j1]
-        mask = (w == FULL) & dilate8((w == UNKNOWN) & dilate8(w == EMPTY))
-        return np.argwhere(mask) + np.array([i0, j0])
+        return np.argwhere(growth_mask(self.w[i0:i1, j0:j1])) + np.array([i0, j0])
 
     def possible_improvement(self) -> int:
         if self.bbox is None:
             return 0
         i0, i1, j0, j1 = self._window()
-        w = self.w[i0:i1, j0:j1]
-        return int(((w == UNKNOWN) & dilate8(w == EMPTY) & dilate8(w == FULL)).sum())
+        return int(driving_candidate_mask(self.w[i0:i1, j0:j1]).sum())
 
     def nearest_growth_point(self, pp_old):
         pts = self.growth_points()
@@ -380,10 +392,13 @@ class _Engine:
             aims = aim_points(cc, cfg.aim)
             direction = compute_direction(self.w, pp, cfg.contour_points)
             normal = outward_normal(self.w, pp, direction)
+            # a contour end's general candidate lies where the outer side is not known yet (beyond an apex): the
+            # camera-in-front rule, made for the side the contour shows, would exclude the views round the apex
+            score_cfg = cfg.score if is_strict_candidate(self.w, cc) else replace(cfg.score, camera_front=False)
             if strategy == Strategy.S0:
                 plan = plan_s0(
-                    self.m, self.rf, cc, aims, self.circles_for(aims), normal, self.current_source, cfg.score,
-                    self.forbid_array(strategy, cc, len(aims)),
+                    self.m, self.rf, cc, aims, self.circles_for(aims), normal, self.current_source, score_cfg,
+                    self.forbid_array(strategy, cc, len(aims)), loose=cfg.s0_loose_d0_check,
                 )  # fmt: skip
             elif strategy == Strategy.S1:
                 plan = plan_s1(
@@ -392,7 +407,10 @@ class _Engine:
                 )  # fmt: skip
             else:
                 if orbit is None:
-                    orbit = start_orbit(pp, normal, direction, cc, self.current_source, cfg.s2_step_deg, cfg.s2_start)
+                    orbit = start_orbit(
+                        pp, normal, direction, cc, self.current_source, cfg.s2_step_deg, cfg.s2_start,
+                        cfg.s2_max_turn_deg,
+                    )  # fmt: skip
                 plan = plan_s2(self.rf, orbit)
             if isinstance(plan, NoView):
                 # a candidate is unmeasurable only once every planning strategy has failed to plan it. In fullpix,
@@ -469,35 +487,60 @@ class _Engine:
         radius = float(np.hypot(*rel)) + rf.standoff_cells
         psi0 = math.atan2(rel[1], rel[0])
         near, far = rf.depth_window_cells()
-        n_steps = math.ceil(360.0 / cfg.circ_step_deg)
-        for k in range(n_steps + 1):
-            psi = psi0 + math.radians(k * cfg.circ_step_deg)
-            src = centre + radius * np.array([math.cos(psi), math.sin(psi)])
-            while True:
-                self._check_budget()
-                if len(self.growth_points()) == 0:
-                    return "growth_points_exhausted"
-                plan = self._circ_plan(src, near, far)
-                if plan is None:
-                    break
-                pos, cc = plan
-                self.measure(pos, cc, Strategy.S0)
-                self.mark(cc, PROBABLY_EMPTY)
-        return "circle_completed"
+        steps_per_lap = math.ceil(360.0 / cfg.circ_step_deg)
+        k = 0
+        for _lap in range(cfg.circ_max_laps):
+            measured_in_lap = 0
+            for _ in range(steps_per_lap):
+                k += 1
+                psi = psi0 + math.radians(k * cfg.circ_step_deg)
+                src = centre + radius * np.array([math.cos(psi), math.sin(psi)])
+                while True:
+                    self._check_budget()
+                    if len(self.growth_points()) == 0:
+                        return "growth_points_exhausted"
+                    plan = self._circ_plan(src, near, far)
+                    if plan is None:
+                        break
+                    pos, cc = plan
+                    self.measure(pos, cc, Strategy.S0)
+                    self.mark(cc, PROBABLY_EMPTY)
+                    measured_in_lap += 1
+            if measured_in_lap == 0:
+                break
+        # a whole lap planned no view of the candidates left: from the circle they cannot be planned, which is the
+        # report's "unmeasurable"; marking them exhausts the growth points
+        i0, i1, j0, j1 = self._window()
+        while True:  # marking the candidates of a contour end may expose the end's other unknown neighbours
+            left = np.argwhere(driving_candidate_mask(self.w[i0:i1, j0:j1])) + np.array([i0, j0])
+            if len(left) == 0:
+                break
+            for c in left:
+                self._unmeasurable((int(c[0]), int(c[1])), None)
+        return "growth_points_exhausted" if len(self.growth_points()) == 0 else "circle_completed"
 
     def _circ_plan(self, src, near, far):
         i0, i1, j0, j1 = self._window()
-        w = self.w[i0:i1, j0:j1]
-        cands = np.argwhere((w == UNKNOWN) & dilate8(w == EMPTY) & dilate8(w == FULL)) + np.array([i0, j0])
+        cands = np.argwhere(driving_candidate_mask(self.w[i0:i1, j0:j1])) + np.array([i0, j0])
         if len(cands) == 0:
             return None
         depth = np.hypot(*(cands - src).T)
         ok = (depth > near) & (depth < far)
         cands, depth = cands[ok], depth[ok]
         full = self.m == FULL
+        reach = min(far, float(self.shape[0] + self.shape[1])) + 2.0
+        cfg_near = 5.0  # as strategy 0's near_cells
         for k in np.argsort(np.abs(depth - self.rf.standoff_cells), kind="stable")[:30]:
             cc = (int(cands[k, 0]), int(cands[k, 1]))
             if first_blocking(full, src, cc, skip=cc)[0] >= 0:
+                continue
+            # should cc be empty the laser goes on: a known full cell behind cc, before any cell that is not known
+            # empty or within the near stretch, would answer with an already seen cell (a D0); not planned
+            d = (np.asarray(cc, dtype=float) - src) / depth[k]
+            bi, bj = first_blocking(self.m != EMPTY, cc, src + reach * d, skip=cc)
+            if bi >= 0 and full[bi, bj]:
+                continue
+            if first_blocking(full, cc, np.asarray(cc, dtype=float) + cfg_near * d, skip=cc)[0] >= 0:
                 continue
             for side in (1, -1):
                 pos = self.rf.pose_through(src, cc, side)

@@ -11,10 +11,20 @@ Documented choice: the growth points that drive the run (``getpoints2d``, ``veri
 the full cells that still have a ``getcandidates2d`` candidate, so that "a growth point whose candidates are
 exhausted stops being a growth point" holds literally. The looser report definition is :func:`general_growth_mask`.
 Only ``W == 0`` counts as unknown: cells marked +-0.1 by the planner are never candidates again.
+
+Documented choice (contour ends): ``getcandidates2d``'s rule needs an empty cell next to the candidate. At an acute
+apex the space beyond the apex is often still unknown (no ray has passed there), so the strict rule finds no
+candidate and the contour would stop at the apex although the report's growth point ("a full point with unknown
+region nearby") is still there. A *contour end* is a full cell whose full 8-neighbours all lie within 45 degrees of their mean
+direction (the end of a straight or staircase run, or an acute apex; a right-angle corner and an isolated cell are
+not ends). A contour end
+without a strict candidate takes the report's general candidates instead: its unknown 8-neighbours. Each such
+candidate is still a candidate at most once, so termination is unaffected.
 """
 
 from __future__ import annotations
 
+import math
 from collections import deque
 
 import numpy as np
@@ -25,6 +35,8 @@ from .grid import EMPTY, FULL, UNKNOWN, dilate8
 __all__ = [
     "candidate_mask",
     "compute_direction",
+    "contour_end_mask",
+    "driving_candidate_mask",
     "general_growth_mask",
     "get_distance_vc",
     "get_nearest_pp",
@@ -39,6 +51,9 @@ __all__ = [
 ]
 
 _NEIGHBOURS = np.array([(1, 0), (1, 1), (0, 1), (-1, 1), (-1, 0), (-1, -1), (0, -1), (1, -1)], dtype=int)
+_NEIGHBOUR_NORM = np.hypot(_NEIGHBOURS[:, 0], _NEIGHBOURS[:, 1]).astype(float)
+# a contour end: every full neighbour within 45 degrees of their mean direction (a 90-degree corner is not an end)
+_END_COS = math.cos(math.radians(45.0)) + 1e-9
 NONE_CELL = (-1, -1)
 
 
@@ -65,6 +80,36 @@ def strict_candidate_mask(w: np.ndarray) -> np.ndarray:
     return (w == UNKNOWN) & dilate8(w == EMPTY) & dilate8(w == FULL)
 
 
+def contour_end_mask(w: np.ndarray) -> np.ndarray:
+    """Full cells at the end of a measured contour: all full 8-neighbours on one side (see the module docstring)."""
+    w = _check_grid(w)
+    full = w == FULL
+    padded = np.zeros((w.shape[0] + 2, w.shape[1] + 2), dtype=bool)
+    padded[1:-1, 1:-1] = full
+    cells = np.argwhere(full)
+    out = np.zeros_like(full)
+    if len(cells) == 0:
+        return out
+    nb = padded[cells[:, :1] + 1 + _NEIGHBOURS[:, 0], cells[:, 1:] + 1 + _NEIGHBOURS[:, 1]]  # k x 8
+    s = (nb.astype(np.int64) @ _NEIGHBOURS).astype(float)  # k x 2: sum of the full neighbours' offsets
+    cos = (s @ _NEIGHBOURS.T) / (np.hypot(*s.T)[:, None] * _NEIGHBOUR_NORM[None, :] + 1e-300)  # k x 8
+    end = nb.any(axis=1) & (~nb | (cos > _END_COS)).all(axis=1)
+    out[cells[end, 0], cells[end, 1]] = True
+    return out
+
+
+def driving_candidate_mask(w: np.ndarray) -> np.ndarray:
+    """Every cell that is a candidate of some driving growth point: the ``getcandidates2d`` candidates of all full
+    cells, plus the unknown 8-neighbours of the contour ends that have no such candidate."""
+    w = _check_grid(w)
+    unknown = w == UNKNOWN
+    strict = unknown & dilate8(w == EMPTY)
+    full = w == FULL
+    has_strict = full & dilate8(strict)
+    bare_ends = contour_end_mask(w) & ~has_strict
+    return (strict & dilate8(full)) | (unknown & dilate8(bare_ends))
+
+
 def general_growth_mask(w: np.ndarray) -> np.ndarray:
     """The report's literal growth points: full cells with an unknown 8-neighbour."""
     w = _check_grid(w)
@@ -72,15 +117,48 @@ def general_growth_mask(w: np.ndarray) -> np.ndarray:
 
 
 def growth_mask(w: np.ndarray) -> np.ndarray:
-    """Growth points that drive the run: full cells with at least one ``getcandidates2d`` candidate."""
+    """Growth points that drive the run: full cells with at least one ``getcandidates2d`` candidate (contour ends
+    included, see the module docstring)."""
     w = _check_grid(w)
-    return (w == FULL) & dilate8((w == UNKNOWN) & dilate8(w == EMPTY))
+    unknown = w == UNKNOWN
+    strict = (w == FULL) & dilate8(unknown & dilate8(w == EMPTY))
+    return strict | (contour_end_mask(w) & dilate8(unknown))
+
+
+def _is_contour_end(w: np.ndarray, x) -> bool:
+    if not _inside(w, x) or w[x] != FULL:
+        return False
+    offs = [
+        (int(di), int(dj))
+        for di, dj in _NEIGHBOURS
+        if _inside(w, (x[0] + di, x[1] + dj)) and w[x[0] + di, x[1] + dj] == FULL
+    ]
+    if not offs:
+        return False
+    sx, sy = sum(o[0] for o in offs), sum(o[1] for o in offs)
+    ns = float(np.hypot(sx, sy))
+    return ns > 0 and all((o[0] * sx + o[1] * sy) / (ns * float(np.hypot(*o))) > _END_COS for o in offs)
 
 
 def getcandidates2d(w: np.ndarray, x) -> np.ndarray:
-    """Candidates of the growth point ``x`` (k x 2, neighbour order E, NE, N, NW, W, SW, S, SE); may be empty."""
+    """Candidates of the growth point ``x`` (k x 2, neighbour order E, NE, N, NW, W, SW, S, SE); may be empty.
+
+    The report's rule (unknown, 8-adjacent to an empty cell and to ``x``); at a contour end with no such candidate,
+    the unknown 8-neighbours of ``x`` (see the module docstring).
+    """
     w = _check_grid(w)
     x = (int(x[0]), int(x[1]))
+    out = _strict_candidates(w, x)
+    if len(out) == 0 and _is_contour_end(w, x):
+        out = [
+            (x[0] + int(di), x[1] + int(dj))
+            for di, dj in _NEIGHBOURS
+            if _inside(w, (x[0] + di, x[1] + dj)) and w[x[0] + di, x[1] + dj] == UNKNOWN
+        ]
+    return np.asarray(out, dtype=int).reshape(-1, 2)
+
+
+def _strict_candidates(w: np.ndarray, x) -> list:
     out = []
     for di, dj in _NEIGHBOURS:
         c = (x[0] + di, x[1] + dj)
@@ -90,7 +168,7 @@ def getcandidates2d(w: np.ndarray, x) -> np.ndarray:
         j0, j1 = max(c[1] - 1, 0), min(c[1] + 2, w.shape[1])
         if (w[i0:i1, j0:j1] == EMPTY).any():
             out.append(c)
-    return np.asarray(out, dtype=int).reshape(-1, 2)
+    return out
 
 
 def verifypoint2d(w: np.ndarray, p) -> int:

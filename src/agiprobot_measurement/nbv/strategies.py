@@ -25,7 +25,8 @@ the report's where it gives one, otherwise a documented choice (marked "choice" 
   full cell is hit; D1 undetected occlusion, switch (-> S2 in ``stratpix``, -> S0 in ``fullpix``: choice). No view
   -> unmeasurable (report: S1 detects unmeasurable candidates with the circle of visibility).
 - S2: A2 success (-> S0); B2 switch to S1; C2 a full turn, switch (choice: ``cc`` unmeasurable, back to S0);
-  D2 normal, next angle on the circle; 360 degrees without a return -> ``cc`` unmeasurable.
+  D2 normal, next angle on the circle; a full turn (``s2_max_turn_deg``, 360 by default) without a return -> ``cc``
+  unmeasurable.
 
 A re-plan or a switch always forbids the configuration just used, a candidate gets at most
 ``max_switches_per_candidate`` strategy switches, and no cell is a candidate twice: together they bound the number
@@ -119,6 +120,11 @@ TRANSITIONS = {
 }
 
 
+def is_strict_candidate(w: np.ndarray, cell) -> bool:
+    """``cell`` is unknown and 8-adjacent to an empty and to a full cell (a ``getcandidates2d`` candidate)."""
+    return _is_strict_candidate(w, cell)
+
+
 def _is_strict_candidate(w: np.ndarray, cell) -> bool:
     i, j = cell
     if w[i, j] != UNKNOWN:
@@ -183,13 +189,17 @@ def plan_s0(
     cfg: ScoreConfig,
     forbidden: np.ndarray,
     max_checks: int = 60,
+    loose: bool = True,
+    near_cells: float = 5.0,
 ) -> Plan | NoView:
     """Strategy 0: the best perpendicular view of ``cc`` by Viditelnost x Kolmost x Pohyb.
 
     The ranked views are checked on the model beyond the aim, to avoid D0 (an already seen cell answering because
     ``cc`` was empty): the best view with no known full cell on the laser within the camera's depth window behind
-    ``cc`` is taken; if there is none, the best view whose first not-known-empty cell behind ``cc`` is not known
-    full; if there is none either, ``cc`` goes to strategy 1 ("look_through_only").
+    ``cc`` is taken; if there is none and ``loose`` is set, the best view whose first not-known-empty cell behind
+    ``cc`` is not known full and that has no known full cell within ``near_cells`` behind the aim (such a view can
+    still end in a D0 when the unknown cells it crosses are empty); if
+    there is none either, ``cc`` goes to strategy 1 ("look_through_only").
     """
     views: ViewSet = score_views(rf, aims, circles, normal, current_source, cfg, forbidden)
     ranked = views.ranked()
@@ -208,9 +218,12 @@ def plan_s0(
         far = pos[2] + max(reach, 1.0) * d
         if first_blocking(full, pos[2], far, skip=cc)[0] < 0:
             return Plan(pos, _key(views, idx), float(views.score[idx]))
-        if fallback is None:
+        if loose and fallback is None:
             ci, cj = _continuation_first(m, pos[2], d, cc, reach)
-            if ci < 0 or m[ci, cj] != FULL:
+            # the first cell may be an unknown one the laser only grazes: a known full cell right behind cc
+            # (within ``near_cells``) would still answer, so that is excluded as well
+            near_full = first_blocking(full, pos[2], pos[2] + near_cells * d, skip=cc)[0] >= 0
+            if (ci < 0 or m[ci, cj] != FULL) and not near_full:
                 fallback = idx
     if fallback is not None:
         return Plan(views.poses[fallback], _key(views, fallback), float(views.score[fallback]))
@@ -279,15 +292,19 @@ class OrbitState:
     rotation: int
     step_rad: float
     k: int = 0
+    max_turn_rad: float = 2 * math.pi
 
     @property
     def n_steps(self) -> int:
-        return math.ceil(2 * math.pi / self.step_rad - 1e-9)
+        return math.ceil(self.max_turn_rad / self.step_rad - 1e-9)
 
 
-def start_orbit(pp, normal, direction, cc, current_source, step_deg: float, start_at: str = "normal") -> OrbitState:
+def start_orbit(
+    pp, normal, direction, cc, current_source, step_deg: float, start_at: str = "normal", max_turn_deg: float = 360.0
+) -> OrbitState:
     """Begin the orbit on the outward normal of ``pp`` (where strategy 0 looked from) and turn towards where the
-    contour goes on (``direction``, else towards ``cc``); without a normal, start where the sensor is."""
+    contour goes on (``direction``, else towards ``cc``); without a normal, start where the sensor is. The orbit
+    gives up after ``max_turn_deg`` (the report: a full turn)."""
     p = np.asarray(pp, dtype=float)
     at_sensor = current_source is not None and np.hypot(*(np.asarray(current_source) - p)) > 0
     if start_at == "sensor" and at_sensor:
@@ -301,7 +318,10 @@ def start_orbit(pp, normal, direction, cc, current_source, step_deg: float, star
     ahead = direction if direction is not None else (np.asarray(cc, dtype=float) - p)
     cross = start[0] * ahead[1] - start[1] * ahead[0]
     rotation = 1 if cross >= 0 else -1
-    return OrbitState((int(pp[0]), int(pp[1])), math.atan2(start[1], start[0]), rotation, math.radians(step_deg))
+    return OrbitState(
+        (int(pp[0]), int(pp[1])), math.atan2(start[1], start[0]), rotation, math.radians(step_deg),
+        max_turn_rad=math.radians(max_turn_deg),
+    )  # fmt: skip
 
 
 def plan_s2(rf, orbit: OrbitState) -> Plan | NoView:

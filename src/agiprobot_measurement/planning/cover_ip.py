@@ -190,6 +190,9 @@ def solve_reduced_ip(sub, costs, tie, integral, solve, deadline, mip_gap, warm_s
         x_lp, lp_bound, rc = lp
         candidates.append(make_irredundant(sub, lp_rounding(sub, costs, x_lp), costs))
         stats["lp_bound"] = lp_bound
+        # local columns by how likely a cover is to use them (LP value, then reduced cost): the planner verifies
+        # scan lines in this order
+        stats["likely_local_columns"] = np.lexsort((rc, -x_lp))
     incumbent = min(candidates, key=lambda c: float(costs[c].sum()))
     if lp is not None and sub.n_cols > SUPPORT_MIP_COLS:
         # A small programme over the columns the LP likes best (least reduced cost) plus the incumbent

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.cm import ScalarMappable
-from matplotlib.colors import LinearSegmentedColormap, Normalize
+from matplotlib.colors import LinearSegmentedColormap, Normalize, to_rgba
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.ticker import MaxNLocator
@@ -29,7 +29,9 @@ from agiprobot_measurement.common.files import atomic_write
 __all__ = [
     "DEFAULT_VIEWS",
     "MAX_MESH_FACES",
+    "NOT_EXECUTABLE_COLOR",
     "NOT_MEASURABLE_COLOR",
+    "NOT_PLANNED_COLOR",
     "SCAN_LINE_COLORS",
     "UNCERTAINTY_CMAP",
     "plot_coverage",
@@ -38,6 +40,10 @@ __all__ = [
 #: Low uncertainty -> high uncertainty (green -> teal -> blue), as in the documentation's figure.
 UNCERTAINTY_CMAP = LinearSegmentedColormap.from_list("coverage_uncertainty", ["#1a9641", "#1f9e9a", "#2c4fc7"])
 NOT_MEASURABLE_COLOR = "#d7191c"
+#: measurable by the sensor model from some candidate view, but no such view's scan line can be driven
+NOT_EXECUTABLE_COLOR = "#e7298a"
+#: measurable by an executable view, but the plan does not (views left out, time limit)
+NOT_PLANNED_COLOR = "#ff9f1c"
 # Scan line colours avoid red, green and blue, which already mean something in this figure.
 SCAN_LINE_COLORS = ("#ff7f0e", "#7b3294", "#8c564b", "#e377c2", "#404040", "#bcbd22", "#c2a5cf", "#000000")
 #: (elevation, azimuth) in degrees of the two panels: from the front left and from the back right.
@@ -98,12 +104,18 @@ def _equal_limits(ax, lo: np.ndarray, hi: np.ndarray) -> None:
     ax.set_box_aspect(tuple(half / half.max()))
 
 
-def _summary(uncertainties: np.ndarray, measured: np.ndarray, n_lines: int) -> str:
+def _summary(uncertainties: np.ndarray, measured: np.ndarray, n_lines: int, metrology=None, executable=None) -> str:
     n = len(uncertainties)
     if n == 0:
         return "no samples"
-    text = f"{n} samples: {int(measured.sum())} measured ({100.0 * measured.mean():.1f} %), "
-    text += f"{int((~measured).sum())} not measurable; {n_lines} scan lines"
+    text = f"{n} samples: {int(measured.sum())} covered ({100.0 * measured.mean():.1f} %), "
+    if metrology is not None and executable is not None:
+        text += (
+            f"{int(metrology.sum())} measurable, {int(executable.sum())} of them by executable views, "
+            f"{int((~metrology).sum())} not measurable; {n_lines} scan lines"
+        )
+    else:
+        text += f"{int((~measured).sum())} not measurable; {n_lines} scan lines"
     if measured.any():
         text += (
             f"; uncertainty mean {uncertainties[measured].mean():.4f} mm, max {uncertainties[measured].max():.4f} mm"
@@ -122,6 +134,8 @@ def plot_coverage(
     mesh=None,
     views: Sequence[tuple[float, float]] = DEFAULT_VIEWS,
     dpi: int = 100,
+    metrology_coverable=None,
+    executable_coverable=None,
 ) -> Path:
     """Write a PNG of the plan's predicted coverage to ``path`` (atomically) and return the path.
 
@@ -132,6 +146,9 @@ def plot_coverage(
         ``get_min_uncertainty()`` and ``get_max_uncertainty()``; default: the range of the measured values.
     :param mesh: optional part mesh in the same frame (trimesh.Trimesh or (vertices, faces)), drawn translucent.
     :param views: (elevation, azimuth) in degrees per panel.
+    :param metrology_coverable, executable_coverable: optional (N,) masks of the points some candidate view
+        measures, and some executable view does: unmeasured points are then coloured by why (red: no view
+        measures it, magenta: measurable but not executable, orange: executable but not in the plan).
     """
     path = Path(path)
     points = _as_points(points_mm)
@@ -158,7 +175,19 @@ def plot_coverage(
     norm = Normalize(vmin=u_min, vmax=u_max, clip=True)
     colors = np.empty((len(points), 4))
     colors[measured] = UNCERTAINTY_CMAP(norm(uncertainties[measured]))
-    colors[~measured] = (0.843, 0.098, 0.110, 1.0)
+    colors[~measured] = to_rgba(NOT_MEASURABLE_COLOR)
+    masks = []
+    for mask, name in ((metrology_coverable, "metrology_coverable"), (executable_coverable, "executable_coverable")):
+        if mask is not None:
+            mask = np.asarray(mask, dtype=bool).reshape(-1)
+            if mask.shape[0] != points.shape[0]:
+                raise ValueError(f"{name} has {mask.shape[0]} entries for {points.shape[0]} points")
+        masks.append(mask)
+    metrology, executable = masks
+    if metrology is not None:
+        colors[~measured & metrology] = to_rgba(NOT_EXECUTABLE_COLOR)
+    if executable is not None:
+        colors[~measured & executable] = to_rgba(NOT_PLANNED_COLOR)
     triangles = _mesh_triangles(mesh)
 
     part_extent = [points] if triangles is None else [points, triangles.reshape(-1, 3)]
@@ -173,7 +202,14 @@ def plot_coverage(
     fig = Figure(figsize=(5.4 * len(panels) + 1.2, 6.0), dpi=dpi)
     FigureCanvasAgg(fig)
     fig.suptitle(title, fontsize=13)
-    fig.text(0.5, 0.915, _summary(uncertainties, measured, len(lines)), ha="center", fontsize=9, color="#333333")
+    fig.text(
+        0.5,
+        0.915,
+        _summary(uncertainties, measured, len(lines), metrology, executable),
+        ha="center",
+        fontsize=9,
+        color="#333333",
+    )
     width = 0.87 / len(panels)
     # measured first, red last: the points that need attention are drawn on top
     order = np.argsort(measured, kind="stable")[::-1]
@@ -218,11 +254,23 @@ def plot_coverage(
     colorbar.set_label("predicted uncertainty [mm]")
     handles = [
         Line2D([], [], linestyle="", marker="o", color=NOT_MEASURABLE_COLOR, label="not measurable"),
+        *(
+            [Line2D([], [], linestyle="", marker="o", color=NOT_EXECUTABLE_COLOR, label="measurable, not executable")]
+            if metrology is not None
+            else []
+        ),
+        *(
+            [Line2D([], [], linestyle="", marker="o", color=NOT_PLANNED_COLOR, label="executable, not planned")]
+            if executable is not None
+            else []
+        ),
         Line2D([], [], linestyle="", marker="o", color=UNCERTAINTY_CMAP(0.0), label="low uncertainty"),
         Line2D([], [], linestyle="", marker="o", color=UNCERTAINTY_CMAP(1.0), label="high uncertainty"),
         Line2D([], [], color=SCAN_LINE_COLORS[0], linewidth=3, marker="o", label="scan line (o = start)"),
     ]
-    fig.legend(handles=handles, loc="lower center", ncol=4, fontsize=9, frameon=False, bbox_to_anchor=(0.45, 0.0))
+    fig.legend(
+        handles=handles, loc="lower center", ncol=len(handles), fontsize=9, frameon=False, bbox_to_anchor=(0.45, 0.0)
+    )
 
     atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=dpi), suffix=".png")
     return path

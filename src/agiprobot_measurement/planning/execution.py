@@ -1,14 +1,17 @@
 """Executing a plan: the executor interface, the segment loop, loading a stored plan and adapting its start.
 
 An executor drives the robot through one segment at a time (:class:`SegmentExecutor`). The package has two:
-:class:`SimulatedExecutor` (instant, on a kinematic state; pytest and the API's default) and
-``agiprobot_measurement.ros.executor.RosSegmentExecutor`` (the robot controller's action, the scanner's stitching).
+:class:`SimulatedExecutor` (instant, on a kinematic state; pytest, and the API's default outside ROS) and
+``agiprobot_measurement.ros.executor.RosSegmentExecutor`` (the robot controller's action, the scanner's stitching;
+the API's default inside a ROS process with the station running, see :func:`ros_station_executor`).
 :func:`execute_segments` runs the loop: feedback before each segment, stop at the first failure or cancel, and an
 :class:`ExecutionOutcome` that says how far it got. Joint values are rad, times s, lengths mm.
 """
 
 from __future__ import annotations
 
+import importlib
+import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,7 +22,7 @@ import numpy as np
 from agiprobot_measurement.errors import InputError, InternalError
 from agiprobot_measurement.motion.trajectory import JointTrajectory, check_trajectory
 from agiprobot_measurement.planning import plan_io
-from agiprobot_measurement.planning.plan_io import ExecutionPlan, PlanSegment
+from agiprobot_measurement.planning.plan_io import ExecutionPlan
 from agiprobot_measurement.planning.viewpoint import ViewPoint
 
 __all__ = [
@@ -255,21 +258,42 @@ def adapt_plan_start(
 
 
 def segment_triples(items: Sequence) -> list[tuple[str, JointTrajectory, object]]:
-    """``(kind, trajectory, view)`` of what ``TrajectoryManager.execute`` accepts: plan segments, bare
-    trajectories (alternating connect, measure) or views (each its connection and its measurement)."""
+    """``(kind, trajectory, view)`` of what ``TrajectoryManager.execute`` accepts: views (each its connection and
+    its measurement), or an execution plan's segments in C-M-C-M-... order: plan segments, bare trajectories,
+    ``moveit_msgs/RobotTrajectory`` messages or anything shaped like one (``joint_trajectory``), or their
+    expanded mappings. Raises :class:`~agiprobot_measurement.planning.plan_io.PlanError` naming the segment
+    that is none of these."""
+    if isinstance(items, ExecutionPlan):
+        items = items.segments
     items = list(items)
-    if items and isinstance(items[0], ViewPoint):
+    if items and all(isinstance(item, ViewPoint) for item in items):
         out = []
         for view in items:
             out.append(("connect", view.get_trajectory_to_view(), view))
             out.append(("measure", view.get_trajectory_for_measurement(), view))
         return out
-    out = []
-    for index, item in enumerate(items):
-        if isinstance(item, PlanSegment):
-            out.append((item.kind, item.trajectory, None))
-        elif isinstance(item, JointTrajectory):
-            out.append(("connect" if index % 2 == 0 else "measure", item, None))
-        else:
-            raise TypeError(f"cannot execute a {type(item).__name__}")
-    return out
+    return [(segment.kind, segment.trajectory, None) for segment in plan_io.as_segments(items)]
+
+
+EXECUTOR_CHOICES = ("auto", "simulated", "station")
+
+
+def in_ros_process() -> bool:
+    """Whether this process is a ROS node (``rospy.init_node`` was called); imports nothing from ROS."""
+    rospy = sys.modules.get("rospy")
+    core = getattr(rospy, "core", None)
+    return bool(core is not None and core.is_initialized())
+
+
+def ros_station_executor(joint_names: Sequence[str], surface_points_mm=None, part: PlanPart | None = None):
+    """The running station's executor (``agiprobot_measurement.ros.library_executor.station_executor``), or None
+    when this is not a ROS process or no controller answers.
+
+    The core never imports the ROS layer at module level: this looks it up by name, and only in a process where
+    ``rospy`` is already initialised, so ``TrajectoryManager.execute`` drives the real (or simulated) controller
+    for scripts written against the original, and stays instant and ROS-free everywhere else.
+    """
+    if not in_ros_process():
+        return None
+    module = importlib.import_module("agiprobot_measurement.ros.library_executor")
+    return module.station_executor(joint_names, surface_points_mm=surface_points_mm, part=part)

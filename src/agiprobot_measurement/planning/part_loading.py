@@ -48,6 +48,10 @@ PLAUSIBLE_SIZE_MM = (10.0, 2000.0)
 
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".glb", ".gltf")
 STEP_SUFFIXES = (".step", ".stp")
+#: CAD exchange formats trimesh's own loader cannot tessellate (cascadio handles STEP only there)
+UNREAD_CAD_SUFFIXES = (".iges", ".igs")
+#: STEP geometry comes out of OpenCASCADE (through cascadio and GLB) in metres, whatever unit the file declares
+STEP_SCALE_TO_MM = 1000.0
 
 
 class PartLoadError(InputError):
@@ -148,25 +152,38 @@ def _scale_from(units: str | None, scale: float | None, path: Path) -> float:
     return UNIT_SCALES_TO_MM[units]
 
 
-def _read_mesh(path: Path) -> trimesh.Trimesh:
+def _read_mesh(path: Path, tessellation_tolerance_mm: float = 0.0) -> trimesh.Trimesh:
     if not path.exists():
         raise PartLoadError(f"{path}: part file not found")
     if not path.is_file():
         raise PartLoadError(f"{path}: not a file")
     suffix = path.suffix.lower()
+    options = {}
     if suffix in STEP_SUFFIXES:
         if importlib.util.find_spec("cascadio") is None:
             raise PartLoadError(
                 f"{path}: STEP needs a converter and none is installed (trimesh reads STEP through the "
-                "'cascadio' package); export the part as STL, OBJ or PLY from CAD"
+                "'cascadio' package: pip install cascadio); or export the part as STL, OBJ or PLY from CAD"
             )
+        if tessellation_tolerance_mm and tessellation_tolerance_mm > 0:
+            # OpenCASCADE tessellates in its working unit, mm: the linear deflection is a distance in mm
+            options["tol_linear"] = float(tessellation_tolerance_mm)
+        with path.open("rb") as handle:
+            head = handle.read(64)
+        if b"ISO-10303" not in head:
+            raise PartLoadError(f"{path}: not a STEP file (no ISO-10303 header)")
+    elif suffix in UNREAD_CAD_SUFFIXES:
+        raise PartLoadError(
+            f"{path}: IGES is not read here (trimesh's loader tessellates STEP through cascadio, not IGES); "
+            "export the part as STEP, STL, OBJ or PLY"
+        )
     elif suffix not in MESH_SUFFIXES:
         raise PartLoadError(
             f"{path}: unsupported part format {suffix or '(no suffix)'!r}; "
             f"supported: {', '.join(MESH_SUFFIXES + STEP_SUFFIXES)}"
         )
     try:
-        loaded = trimesh.load(str(path), force="mesh", process=False)
+        loaded = trimesh.load(str(path), force="mesh", process=False, **options)
     except Exception as exc:  # trimesh raises anything from ValueError to ModuleNotFoundError on bad files
         raise PartLoadError(f"{path}: cannot read the part: {type(exc).__name__}: {exc}") from exc
     if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
@@ -220,6 +237,7 @@ def load_part(
     merge_vertices: bool = True,
     remove_downside: bool = True,
     remove_threshold_angle_deg: float = 20.0,
+    tessellation_tolerance_mm: float = 0.0,
 ) -> LoadedPart:
     """Load a part (STL, OBJ, PLY, OFF, glTF; STEP only with a STEP reader installed) into the world in mm.
 
@@ -229,12 +247,18 @@ def load_part(
     vertices of STL files and drops degenerate and duplicate faces. ``remove_downside``: faces whose normal
     (in the world, after the transform) lies within ``remove_threshold_angle_deg`` degrees of -z are not
     measurable (the fixture holds the part from below); they stay in :attr:`LoadedPart.mesh`.
+    STEP files (with ``cascadio`` installed) carry their unit: ``units`` and ``scale`` do not apply to them;
+    ``tessellation_tolerance_mm`` is the linear deflection of their tessellation (0 = the reader's default).
     """
     path = Path(path).expanduser()
     scale_to_mm = _scale_from(units, scale, path)
     placement = np.eye(4) if transform is None else validate_rigid_transform(transform)
-    mesh = _read_mesh(path)
+    mesh = _read_mesh(path, tessellation_tolerance_mm)
     messages: list[str] = []
+    if path.suffix.lower() in STEP_SUFFIXES:
+        if scale is not None or units not in (None, "mm"):
+            _warn(messages, f"{path}: a STEP file declares its own unit; the given unit/scale is not used")
+        scale_to_mm = STEP_SCALE_TO_MM
     if merge_vertices:
         mesh.merge_vertices()
         mesh.update_faces(mesh.nondegenerate_faces())

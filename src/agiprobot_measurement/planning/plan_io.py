@@ -22,6 +22,7 @@ import yaml
 
 from agiprobot_measurement.common.config import ConfigError, read_yaml
 from agiprobot_measurement.common.files import atomic_write_text
+from agiprobot_measurement.common.message_shape import MessageShape, MessageTime, message_shape
 from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.motion.trajectory import (
     CheckResult,
@@ -39,14 +40,18 @@ __all__ = [
     "PLAN_SUFFIXES",
     "SEGMENT_KINDS",
     "ExecutionPlan",
+    "MessageShape",
+    "MessageTime",
     "PlanError",
     "PlanFileNotFoundError",
     "PlanSegment",
     "adapt_to_current_start_pose",
+    "as_segments",
     "dump_execution_plan",
     "empty_multi_dof",
     "kind_at",
     "load_execution_plan",
+    "message_shape",
     "message_to_dict",
     "plan_from_dicts",
     "plan_path",
@@ -96,16 +101,41 @@ class PlanSegment:
 
     ``header`` keeps the stored ``joint_trajectory.header`` (``seq``, ``stamp``); its ``frame_id`` is the
     trajectory's. ``multi_dof`` is the ``multi_dof_joint_trajectory`` mapping, empty in the original's plans.
+
+    A segment also reads as the original's ``moveit_msgs/RobotTrajectory``: ``joint_trajectory`` and
+    ``multi_dof_joint_trajectory`` are message-shaped snapshots (``seg.joint_trajectory.points[-1]
+    .time_from_start.to_sec()``); inside ROS, ``agiprobot_measurement.ros.conversions.joint_trajectory_to_msg``
+    makes a ``trajectory_msgs/JointTrajectory`` message of ``trajectory``.
     """
 
     kind: str
     trajectory: JointTrajectory
     multi_dof: dict = field(default_factory=empty_multi_dof)
     header: dict | None = None
+    _shape_cache: tuple | None = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self):
         if self.kind not in SEGMENT_KINDS:
             raise PlanError(f"segment kind must be one of {SEGMENT_KINDS}, got {self.kind!r}")
+
+    def _shapes(self) -> tuple:
+        # Rebuilt when the trajectory object, header or multi-DOF part is replaced (not on in-place edits).
+        key = (id(self.trajectory), len(self.trajectory), id(self.header), id(self.multi_dof))
+        if self._shape_cache is None or self._shape_cache[0] != key:
+            data = segment_to_dict(self)
+            shapes = (message_shape(data["joint_trajectory"]), message_shape(data["multi_dof_joint_trajectory"]))
+            self._shape_cache = (key, shapes)
+        return self._shape_cache[1]
+
+    @property
+    def joint_trajectory(self) -> MessageShape:
+        """The ``trajectory_msgs/JointTrajectory``-shaped snapshot (header, joint_names, points)."""
+        return self._shapes()[0]
+
+    @property
+    def multi_dof_joint_trajectory(self) -> MessageShape:
+        """The ``trajectory_msgs/MultiDOFJointTrajectory``-shaped snapshot (empty in the original's plans)."""
+        return self._shapes()[1]
 
 
 @dataclass
@@ -244,6 +274,8 @@ def message_to_dict(message: object) -> object:
         return {"nsecs": int(message.nsecs), "secs": int(message.secs)}
     if hasattr(message, "__slots__") and hasattr(message, "_slot_types"):
         return {name: message_to_dict(getattr(message, name)) for name in message.__slots__}
+    if isinstance(message, MessageShape):
+        return {name: message_to_dict(value) for name, value in vars(message).items()}
     if isinstance(message, list | tuple):
         return [message_to_dict(v) for v in message]
     if isinstance(message, np.generic):
@@ -323,7 +355,7 @@ def _plain(value: object, where: str, converted: dict | None = None) -> object:
     raise PlanError(f"{where}: cannot write a {type(value).__name__} to YAML; use numbers, strings, lists, dicts")
 
 
-def _as_segments(plan_or_segments: object) -> list[PlanSegment]:
+def as_segments(plan_or_segments: object) -> list[PlanSegment]:
     if isinstance(plan_or_segments, ExecutionPlan):
         return list(plan_or_segments.segments)
     if isinstance(plan_or_segments, dict | str | bytes) or not isinstance(plan_or_segments, Sequence):
@@ -376,7 +408,7 @@ def load_execution_plan(path: str | Path) -> ExecutionPlan:
 
 def dump_execution_plan(plan_or_segments: object, metadata: Mapping | None = None) -> str:
     """The YAML text :func:`store_execution_plan` writes (same style as the original: block, sorted keys)."""
-    segments = _as_segments(plan_or_segments)
+    segments = as_segments(plan_or_segments)
     merged = dict(plan_or_segments.metadata) if isinstance(plan_or_segments, ExecutionPlan) else {}
     if metadata is not None:
         if not isinstance(metadata, Mapping):
@@ -390,7 +422,8 @@ def store_execution_plan(path: str | Path, plan_or_segments: object, metadata: M
     """Write an execution plan that :func:`load_execution_plan` (and the original) can read.
 
     Args:
-        path: target file; ``.yaml`` is appended unless it ends in ``.yaml``/``.yml`` (never ``.yaml.yaml``).
+        path: the file written, exactly as given (as the original's ``store_execution_plan``); callers that
+            want the ``.yaml`` suffix added apply :func:`plan_path` first (the CLI and the node do).
         plan_or_segments: an :class:`ExecutionPlan`, or a list of segments in C-M-C-M-... order
             (:class:`PlanSegment`, :class:`JointTrajectory`, RobotTrajectory mappings or messages).
         metadata: entries for the metadata mapping, merged over the plan's own.
@@ -401,7 +434,7 @@ def store_execution_plan(path: str | Path, plan_or_segments: object, metadata: M
     The file is replaced atomically: written to a temporary file in the same directory, then renamed, so a
     reader never sees a half-written plan and a failure leaves any previous file untouched.
     """
-    target = plan_path(path)
+    target = Path(path)
     directory = target.parent
     if not directory.is_dir():
         raise PlanError(f"{target}: directory {directory} does not exist")

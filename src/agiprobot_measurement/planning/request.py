@@ -31,6 +31,8 @@ from agiprobot_measurement.planning.viewpoint import TILT_MODES, TILT_STEPS
 
 __all__ = [
     "DEFAULTS_FILE",
+    "PLACEMENTS",
+    "REQUEST_TILT_MODES",
     "PlanRequest",
     "PlanRequestError",
     "WorkBudget",
@@ -42,6 +44,13 @@ __all__ = [
     "load_planning_defaults",
     "load_work_budget",
 ]
+
+#: ``scene``: the part at the scene file's part pose times the request's transform; ``fixture``: its lowest point on
+#: the fixture's top, centred on it, turned by the transform's rotation (its translation shifts it from there)
+PLACEMENTS = ("scene", "fixture")
+#: the tilt modes of a request: the viewpoint generator's, and ``auto`` (tilt none first, then limited / full
+#: when the cover is large or coverage short; the choice is reported)
+REQUEST_TILT_MODES = (*TILT_MODES, "auto")
 
 #: the file holding the defaults of every request field (section ``planning``)
 DEFAULTS_FILE = CONFIG_DIR / "trajectory_manager.yaml"
@@ -136,7 +145,7 @@ def estimate_work(
     """The :class:`WorkEstimate` of sampling ``area_mm2`` at ``sampling_density`` points/mm^2 with that many
     orientations and tilts (floats: a hostile density must not overflow an integer)."""
     samples = float(area_mm2) * float(sampling_density)
-    tilts = 1 if viewpoint_tilt_mode == "none" else len(TILT_STEPS)
+    tilts = 1 if viewpoint_tilt_mode == "none" else len(TILT_STEPS)  # auto: at most full
     candidates = samples * float(orientations_around_boresight) * tilts
     per_view = min(samples, float(sampling_density) * VIEW_FOOTPRINT_MM2)
     entries = candidates * per_view
@@ -210,6 +219,12 @@ class PlanRequest:
     ``part_transform_mm``: 4x4 placement of the part's CAD frame relative to the scene file's part pose
     (translation mm). ``plan_file``: where to store the plan ('' = not stored); ``overwrite``: replace an
     existing plan file of that name (else the request is refused before planning).
+    ``time_limit_s``: the whole plan's wall-clock budget (s): the set cover / verification loop stops in time
+    and returns the best verified plan with its optimality gap; ``set_cover_time_limit_s`` bounds one IP solve
+    inside it. ``set_cover_mip_gap``: the relative optimality gap at which an IP solve may stop.
+    ``placement``: one of :data:`PLACEMENTS`. ``min_reachable_share``: below this share of samples with a
+    reachable anchor a warning suggests another placement or tilts. ``tessellation_tolerance_mm``: the linear
+    deflection of STEP tessellation (0 = the reader's default).
     """
 
     part_file: str = ""
@@ -231,6 +246,11 @@ class PlanRequest:
     part_transform_mm: np.ndarray = field(default_factory=lambda: np.eye(4))
     plan_file: str = ""
     overwrite: bool = False
+    time_limit_s: float = 300.0
+    set_cover_mip_gap: float = 0.02
+    placement: str = "scene"
+    min_reachable_share: float = 0.3
+    tessellation_tolerance_mm: float = 0.0
 
     @classmethod
     def field_names(cls) -> list[str]:
@@ -280,7 +300,10 @@ class PlanRequest:
         if not part.is_file():
             raise PlanRequestError("part_file", f"part is not a regular file: {part}")
         units = check_choice(self.units, tuple(UNIT_SCALES_TO_M), "units", label("units"))
-        tilt = check_choice(self.viewpoint_tilt_mode, TILT_MODES, "viewpoint_tilt_mode", label("viewpoint_tilt_mode"))
+        tilt = check_choice(
+            self.viewpoint_tilt_mode, REQUEST_TILT_MODES, "viewpoint_tilt_mode", label("viewpoint_tilt_mode")
+        )
+        placement = check_choice(self.placement, PLACEMENTS, "placement", label("placement"))
         solver = check_choice(self.solver_type, SOLVER_TYPES, "solver_type", label("solver_type"))
         positives = {
             name: check_positive(getattr(self, name), name, label(name))
@@ -289,6 +312,7 @@ class PlanRequest:
                 "uncertainty_threshold_mm",
                 "scan_speed_mm_s",
                 "set_cover_time_limit_s",
+                "time_limit_s",
                 "min_planning_time_s",
                 "minimum_trajectory_length_mm",
                 "trajectory_sample_step_mm",
@@ -301,6 +325,21 @@ class PlanRequest:
                 "minimum_required_overmeasure_mm",
                 f"{label('minimum_required_overmeasure_mm')} must be a number >= 0, got {self.minimum_required_overmeasure_mm}",
             )
+        fractions = {}
+        for name, low, high in (
+            ("set_cover_mip_gap", 0.0, 0.5),
+            ("min_reachable_share", 0.0, 1.0),
+            ("tessellation_tolerance_mm", 0.0, 1000.0),
+        ):
+            try:
+                number = float(getattr(self, name))
+            except (TypeError, ValueError):
+                number = float("nan")
+            if not (math.isfinite(number) and low <= number <= high):
+                raise PlanRequestError(
+                    name, f"{label(name)} must be a number in [{low:g}, {high:g}], got {getattr(self, name)}"
+                )
+            fractions[name] = number
         orientations = self.orientations_around_boresight
         if isinstance(orientations, float) and orientations.is_integer():
             orientations = int(orientations)
@@ -321,6 +360,7 @@ class PlanRequest:
             part_file=str(part),
             units=units,
             viewpoint_tilt_mode=tilt,
+            placement=placement,
             solver_type=solver,
             orientations_around_boresight=int(orientations),
             minimum_required_overmeasure_mm=overmeasure,
@@ -330,4 +370,5 @@ class PlanRequest:
             plan_file=str(self.plan_file or ""),
             overwrite=bool(self.overwrite),
             **positives,
+            **fractions,
         )

@@ -56,6 +56,7 @@ class PlanningOutcome:
 
     report: CoverageReport
     plan_file: str
+    tilt_choice: str = ""
 
 
 class MeasurementSession:
@@ -169,7 +170,7 @@ class MeasurementSession:
             self.predicted_mask = np.isfinite(manager.point_uncertainties())
             self.coverable_mask = manager.coverable_mask()
             self.last_measured_coverage = -1.0
-        return PlanningOutcome(report, written)
+        return PlanningOutcome(report, written, str(manager.parameters.get("tilt_choice", "")))
 
     # ------------------------------------------------------------------------------------ plan files
     def read(self, name: str) -> LoadedPlan:
@@ -282,4 +283,6 @@ class MeasurementSession:
             manager.sensor_model.get_max_uncertainty(),
             title=title,
             mesh=manager.part.mesh,
+            metrology_coverable=manager.metrology_coverable_mask(),
+            executable_coverable=manager.coverable_mask(),
         )

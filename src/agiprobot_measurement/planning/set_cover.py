@@ -233,6 +233,7 @@ def solve_set_cover(
     forced = list(red.forced)
     offset = float(costs[forced].sum()) if forced else 0.0
     if red.rows_alive.size == 0:
+        stats["likely_columns"] = np.asarray(forced, dtype=np.int64)
         picks = make_irredundant(cols, forced, costs)
         return finish(picks, 0.0, True, float(raw_costs[picks].sum()), "optimal (solved by reductions)")
 
@@ -245,6 +246,12 @@ def solve_set_cover(
     )
     picks = forced + red.cols_alive[local].tolist()
     picks = make_irredundant(cols, picks, costs)
+    likely_local = stats.pop("likely_local_columns", None)
+    if likely_local is None:
+        likely_local = np.argsort(-sub.sizes(), kind="stable")
+    # what a cover of this problem is likely to use, most likely first: the forced columns, then the reduced
+    # programme's columns by LP value (the planner verifies scan lines in this order)
+    stats["likely_columns"] = np.concatenate([np.asarray(forced, dtype=np.int64), red.cols_alive[likely_local]])
     objective_n = float(costs[picks].sum())
     bound_n = bound_local + offset
     if integral and math.isfinite(bound_n):

@@ -13,8 +13,11 @@ Pipeline (``generate_samples_and_viewpoints`` -> ``solve_scp`` -> ``connect_view
 3. the anchors of all candidates are checked for reachability with the batched closed-form IK, the reachable
    ones are evaluated metrologically in one batch (sparse points x viewpoints matrix);
 4. mechanics without waste: the full scan line (Cartesian path, joint jumps, collisions, partial acceptance)
-   is computed only for the views the set cover picks; when one fails or is cut short, its column is
-   corrected and the set cover is solved again (bounded rounds);
+   is computed for the views the set cover picks and, in the same round, for the views it is likely to pick
+   next (the greedy cover's, the LP's favourites, a few views of every point no verified view measures yet);
+   failed or shortened columns are corrected and the cover solved again, over a candidate pool after the
+   first round, until the chosen views are all verified or the whole-plan time limit comes (then: the best
+   cover of verified views, with its gap);
 5. the chosen views are ordered greedily by connection time from the current state (either scan direction),
    improved by 2-opt, and connected with collision-free, time-parameterised paths.
 
@@ -30,6 +33,7 @@ uncertainties, the coverable mask), ``execution`` (the executor interface and th
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
@@ -47,12 +51,13 @@ from agiprobot_measurement.motion.kinematics import KinematicModel
 from agiprobot_measurement.motion.trajectory import JointTrajectory, check_trajectory
 from agiprobot_measurement.planning import plan_io
 from agiprobot_measurement.planning.execution import (
+    EXECUTOR_CHOICES,
     ExecutionCancelled,
     ExecutionError,
-    ExecutionOutcome,
     PlanPart,
     SimulatedExecutor,
     execute_segments,
+    ros_station_executor,
     segment_triples,
 )
 from agiprobot_measurement.planning.mechanics import (
@@ -64,10 +69,13 @@ from agiprobot_measurement.planning.mechanics import (
 )
 from agiprobot_measurement.planning.ordering import order_views, p2p_durations, unwrapped_towards
 from agiprobot_measurement.planning.part_loading import LoadedPart, PartLoadError, SurfaceSamples, load_part
+from agiprobot_measurement.planning.placement import check_placement, fixture_placement
 from agiprobot_measurement.planning.plan_io import PlanSegment
 from agiprobot_measurement.planning.progress import STAGES
 from agiprobot_measurement.planning.report import CoverageReport, coverable_mask, point_uncertainties
 from agiprobot_measurement.planning.request import (
+    PLACEMENTS,
+    REQUEST_TILT_MODES,
     PlanRequest,
     WorkBudget,
     WorkEstimate,
@@ -102,6 +110,53 @@ __all__ = [
 ]
 
 LOG = logging.getLogger(__name__)
+
+#: tilt auto tries tilt full when tilt none covers less than this share of the metrologically coverable points
+AUTO_COVERAGE_SHARE = 0.98
+#: ... or needs more views than this
+AUTO_VIEWS = 10
+#: ... and at least this share of the time limit is left
+AUTO_MIN_TIME_SHARE = 0.4
+#: coverages within this share of the samples count as the same
+AUTO_SAME_COVERAGE = 0.005
+
+#: an IP solve of one verification round stops after this long (s): its cover only names what to verify next
+ROUND_IP_TIME_S = 2.0
+#: the set cover loop solves the problem over all views at most this often (the rest over the candidate pool)
+MAX_FULL_SOLVES = 3
+#: each verification round takes up to this many unverified views of every point no verified view measures yet
+POINT_VIEWS_PER_ROUND = 3
+#: ... but no more than this many in one round (the next round's cover may settle the rest)
+MAX_POINT_VIEWS_PER_ROUND = 400
+
+
+def open_point_views(matrix, views: list[ViewPoint], per_point: int) -> np.ndarray:
+    """Columns to verify for the rows (points) of ``matrix`` (points x views, CSC, non-zero = measurable) that
+    no verified view measures yet: up to ``per_point`` unverified columns each, the largest columns first."""
+    verified = np.array([v.mechanics_verified is True for v in views], dtype=bool)
+    unverified = np.array([v.mechanics_verified is False for v in views], dtype=bool)
+    measurable = scipy.sparse.csc_matrix(matrix, copy=True)
+    measurable.eliminate_zeros()
+    sizes = np.diff(measurable.indptr)
+    done = np.asarray(measurable[:, np.flatnonzero(verified)].sum(axis=1)).ravel() > 0 if verified.any() else None
+    rows = measurable.tocsr()
+    open_rows = np.diff(rows.indptr) > 0
+    if done is not None:
+        open_rows &= ~done
+    if not open_rows.any():
+        return np.zeros(0, dtype=np.int64)
+    sub = rows[np.flatnonzero(open_rows)].tocoo()
+    keep = unverified[sub.col]
+    r, c = sub.row[keep], sub.col[keep]
+    order = np.lexsort((-sizes[c], r))
+    r, c = r[order], c[order]
+    first = np.searchsorted(r, r, side="left")
+    rank = np.arange(r.size) - first
+    picked = c[rank < per_point]
+    # most-shared columns first: one view that settles many open points is worth more than many that settle one
+    unique, counts = np.unique(picked, return_counts=True)
+    return unique[np.lexsort((-sizes[unique], -counts))]
+
 
 #: progress callback: (stage, fraction done 0..1, message)
 ProgressCallback = Callable[[str, float, str], None]
@@ -170,6 +225,12 @@ class TrajectoryManager:
         self.parameters: dict = {}
         self.mechanics_checked = 0
         self.measurability = None
+        #: doubts about the run the caller should hear of (low reachability, time limit hit, ...)
+        self.warnings: list[str] = []
+        #: share of samples with at least one reachable candidate anchor (after sampling)
+        self.reachable_share: float | None = None
+        self._metrology_coverable: np.ndarray | None = None
+        self.time_limit_hit = False
         self._generation_views: list[ViewPoint] | None = None
         self._duration_bias = 1.0
         # mechanics settings used by the lazy verification (set by generate_samples_and_viewpoints)
@@ -214,16 +275,26 @@ class TrajectoryManager:
         remove_downside=True,
         remove_threshold_angle_deg=20,
         units="mm",
+        placement="scene",
+        check_scene_overlap=True,
+        tessellation_tolerance_mm=0.0,
     ) -> bool:
         """Load the part to measure and put it into the collision world.
 
         ``transform``: 4x4 placement of the CAD frame (translation in mm) relative to the scene file's part
         pose (the station's part offset, ``config/scene.yaml``); identity puts the part where the scene says.
         ``add_wbk_mirrors``: keep the scene objects of group ``wbk_mirrors`` (the original station's two mirrors).
-        ``units``: the file's length unit (mm, cm, dm, m, inch, ft). Raises
+        ``units``: the file's length unit (mm, cm, dm, m, inch, ft; STEP files carry their own).
+        ``placement``: 'scene' (as above) or 'fixture': the part turned by the rotation of scene pose x
+        ``transform``, its lowest point on the fixture's top and its bounding box centred over the fixture, then
+        shifted by ``transform``'s translation. ``check_scene_overlap``: refuse a part that overlaps a scene object
+        or the robot at its start state (:class:`~agiprobot_measurement.planning.placement.PlacementError`, naming
+        the object, the depth and the lift that clears it). ``tessellation_tolerance_mm``: linear deflection of
+        the STEP tessellation (0 = the reader's default). Raises
         :class:`~agiprobot_measurement.planning.part_loading.PartLoadError` with the reason for unreadable, empty or
         implausible input; returns True when everything was loaded.
         """
+        check_choice(placement, PLACEMENTS, "placement")
         transform = np.asarray(transform, dtype=float)
         if transform.shape != (4, 4) or not np.all(np.isfinite(transform)):
             raise PartLoadError(f"transform must be a finite 4x4 matrix, got shape {transform.shape}")
@@ -232,18 +303,36 @@ class TrajectoryManager:
         if scene_part is not None:
             placement_mm = scene_part.pose.copy()
             placement_mm[:3, 3] *= 1000.0
+        world = placement_mm @ transform
+        if placement == "fixture":
+            turned = np.eye(4)
+            turned[:3, :3] = world[:3, :3]
+            world = turned
         part = load_part(
             file_name,
             units=units,
-            transform=placement_mm @ transform,
+            transform=world,
             remove_downside=remove_downside,
             remove_threshold_angle_deg=remove_threshold_angle_deg,
+            tessellation_tolerance_mm=tessellation_tolerance_mm,
         )
+        scene = self._base_scene if add_wbk_mirrors else self._base_scene.without_group("wbk_mirrors")
+        if placement == "fixture":
+            centred = fixture_placement(part.mesh.vertices, np.eye(3), scene)
+            shift = centred[:3, 3] + placement_mm[:3, :3] @ transform[:3, 3]
+            part.mesh.apply_translation(shift)
+            moved = np.eye(4)
+            moved[:3, 3] = shift
+            part.transform = moved @ part.transform
         for message in part.warnings:
             LOG.warning("%s", message)
-        scene = self._base_scene if add_wbk_mirrors else self._base_scene.without_group("wbk_mirrors")
         self.collision = CollisionChecker(self.kinematics, scene, self.collision.config, load_part=False)
         self.collision.set_part(part.mesh, pose=np.eye(4), name="part", scale_to_m=1e-3)
+        if check_scene_overlap:
+            started = time.perf_counter()
+            check_placement(part.mesh, scene, self.collision, self.current_state)
+            self.timings_s["placement_check"] = time.perf_counter() - started
+        self.warnings = list(part.warnings)
         self._planner = None
         self.part = part
         self.target_mesh = part.mesh
@@ -254,6 +343,7 @@ class TrajectoryManager:
             add_wbk_mirrors=bool(add_wbk_mirrors),
             remove_downside=bool(remove_downside),
             remove_threshold_angle_deg=float(remove_threshold_angle_deg),
+            placement=placement,
             # file coordinates -> world mm (scale included), so a stored plan names its part's placement
             part_transform_mm=(part.transform @ np.diag([part.scale_to_mm] * 3 + [1.0])).reshape(-1).tolist(),
             seed=self.seed,
@@ -278,13 +368,16 @@ class TrajectoryManager:
         minimum_required_overmeasure=5,
         joint_jump_threshold=1.5,
         maximum_deflection=500.0,
+        min_reachable_share=0.3,
     ):
         """Sample the part (``sampling_density`` points/mm^2), generate candidate viewpoints and evaluate them.
 
         Returns ``(sampled surface points (list of (3,) mm), viewpoints)``: the viewpoints whose anchor pose is
         reachable and which measure at least one sample within ``uncertainty_threshold`` (mm). Their scan
         lines are checked mechanically (Cartesian path, joint jumps, collisions) lazily, when ``solve_scp``
-        picks them, or at once with :meth:`process_viewpoint`.
+        picks them, or at once with :meth:`process_viewpoint`. After the (cheap) anchor reachability the share
+        of samples with at least one reachable anchor is in ``reachable_share``; below ``min_reachable_share`` a
+        warning (logged and in ``warnings``) names it and suggests another placement or tilts.
         """
         part = self._require_part()
         density = check_positive(sampling_density, "sampling_density", "sampling_density (points/mm^2)")
@@ -337,6 +430,17 @@ class TrajectoryManager:
         t1 = time.perf_counter()
         reachable = reachable_anchors(self.ik, candidates.poses)
         timings["anchor_reachability"] = time.perf_counter() - t1
+        sample_reachable = np.zeros(len(samples), dtype=bool)
+        sample_reachable[candidates.sample_index[reachable]] = True
+        self.reachable_share = float(sample_reachable.mean())
+        if self.reachable_share < float(min_reachable_share):
+            message = (
+                f"only {100 * self.reachable_share:.1f} % of the {len(samples)} samples have a reachable anchor "
+                f"(threshold {100 * float(min_reachable_share):.0f} %): move the part closer to the robot or place it "
+                "on the fixture (placement 'fixture'), or allow tilts (tilt mode limited/full/auto)"
+            )
+            LOG.warning("%s", message)
+            self.warnings.append(message)
         self._report("metrology", 0.0, f"{int(reachable.sum())} of {len(reachable)} anchors reachable")
         t2 = time.perf_counter()
         index = np.flatnonzero(reachable)
@@ -375,6 +479,8 @@ class TrajectoryManager:
         del result, gather
         store = self.measurability
         self._entry_alive = np.ones(store.nnz, dtype=bool)
+        self._metrology_coverable = np.zeros(len(samples), dtype=bool)
+        self._metrology_coverable[store.point_indices] = True
         views = build_viewpoints(
             candidates,
             samples.points,
@@ -501,14 +607,28 @@ class TrajectoryManager:
         return valid
 
     # ------------------------------------------------------------------------------------ set cover
-    def solve_scp(self, provided_viewpoints, solver_type="greedy", time_limit_s=60.0, max_rounds=30):
+    def solve_scp(
+        self,
+        provided_viewpoints,
+        solver_type="greedy",
+        time_limit_s=60.0,
+        max_rounds=30,
+        mip_gap=0.02,
+        deadline_s=None,
+        verification_batch=None,
+    ):
         """Choose viewpoints that together measure every point any provided viewpoint measures.
 
         ``solver_type``: 'greedy', 'IP_basic', 'IP_uncertainty' or 'IP_time' (an unknown name raises
         ValueError listing these). Views picked but not yet verified mechanically are verified (and corrected
-        or dropped) and the problem is solved again until every chosen view is executable. After ``max_rounds``
-        rounds the cover is solved once more over verified views only, so the result is always executable.
-        Returns the chosen views as a set (documented type).
+        or dropped) and the problem is solved again until every chosen view is executable. Each round verifies
+        a batch: the picked views, the greedy cover's and the views the LP relaxation likes best (most likely
+        picked first), at least ``verification_batch`` (default: four times the cover) views, so the loop ends
+        in a few rounds. ``time_limit_s`` bounds one IP solve, ``mip_gap`` is the relative gap at which it may
+        stop (0 = prove optimality); ``deadline_s`` (a ``time.perf_counter()`` value) bounds the whole loop: when
+        it comes, or after ``max_rounds``, the cover is solved once more over verified views only, so the result
+        is always executable (``time_limit_hit`` says so, the gap is in ``last_set_cover``). Returns the chosen
+        views as a set (documented type).
         """
         if solver_type not in SOLVER_TYPES:
             raise ValueError(f"unknown solver_type {solver_type!r}; valid names: {', '.join(SOLVER_TYPES)}")
@@ -517,52 +637,177 @@ class TrajectoryManager:
             raise PlanningError("solve_scp needs at least one viewpoint")
         n_points = len(self.sampled_surface_points) or 1 + max(int(v.measurable_indices.max(initial=0)) for v in views)
         t0 = time.perf_counter()
+        deadline = math.inf if deadline_s is None else float(deadline_s)
         mechanics_before = self.timings_s.get("mechanics", 0.0)
         set_cover_time = 0.0
         verified_count = 0
         only_verified = False
+        self.time_limit_hit = False
         result = None
+        rounds_used = 0
+        # Rounds after the first solve a restricted problem: the columns the first (full) solve's reductions kept,
+        # plus every column verified since. The full matrix's reductions cost seconds on parts whose views see
+        # hundreds of points; the pool's cost milliseconds. When a restricted cover is fully verified, the full
+        # problem is solved once more (if time allows) to prove the cover is optimal over all views.
+        pool: np.ndarray | None = None
+        full_checked = False
+        full_solve_s = 0.0
+        best_verified: SetCoverResult | None = None
+        full_solves = 0
         for round_index in range(max_rounds + 1):
-            if round_index == max_rounds:
+            rounds_used = round_index + 1
+            now = time.perf_counter()
+            # the first round always solves and verifies its picks: a plan comes out however short the time
+            if round_index == max_rounds or (now >= deadline and round_index > 0):
                 only_verified = True  # the fallback: no more verification, a cover of verified views
-                LOG.warning("set cover: %d rounds of verification; solving over verified views only", max_rounds)
+                self.time_limit_hit = now >= deadline
+                message = (
+                    f"set cover: {'the time limit came' if self.time_limit_hit else f'{max_rounds} rounds'} after "
+                    f"{verified_count} scan lines verified; solving over verified views only"
+                )
+                LOG.warning("%s", message)
+                self.warnings.append(message)
             matrix, durations = self._coverage_problem(views, n_points, only_verified)
-            self._report("set cover", min(0.9, round_index / max_rounds), f"round {round_index + 1}")
+            self._report("set cover", min(0.9, round_index / max(max_rounds, 1)), f"round {round_index + 1}")
+            # an IP solve never takes all the time left: verification and the last solve need some
+            # a round's cover only decides what to verify next (its columns change after that): a short solve is
+            # enough; the last cover gets the time left (below)
+            remaining = deadline - time.perf_counter()
+            limit = min(time_limit_s, ROUND_IP_TIME_S)
+            if math.isfinite(remaining):
+                limit = max(1.0, min(limit, 0.5 * remaining))
+            columns = np.arange(len(views)) if pool is None or only_verified else pool
+            sub = matrix if columns.size == len(views) else matrix[:, columns]
             result = solve_set_cover(
-                matrix,
+                sub,
                 solver_type,
-                durations_s=durations if solver_type == "IP_time" else None,
-                time_limit_s=time_limit_s,
+                durations_s=durations[columns] if solver_type == "IP_time" else None,
+                time_limit_s=limit,
+                mip_gap=mip_gap,
             )
             set_cover_time += result.solve_time_s
+            if columns.size == len(views):
+                full_solve_s = result.solve_time_s
+                full_solves += 1
+            result = dataclasses.replace(result, selected=columns[result.selected])
             chosen = [views[j] for j in result.selected.tolist()]
             pending = [v for v in chosen if v.mechanics_verified is False]
-            if not pending:
+            if only_verified:
                 break
-            if solver_type != "greedy" and not only_verified:
-                # the greedy cover of the same matrix costs little and names views the next solve is likely to
-                # want: verifying them now saves rounds of the (slower) integer programme
-                extra = solve_set_cover(matrix, "greedy", time_limit_s=time_limit_s)
+            if not pending and columns.size < len(views):
+                best_verified = result
+            if pending and columns.size == len(views) and best_verified is not None:
+                # unverified views count as executable in the full problem, so its bound is a bound on every
+                # executable cover: a verified cover within the gap of it is good enough
+                bound = result.lower_bound
+                same_points = int(best_verified.covered.sum()) >= result.n_coverable
+                if same_points and bound is not None and best_verified.objective > 0:
+                    gap = max(0.0, (best_verified.objective - bound) / best_verified.objective)
+                    if gap <= max(mip_gap, 1e-9):
+                        result = dataclasses.replace(
+                            best_verified, gap=gap, lower_bound=bound, proven_optimal=gap <= 1e-9
+                        )
+                        chosen = [views[j] for j in result.selected.tolist()]
+                        full_checked = True
+                        break
+            if not pending:
+                if columns.size == len(views):
+                    full_checked = True
+                    break
+                # a verified cover of the pool: worth proving over all views only if that fits in the time, and a
+                # few times at most (each full solve may name new candidates, each costs the full reductions)
+                if full_solves < MAX_FULL_SOLVES and time.perf_counter() + 1.5 * full_solve_s < deadline:
+                    pool = None
+                    continue
+                message = (
+                    f"set cover: the gap holds for a candidate pool of {columns.size} of {len(views)} views (no "
+                    "more time or rounds to solve over all views again)"
+                )
+                LOG.warning("%s", message)
+                self.warnings.append(message)
+                break
+            batch = list(pending)
+            greedy_pending = []
+            if solver_type != "greedy":
+                # the greedy cover of the same matrix costs little and names views the next solve may want
+                extra = solve_set_cover(sub, "greedy", time_limit_s=limit)
                 set_cover_time += extra.solve_time_s
-                pending += [views[j] for j in extra.selected.tolist() if views[j].mechanics_verified is False]
-                pending = list(dict.fromkeys(pending))
-            for view in pending:
+                greedy_pending = [
+                    views[j] for j in columns[extra.selected].tolist() if views[j].mechanics_verified is False
+                ]
+            size = max(int(verification_batch or 0), 4 * len(chosen), len(pending) + len(greedy_pending))
+            batch += greedy_pending
+            likely = result.stats.get("likely_columns")
+            likely = None if likely is None else columns[np.asarray(likely, dtype=np.int64)]
+            if likely is not None and len(batch) < size:
+                # the columns the reduced programme kept, most likely first: the next covers choose from them
+                unverified = [views[j] for j in likely.tolist() if views[j].mechanics_verified is False]
+                batch += unverified[: 2 * size]
+            # points no verified view measures yet: a few of their unverified views each, largest first, so that a
+            # point whose views keep failing is settled in one pass instead of one view per round
+            # (twice as many each round: a point all of whose views fail is known to be so after a few rounds)
+            per_point = POINT_VIEWS_PER_ROUND * 2 ** min(round_index, 10)
+            batch = list(dict.fromkeys(batch))[:size]
+            batch += [views[j] for j in open_point_views(matrix, views, per_point)][:MAX_POINT_VIEWS_PER_ROUND]
+            batch = list(dict.fromkeys(batch))
+            LOG.debug(
+                "set cover round %d: %d of %d columns, %d chosen, %d pending, %d to verify (%s)",
+                round_index + 1, columns.size, len(views), len(chosen), len(pending), len(batch), result.message,
+            )  # fmt: skip
+            for k, view in enumerate(batch):
+                if k >= len(pending) and time.perf_counter() >= deadline:
+                    break  # the picked views first; the likely ones only while there is time
                 self._verify_mechanics(view)
                 verified_count += 1
-                self._report(
-                    "mechanics",
-                    min(1.0, verified_count / (verified_count + 10)),
-                    f"verified {verified_count} scan lines",
+                if verified_count % 25 == 0 or k == len(batch) - 1:
+                    self._report(
+                        "mechanics",
+                        min(1.0, verified_count / (verified_count + 10)),
+                        f"verified {verified_count} scan lines",
+                    )
+            verified_columns = np.flatnonzero([v.mechanics_verified is True and v.mechanics_valid for v in views])
+            previous = np.zeros(0, dtype=np.int64) if pool is None else pool
+            extra_columns = [result.selected, verified_columns, previous]
+            if likely is not None:
+                extra_columns.append(likely)
+            pool = np.unique(np.concatenate([np.asarray(c, dtype=np.int64) for c in extra_columns]))
+        self.timings_s["set_cover_full_problem_checked"] = bool(full_checked)
+        if chosen and (result.gap is None or result.gap > mip_gap) and solver_type != "greedy":
+            # the rounds' short solves may leave a gap: spend what is left on the programme over the verified
+            # views (every cover of it is executable); the gap is then the one over verified views
+            left = deadline - time.perf_counter()
+            if not math.isfinite(left):
+                left = time_limit_s
+            if left > 2.0:
+                matrix, durations = self._coverage_problem(views, n_points, only_verified=True)
+                polished = solve_set_cover(
+                    matrix,
+                    solver_type,
+                    durations_s=durations if solver_type == "IP_time" else None,
+                    time_limit_s=max(1.0, min(time_limit_s, 0.8 * left)),
+                    mip_gap=mip_gap,
                 )
+                set_cover_time += polished.solve_time_s
+                polished_views = [views[j] for j in polished.selected.tolist()]
+                if (
+                    polished.covered.sum() >= result.covered.sum()
+                    and polished.objective <= result.objective
+                    and polished.gap is not None
+                    and all(v.mechanics_verified for v in polished_views)
+                ):
+                    result = dataclasses.replace(polished, message=polished.message + " (over verified views)")
+                    chosen = polished_views
         if not chosen:
             raise PlanningError("no viewpoint is executable: every candidate failed the mechanical checks")
         self.timings_s["set_cover_and_mechanics"] = time.perf_counter() - t0
         self.timings_s["set_cover"] = set_cover_time
         self.timings_s["set_cover_last_solve"] = result.solve_time_s
-        self.timings_s["set_cover_rounds"] = round_index + 1
+        self.timings_s["set_cover_rounds"] = rounds_used
+        self.timings_s["scan_lines_verified"] = verified_count
         self.timings_s["mechanics_in_set_cover"] = self.timings_s.get("mechanics", 0.0) - mechanics_before
         self.last_set_cover = result
         self.parameters["solver_type"] = solver_type
+        self.parameters["set_cover_mip_gap"] = float(mip_gap)
         self._report("set cover", 1.0, f"{len(chosen)} views cover {int(result.covered.sum())} points")
         return set(chosen)
 
@@ -678,7 +923,7 @@ class TrajectoryManager:
         return segments
 
     def store_execution_plan(self, file_path, execution_plan, metadata={}):  # noqa: B006 (documented default)
-        """Store the plan as YAML (the original's format; atomic write, ``.yaml`` appended once if missing).
+        """Store the plan as YAML at exactly ``file_path`` (the original's format; atomic write).
         Returns True (documented); the path written is in ``last_plan_path``."""
         info = {
             "Timestamp": time.strftime("%a %b %d %H:%M:%S %Y"),
@@ -698,8 +943,13 @@ class TrajectoryManager:
             report = self.coverage_report()
             meta["coverage"] = {
                 "samples": report.n_samples,
+                "coverable_metrology": report.n_coverable_metrology,
                 "coverable": report.n_coverable,
+                "coverable_executable": report.n_coverable,
                 "covered": report.n_covered,
+                "unverified": report.n_unverified,
+                "reachable_share": None if report.reachable_share is None else round(report.reachable_share, 4),
+                "time_limit_hit": report.time_limit_hit,
                 "views": report.n_views,
                 "estimated_execution_time_s": round(report.estimated_execution_time_s, 3),
                 "mean_uncertainty_mm": round(report.mean_uncertainty_mm, 6),
@@ -743,13 +993,15 @@ class TrajectoryManager:
     def postprocess_trajectory(self, trajectory) -> bool:
         """Whether a trajectory meets the joint limits (positions, velocities, accelerations) and its time is
         strictly increasing (the documented check)."""
-        if isinstance(trajectory, PlanSegment):
+        if isinstance(trajectory, JointTrajectory):
+            pass
+        elif isinstance(trajectory, PlanSegment):
             trajectory = trajectory.trajectory
         elif isinstance(trajectory, dict):
             trajectory = JointTrajectory.from_dict(trajectory.get("joint_trajectory", trajectory))
         elif hasattr(trajectory, "joint_trajectory"):
             trajectory = JointTrajectory.from_msg(trajectory.joint_trajectory)
-        elif not isinstance(trajectory, JointTrajectory):
+        else:
             trajectory = JointTrajectory.from_msg(trajectory)
         verdict = check_trajectory(trajectory, self.limits)
         if not verdict.ok:
@@ -758,33 +1010,71 @@ class TrajectoryManager:
 
     # ------------------------------------------------------------------------------------ execution
     def execute(self, execution_list, surface_points=None, executor=None, on_segment=None):
-        """Execute segments (or ViewPoints) one after the other through ``executor`` (default: an instant
-        simulated robot; see :class:`~agiprobot_measurement.planning.execution.SegmentExecutor`). A failing
-        segment stops execution and raises :class:`ExecutionError`; a cancel raises
+        """Execute segments, ``moveit_msgs/RobotTrajectory``-shaped items or ViewPoints one after the other.
+
+        ``executor``: ``None``/``"auto"`` drives the running station's controller when this is a ROS process
+        (``rospy.init_node`` called) and a controller answers, as the original drove the robot through MoveIt,
+        else an instant simulated robot; ``"simulated"`` always the instant one; ``"station"`` the station or an
+        :class:`ExecutionError`; or any
+        :class:`~agiprobot_measurement.planning.execution.SegmentExecutor`. On the station, with
+        ``surface_points`` (the sampled points, mm) and views given, the points each view measures are published
+        on ``/currently_measured_points`` while it runs (as the original did). A failing segment stops execution
+        and raises :class:`ExecutionError`; a cancel raises
         :class:`~agiprobot_measurement.planning.execution.ExecutionCancelled`. ``on_segment(feedback)`` hears of
         each segment before it starts."""
-        outcome = self.execute_with_outcome(execution_list, executor, on_segment)
+        outcome = self.execute_with_outcome(execution_list, executor, on_segment, surface_points)
         if outcome.status == "cancelled":
             raise ExecutionCancelled(outcome.describe())
         if not outcome.ok:
             raise ExecutionError(outcome.error)
         return True
 
-    def execute_with_outcome(self, execution_list, executor=None, on_segment=None) -> ExecutionOutcome:
+    def execute_with_outcome(self, execution_list, executor=None, on_segment=None, surface_points=None):
         """Like :meth:`execute`, but a failure or cancel is returned as the :class:`ExecutionOutcome` (how many
         segments ran, why it stopped) instead of raised."""
-        executor = executor or SimulatedExecutor(self.current_state, self.limits)
-        outcome = execute_segments(segment_triples(execution_list), executor, on_segment)
+        triples = segment_triples(execution_list)  # malformed input is refused before anything moves
+        executor = self._executor(executor, surface_points)
+        outcome = execute_segments(triples, executor, on_segment)
         self.current_state = executor.current_state()
         return outcome
 
+    def _executor(self, choice, surface_points):
+        if choice is not None and not isinstance(choice, str):
+            return choice
+        choice = "auto" if choice is None else choice
+        if choice not in EXECUTOR_CHOICES:
+            raise PlanningError(f"executor must be one of {EXECUTOR_CHOICES} or a SegmentExecutor, got {choice!r}")
+        if choice != "simulated":
+            params = self.parameters
+            part = None
+            if "part_file" in params and "part_transform_mm" in params:
+                placement = np.asarray(params["part_transform_mm"], dtype=float).reshape(4, 4)
+                part = PlanPart(str(params["part_file"]), str(params.get("units", "mm")), placement)
+            station = ros_station_executor(list(self.limits.names), surface_points, part)
+            if station is not None:
+                return station
+            if choice == "station":
+                raise ExecutionError("executor='station': this is not a ROS process or no robot controller answers")
+        return SimulatedExecutor(self.current_state, self.limits)
+
     # ------------------------------------------------------------------------------------ reports
     def coverable_mask(self) -> np.ndarray:
-        """(n_samples,) bool: the samples some mechanically valid view measures, or the plan covers."""
+        """(n_samples,) bool: the samples some view verified executable measures, or the plan covers."""
         if self.samples is None:
             raise PlanningError("nothing planned yet")
         covered = np.isfinite(self.point_uncertainties())
         return coverable_mask(self.last_viewpoints, len(self.samples), covered)
+
+    def metrology_coverable_mask(self) -> np.ndarray:
+        """(n_samples,) bool: the samples some candidate view with a reachable anchor measures (the sensor model
+        says so), whether or not its scan line can be driven."""
+        if self.samples is None:
+            raise PlanningError("nothing planned yet")
+        n = len(self.samples)
+        mask = coverable_mask(self.last_viewpoints, n, np.isfinite(self.point_uncertainties()), verified_only=False)
+        if self._metrology_coverable is not None and len(self._metrology_coverable) == n:
+            mask |= self._metrology_coverable
+        return mask
 
     def coverage_report(self, views: Iterable[ViewPoint] | None = None) -> CoverageReport:
         """Coverage, view count, execution time and uncertainties of the chosen (or given) views."""
@@ -795,6 +1085,12 @@ class TrajectoryManager:
         best_u = point_uncertainties(chosen, n)
         covered = np.isfinite(best_u)
         coverable = coverable_mask(self.last_viewpoints, n, covered)
+        metrology = coverable_mask(self.last_viewpoints, n, covered, verified_only=False)
+        if self._metrology_coverable is not None and len(self._metrology_coverable) == n:
+            metrology |= self._metrology_coverable
+        # points that only views never verified measure: neither known executable nor known not to be
+        open_views = [v for v in self.last_viewpoints if v.mechanics_valid and not v.mechanics_verified]
+        unverified = coverable_mask(open_views, n, None, verified_only=False) & ~coverable
         measure = sum(v.get_trajectory_for_measurement().duration for v in chosen if v.get_trajectory_for_measurement())
         connect = sum(v.get_trajectory_to_view().duration for v in chosen if v.get_trajectory_to_view())
         result = self.last_set_cover
@@ -814,6 +1110,12 @@ class TrajectoryManager:
             solver_gap=None if result is None else result.gap,
             timings_s=dict(self.timings_s),
             unconnected_views=len(self.unconnected_views),
+            n_coverable_metrology=int(metrology.sum()),
+            n_unverified=int(unverified.sum()),
+            reachable_share=self.reachable_share,
+            time_limit_hit=bool(self.time_limit_hit),
+            tilt_mode=str(self.parameters.get("viewpoint_tilt_mode", "")),
+            warnings=list(self.warnings),
         )
 
     def point_uncertainties(self, views: Iterable[ViewPoint] | None = None) -> np.ndarray:
@@ -862,6 +1164,8 @@ class TrajectoryManager:
             transform=request.part_transform_mm,
             add_wbk_mirrors=request.add_wbk_mirrors,
             units=request.units,
+            placement=request.placement,
+            tessellation_tolerance_mm=request.tessellation_tolerance_mm,
         )
         return self.plan(
             request.sampling_density,
@@ -875,6 +1179,9 @@ class TrajectoryManager:
             trajectory_sample_step=request.trajectory_sample_step_mm,
             minimum_required_overmeasure=request.minimum_required_overmeasure_mm,
             joint_jump_threshold=request.joint_jump_threshold_rad,
+            time_limit_s=request.time_limit_s,
+            mip_gap=request.set_cover_mip_gap,
+            min_reachable_share=request.min_reachable_share,
         )
 
     def plan(
@@ -886,16 +1193,118 @@ class TrajectoryManager:
         solver_type="IP_basic",
         set_cover_time_limit_s=60.0,
         min_planning_time=0.2,
+        time_limit_s=300.0,
+        mip_gap=0.02,
         **generation,
     ) -> list[ViewPoint]:
         """The whole pipeline on the loaded part: generate, solve the set cover, connect. Returns the ordered
-        views (also in ``last_ordered``). The defaults are :class:`PlanRequest`'s."""
+        views (also in ``last_ordered``). The defaults are :class:`PlanRequest`'s.
+
+        ``time_limit_s`` bounds the whole plan: the set cover / verification loop ends in time for the connection
+        and the best verified plan is returned with its optimality gap (``time_limit_hit`` says whether the limit
+        cut it short). ``viewpoint_tilt_mode='auto'`` plans with tilt none first and, when the cover is large or
+        leaves metrologically coverable points uncovered and time is left, with tilt full; the plan with fewer
+        views at the same coverage (or clearly more coverage) is kept and the choice is in
+        ``parameters['tilt_choice']``.
+        """
         check_choice(solver_type, SOLVER_TYPES, "solver_type")
+        check_choice(viewpoint_tilt_mode, REQUEST_TILT_MODES, "viewpoint_tilt_mode")
+        limit = check_positive(time_limit_s, "time_limit_s", "time_limit_s (s)")
         t0 = time.perf_counter()
-        _, views = self.generate_samples_and_viewpoints(
-            sampling_density, uncertainty_threshold, orientations_around_boresight, viewpoint_tilt_mode, **generation
+        deadline = t0 + limit
+        settings = dict(
+            sampling_density=sampling_density,
+            uncertainty_threshold=uncertainty_threshold,
+            orientations_around_boresight=orientations_around_boresight,
+            solver_type=solver_type,
+            set_cover_time_limit_s=set_cover_time_limit_s,
+            min_planning_time=min_planning_time,
+            mip_gap=mip_gap,
+            generation=generation,
         )
-        chosen = self.solve_scp(views, solver_type, time_limit_s=set_cover_time_limit_s)
-        ordered = self.connect_viewpoints(chosen, min_planning_time=min_planning_time)
+        if viewpoint_tilt_mode != "auto":
+            ordered = self._plan_once(viewpoint_tilt_mode, deadline, **settings)
+        else:
+            ordered = self._plan_auto(t0, deadline, settings)
         self.timings_s["total"] = time.perf_counter() - t0
+        self.parameters["time_limit_s"] = limit
+        return ordered
+
+    def _plan_once(
+        self,
+        tilt_mode,
+        deadline,
+        *,
+        sampling_density,
+        uncertainty_threshold,
+        orientations_around_boresight,
+        solver_type,
+        set_cover_time_limit_s,
+        min_planning_time,
+        mip_gap,
+        generation,
+    ) -> list[ViewPoint]:
+        _, views = self.generate_samples_and_viewpoints(
+            sampling_density, uncertainty_threshold, orientations_around_boresight, tilt_mode, **generation
+        )
+        # the connection needs its share of the time: about a second per view in the worst case, bounded
+        left = deadline - time.perf_counter()
+        reserve = min(0.25 * left, max(0.1 * left, 20.0))
+        chosen = self.solve_scp(
+            views, solver_type, time_limit_s=set_cover_time_limit_s, mip_gap=mip_gap, deadline_s=deadline - reserve
+        )
+        return self.connect_viewpoints(chosen, min_planning_time=min_planning_time)
+
+    def _snapshot(self) -> dict:
+        state = dict(self.__dict__)
+        state["timings_s"] = dict(self.timings_s)
+        state["parameters"] = dict(self.parameters)
+        state["warnings"] = list(self.warnings)
+        return state
+
+    def _plan_auto(self, t0: float, deadline: float, settings: dict) -> list[ViewPoint]:
+        base_warnings = list(self.warnings)
+        ordered = self._plan_once("none", deadline, **settings)
+        first = self.coverage_report()
+        first_state = self._snapshot()
+        short = first.n_covered < AUTO_COVERAGE_SHARE * first.n_coverable_metrology
+        large = first.n_views > AUTO_VIEWS
+        left = deadline - time.perf_counter()
+        if not (short or large):
+            choice = f"none (cover of {first.n_views} views, {first.n_covered} covered: tilts not needed)"
+        elif left < AUTO_MIN_TIME_SHARE * (deadline - t0):
+            choice = f"none (no time left to try tilt full: {left:.0f} s)"
+        else:
+            self.warnings = list(base_warnings)
+            self.timings_s = {}
+            try:
+                self._plan_once("full", deadline, **settings)
+                second = self.coverage_report()
+            except PlanningError as exc:
+                second, reason = None, str(exc)
+            tolerance = AUTO_SAME_COVERAGE * first.n_samples
+            better = second is not None and (
+                (second.n_covered >= first.n_covered - tolerance and second.n_views < first.n_views)
+                or second.n_covered > first.n_covered + 2 * tolerance
+            )
+            if better:
+                ordered = list(self.last_ordered)
+                choice = (
+                    f"full ({second.n_views} views, {second.n_covered} covered; tilt none: {first.n_views} views, "
+                    f"{first.n_covered} covered)"
+                )
+                self.timings_s["tilt_none_total"] = first.timings_s.get("total", 0.0)
+            else:
+                detail = (
+                    f"tilt full: {second.n_views} views, {second.n_covered} covered"
+                    if second is not None
+                    else f"tilt full failed: {reason}"
+                )
+                choice = f"none ({first.n_views} views, {first.n_covered} covered; {detail})"
+                full_time = time.perf_counter() - t0
+                self.__dict__.update(first_state)
+                self.timings_s["tilt_full_total"] = full_time
+        self.parameters["viewpoint_tilt_mode_requested"] = "auto"
+        self.parameters["tilt_choice"] = choice
+        LOG.info("tilt auto: %s", choice)
         return ordered

@@ -416,6 +416,10 @@ class ViewPoint:
     def set_trajectory_to_view(self, trajectory_to_view) -> None:
         self._trajectory_to_view = trajectory_to_view
 
+    # The original's source names these two ``..._to_viewpoint``; its documentation ``..._to_view``. Both work.
+    get_trajectory_to_viewpoint = get_trajectory_to_view
+    set_trajectory_to_viewpoint = set_trajectory_to_view
+
     def reverse_trajectory_for_measurement(self) -> None:
         """Flip the measurement trajectory: start and end swap, the duration stays the same.
 

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 import rospy
-from geometry_msgs.msg import Point, Pose, Quaternion, Transform, TransformStamped, Vector3
-from sensor_msgs.msg import PointCloud2, PointField
+from geometry_msgs.msg import Point, Point32, Pose, Quaternion, Transform, TransformStamped, Vector3
+from sensor_msgs.msg import PointCloud, PointCloud2, PointField
 from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory as JointTrajectoryMsg
 from trajectory_msgs.msg import JointTrajectoryPoint
@@ -32,6 +32,7 @@ __all__ = [
     "transform_to_matrix",
     "xyz_array",
     "xyz_cloud",
+    "xyz_point_cloud",
     "xyzw_array",
 ]
 
@@ -41,6 +42,14 @@ _XYZ = [
     PointField("z", 8, PointField.FLOAT32, 1),
 ]
 _XYZRGB = [*_XYZ, PointField("rgb", 12, PointField.FLOAT32, 1)]
+
+
+def xyz_point_cloud(points_m: np.ndarray, header: Header) -> PointCloud:
+    """The old ``sensor_msgs/PointCloud`` (a list of Point32, metres) of (N, 3) points: what the original planner
+    published on /currently_measured_points."""
+    message = PointCloud(header=header)
+    message.points = [Point32(*p) for p in np.asarray(points_m, dtype=float).reshape(-1, 3).tolist()]
+    return message
 
 
 def xyz_cloud(points_m: np.ndarray, header: Header, colors_rgb: np.ndarray | None = None) -> PointCloud2:

@@ -8,15 +8,16 @@ and radians throughout.
 from __future__ import annotations
 
 import numpy as np
+from asr_robot_model_services.msg import RobotStateMessage
 from geometry_msgs.msg import Point, Quaternion
 from nav_msgs.msg import OccupancyGrid
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from agiprobot_measurement.common.geometry import yaw_quaternion
+from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.mild.occupancy_map import OccupancyMap
 from agiprobot_measurement.mild.state import RobotState
-from agiprobot_measurement.msg import RobotStateMessage
 
 __all__ = [
     "BLUE",
@@ -28,6 +29,7 @@ __all__ = [
     "delete_all",
     "frustum_marker_array",
     "ik_markers",
+    "occupancy_from_msg",
     "occupancy_grid_msg",
     "sphere",
     "state_from_msg",
@@ -69,6 +71,29 @@ def occupancy_grid_msg(grid: OccupancyMap, frame_id: str, stamp, inflated: bool 
     data = grid.costmap if inflated else grid.occupancy
     msg.data = data.astype(np.int8).ravel().tolist()  # rows from the origin upwards: OccupancyGrid's order
     return msg
+
+
+def occupancy_from_msg(
+    msg: OccupancyGrid, inscribed_radius_m: float, inflation_radius_m: float, cost_scaling_per_m: float, source: str
+) -> OccupancyMap:
+    """A received nav_msgs/OccupancyGrid (a map_server's /map) as the model's map, inflated with the given radii.
+    A grid whose data does not match width x height is an InputError naming ``source``."""
+    width, height = int(msg.info.width), int(msg.info.height)
+    if width * height == 0 or len(msg.data) != width * height:
+        raise InputError(f"{source}: OccupancyGrid of {width} x {height} cells carries {len(msg.data)} values")
+    values = np.asarray(msg.data, dtype=np.int16).reshape(height, width)
+    values = np.where((values < 0) | (values > 100), -1, values).astype(np.int8)
+    origin = msg.info.origin
+    return OccupancyMap(
+        values,
+        float(msg.info.resolution),
+        np.array([origin.position.x, origin.position.y]),
+        yaw_of(origin.orientation),
+        inscribed_radius_m,
+        inflation_radius_m,
+        cost_scaling_per_m,
+        source=source,
+    )
 
 
 def _marker(frame_id: str, stamp, ns: str, marker_id: int, marker_type: int, colour, scale) -> Marker:

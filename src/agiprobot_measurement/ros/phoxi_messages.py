@@ -2,8 +2,10 @@
 
 Needs the ROS message packages (sensor_msgs, std_msgs), not a running master. The point cloud has the layout of
 PCL's ``pcl::PointNormal`` (what the driver converts with ``pcl::toROSMsg``): x y z at bytes 0-11, normal_x/y/z at
-16-27, curvature at 32, 48 bytes per point, metres. Images: depth_map 32FC1 (mm), texture and confidence_map
-32FC1, normal_map 32FC3, rgb_texture rgb8.
+16-27, curvature at 32, 48 bytes per point, metres. The driver divides the normals by 1000 as it converts the
+points from mm to m (PhoXiInterface.cpp, getOrganizedCloudFromFrame), so a cloud's normals are
+:data:`CLOUD_NORMAL_SCALE` long; the normal_map image keeps unit normals. Images: depth_map 32FC1 (mm), texture and
+confidence_map 32FC1, normal_map 32FC3, rgb_texture rgb8.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import numpy as np
 from agiprobot_measurement.sensors.phoxi.models import CameraIntrinsics
 
 __all__ = [
+    "CLOUD_NORMAL_SCALE",
     "IMAGE_ENCODINGS",
     "POINT_FIELDS",
     "POINT_STEP",
@@ -34,13 +37,23 @@ POINT_FIELDS = (
     ("curvature", 32),
 )
 POINT_STEP = 48
+#: length of the normals in the driver's point cloud (unit normals divided by 1000); multiply by 1000 for unit ones
+CLOUD_NORMAL_SCALE = 1e-3
 _FLOATS_PER_POINT = POINT_STEP // 4
 
 IMAGE_ENCODINGS = {"32FC1": (np.float32, 1), "32FC3": (np.float32, 3), "rgb8": (np.uint8, 3), "mono8": (np.uint8, 1)}
 
 
-def pointcloud2(points: np.ndarray, normals: np.ndarray, valid: np.ndarray, header, organized: bool = True):
-    """PointCloud2 from (H, W, 3) points (m) and normals; organised H x W with zeros kept, or only valid points."""
+def pointcloud2(
+    points: np.ndarray,
+    normals: np.ndarray,
+    valid: np.ndarray,
+    header,
+    organized: bool = True,
+    normal_scale: float = CLOUD_NORMAL_SCALE,
+):
+    """PointCloud2 from (H, W, 3) points (m) and unit normals, the normals multiplied by ``normal_scale`` (the
+    driver's 1/1000); organised H x W with zeros kept, or only valid points."""
     from sensor_msgs.msg import PointCloud2, PointField
 
     height, width = points.shape[:2]
@@ -52,7 +65,7 @@ def pointcloud2(points: np.ndarray, normals: np.ndarray, valid: np.ndarray, head
         height, width = 1, len(xyz)
     table = np.zeros((len(xyz), _FLOATS_PER_POINT), dtype="<f4")
     table[:, 0:3] = xyz
-    table[:, 4:7] = nrm
+    table[:, 4:7] = nrm * normal_scale
     msg = PointCloud2()
     msg.header = header
     msg.height, msg.width = int(height), int(width)

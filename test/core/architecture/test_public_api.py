@@ -41,6 +41,6 @@ def test_readme_snippet_runs(tmp_path):
         [sys.executable, "-c", snippet], cwd=tmp_path, capture_output=True, text=True, timeout=600, env=os.environ
     )
     assert result.returncode == 0, result.stderr[-3000:]
-    plans = list(tmp_path.glob("cube_plan*.yaml"))
+    plans = list(tmp_path.glob("cube_plan.yaml"))
     assert plans, f"the snippet wrote no plan: {sorted(p.name for p in tmp_path.iterdir())}"
     assert "views" in result.stdout.lower() or "coverage" in result.stdout.lower(), result.stdout

@@ -9,9 +9,17 @@ import pytest
 import xacro
 from scipy.spatial.transform import Rotation
 
+from agiprobot_measurement._paths import PACKAGE_ROOT
 from agiprobot_measurement.common.geometry import wrap_to_pi
 from agiprobot_measurement.errors import InputError
-from agiprobot_measurement.mild.config import MildKinematics, load_kinematics, load_settings, settings_from_mapping
+from agiprobot_measurement.mild.config import (
+    DEFAULTS,
+    MildKinematics,
+    RobotModelSettings,
+    load_kinematics,
+    load_settings,
+    settings_from_mapping,
+)
 from agiprobot_measurement.mild.lp import solve_turn_lp, turn_split_closed_form
 from agiprobot_measurement.mild.ratings import (
     RATING_BASE,
@@ -27,6 +35,15 @@ from agiprobot_measurement.station.urdf_model import UrdfModel
 
 REAL = CONFIG_DIR / "mild_robot_model_services_real.yaml"
 SIM = CONFIG_DIR / "mild_robot_model_services_sim.yaml"
+UPSTREAM_PARAM = PACKAGE_ROOT / "packages" / "asr_robot_model_services" / "param"
+
+
+def wide_pan_settings():
+    """The simulation settings with the pan range widened to +-200 deg (what a user passes as settings:= for a PTU
+    that turns further): the pose-correction tests need every direction reachable by the pan alone."""
+    data = read_yaml(SIM)
+    data.update(panMin=-200, panMax=200)
+    return settings_from_mapping(data, "sim settings, pan +-200 deg")
 
 
 @pytest.fixture(scope="module")
@@ -37,6 +54,11 @@ def real():
 @pytest.fixture(scope="module")
 def sim():
     return MildRobotModel.load(SIM)
+
+
+@pytest.fixture(scope="module")
+def wide():
+    return MildRobotModel.load(wide_pan_settings())
 
 
 def _lateral_model(settings_path=REAL):
@@ -50,7 +72,8 @@ def _lateral_model(settings_path=REAL):
         camera_baseline_m=0.1,
         frames=kin.frames,
     )
-    return MildRobotModel(odd, load_settings(settings_path), None)
+    settings = settings_path if isinstance(settings_path, RobotModelSettings) else load_settings(settings_path)
+    return MildRobotModel(odd, settings, None)
 
 
 def random_states(model, n, rng, area=((0.5, 4.0), (0.5, 4.0))):
@@ -91,10 +114,132 @@ def test_real_settings_are_the_reference_parameter_set():
     assert s.warnings == ()
 
 
-def test_sim_settings_load_with_the_wide_pan_range():
+def test_sim_settings_are_the_originals_simulation_set():
     s = load_settings(SIM)
-    np.testing.assert_allclose(np.degrees(s.pan_limits_rad), [-200, 200])
-    assert s.pan_sampling_steps == 20
+    np.testing.assert_allclose(np.degrees(s.pan_limits_rad), [-20, 20])
+    np.testing.assert_allclose(np.degrees(s.tilt_limits_rad), [-45, 25])
+    assert (s.pan_sampling_steps, s.ik_iteration_accuracy, s.visualize_ik) == (20, 0.005, True)
+    assert s.debug_levels == frozenset()
+
+
+def _upstream_node_params(kind: str) -> dict:
+    """What the original's RobotModelService<kind>.launch loads into the node: settings, topics, frames, costmap."""
+    params = {}
+    for name in (f"robot_model_services_settings_{kind}.yaml", "TopicsConfig.yaml", "robot_model_frames.yaml",
+                 "costmap_params.yaml"):  # fmt: skip
+        params.update(read_yaml(UPSTREAM_PARAM / name))
+    return params
+
+
+@pytest.mark.parametrize(("kind", "config"), [("sim", SIM), ("real", REAL)])
+def test_config_files_agree_with_the_upstream_param_files(kind, config):
+    """config/mild_robot_model_services_<kind>.yaml and the asr_robot_model_services param/ files the launch files
+    load give the same settings (one definition, two file layouts)."""
+    ours = load_settings(config)
+    theirs = settings_from_mapping(_upstream_node_params(kind), f"param/ ({kind})")
+    assert theirs.warnings == ()
+    assert theirs.defaulted == ()
+    for field in ("robot_model_id", "pan_limits_rad", "tilt_limits_rad", "sigma_m", "col_thresh", "omega_pan",
+                  "omega_tilt", "omega_rot", "omega_base", "tolerance_m", "use_global_planner", "ncp_m", "fcp_m",
+                  "visualize_ik", "ik_angle_rating", "pan_sampling_steps", "ik_iteration_accuracy", "debug_levels",
+                  "inscribed_radius_m", "inflation_radius_m", "cost_scaling_per_m",
+                  "ik_visualization_topic"):  # fmt: skip
+        assert (
+            getattr(ours, field) == pytest.approx(getattr(theirs, field))
+            if isinstance(getattr(ours, field), float)
+            else getattr(ours, field) == getattr(theirs, field)
+        ), field
+    assert theirs.inflation_radius_m == 0.65  # costmap_params.yaml
+    assert (theirs.inscribed_radius_m, theirs.cost_scaling_per_m) == (0.46, 10.0)  # costmap_2d's defaults
+
+
+def test_no_parameters_give_the_originals_defaults():
+    s = settings_from_mapping({}, "no parameters")
+    assert s.robot_model_id == 1
+    np.testing.assert_allclose(np.degrees(s.pan_limits_rad), [-60, 60])
+    np.testing.assert_allclose(np.degrees(s.tilt_limits_rad), [-45, 45])
+    assert s.col_thresh == 40
+    assert s.debug_levels == frozenset({"PARAMETERS", "RATING", "ROBOT_MODEL", "MAP", "IK_RATING"})  # none = ALL
+    assert s.ik_angle_rating == "SIMPLE"  # the original's fallback for a name it does not know, "" included
+    assert len(s.warnings) == 1 and "IKAngleRating is not set" in s.warnings[0]
+    assert set(s.defaulted) == set(DEFAULTS)
+    # the keys the original reads without a default take its real settings file's values
+    real = settings_from_mapping(read_yaml(UPSTREAM_PARAM / "robot_model_services_settings_real.yaml"), "real")
+    for field in ("sigma_m", "omega_pan", "omega_tilt", "omega_rot", "omega_base", "tolerance_m", "ncp_m", "fcp_m",
+                  "use_global_planner", "visualize_ik", "pan_sampling_steps", "ik_iteration_accuracy"):  # fmt: skip
+        assert getattr(s, field) == getattr(real, field), field
+    assert (s.inscribed_radius_m, s.inflation_radius_m, s.cost_scaling_per_m) == (0.46, 0.55, 10.0)
+    model = MildRobotModel(load_kinematics(), s, None)  # and it works
+    assert model.camera_pose(RobotState(math.radians(59.0)))[1, 0] > 0.8
+
+
+def test_absent_keys_default_one_by_one_and_present_keys_are_kept():
+    data = read_yaml(REAL)
+    del data["panMax"], data["mSigma"]
+    s = settings_from_mapping(data, "partial")
+    assert s.defaulted == ("panMax", "mSigma")
+    assert math.degrees(s.pan_limits_rad[1]) == pytest.approx(60.0)  # the original's default, not the file's 20
+    assert math.degrees(s.pan_limits_rad[0]) == pytest.approx(-20.0)
+    assert s.sigma_m == 2.0
+
+
+@pytest.mark.parametrize(
+    ("changes", "words"),
+    [
+        ({"debugLevels": ["PARAMETERS", "LOUD"]}, ["invalid debug level 'LOUD'", "debugLevels"]),
+        ({"debugLevels": 3}, ["debugLevels", "list"]),
+        ({"speedFactorPTU": 0}, ["speedFactorPTU", "positive"]),
+        ({"speedFactorBaseRot": "fast"}, ["speedFactorBaseRot", "number"]),
+        ({"global_costmap": {"inflation_layer": {"inflation_radius": "wide"}}}, ["inflation_radius", "number"]),
+        ({"global_costmap": {"robot_radius": 0.9}}, ["inscribed radius", "inflation radius"]),
+        ({"global_costmap": [1, 2]}, ["global_costmap", "mapping"]),
+        ({"IKVisualization": 5}, ["IKVisualization"]),
+        ({"robotModelId": "1"}, ["robotModelId"]),
+        ({"panMin": "left"}, ["'panMin'", "number"]),
+    ],
+)
+def test_present_but_wrong_values_are_still_errors(changes, words):
+    data = {}  # on top of nothing: absent keys default, the given one must be right
+    data.update(changes)
+    with pytest.raises(ConfigError) as info:
+        settings_from_mapping(data, "the node's parameters")
+    assert "the node's parameters" in str(info.value)
+    for word in words:
+        assert word in str(info.value)
+
+
+def test_debug_levels_and_speed_factors_are_read_as_the_original_does():
+    assert settings_from_mapping({"debugLevels": ["NONE"]}, "x").debug_levels == frozenset()
+    assert settings_from_mapping({"debugLevels": ["ALL"]}, "x").debug("MAP")
+    assert settings_from_mapping({"debugLevels": []}, "x").debug("RATING")  # empty = ALL
+    some = settings_from_mapping({"debugLevels": ["MAP", "RATING"]}, "x")
+    assert some.debug("MAP") and some.debug("RATING") and not some.debug("PARAMETERS")
+    assert settings_from_mapping({"debugLevels": "[map, ik_rating]"}, "x").debug_levels == {"MAP", "IK_RATING"}
+    s = settings_from_mapping({"speedFactorPTU": 2.0, "speedFactorBaseMove": 0.5}, "x")
+    assert s.speed_factors == (2.0, 0.5, None)
+    # the original uses the speed factors in no answer: movement costs are the same with and without them
+    plain = MildRobotModel(load_kinematics(), settings_from_mapping({}, "x"), None)
+    scaled = MildRobotModel(load_kinematics(), s, None)
+    a, b = RobotState(0.1, 0.2, 0.3, 1.0, 1.0), RobotState(-0.4, 0.1, 2.0, 3.0, 2.0)
+    assert plain.movement_costs(a, b) == scaled.movement_costs(a, b)
+
+
+def test_costmap_parameters_of_the_original_set_the_inflation():
+    s = settings_from_mapping(
+        {
+            "global_costmap": {
+                "robot_radius": 0.3,
+                "inflation_layer": {"inflation_radius": 0.8, "cost_scaling_factor": 4},
+            }
+        },
+        "costmap",
+    )
+    assert (s.inscribed_radius_m, s.inflation_radius_m, s.cost_scaling_per_m) == (0.3, 0.8, 4.0)
+    old_style = settings_from_mapping({"global_costmap": {"inflation_radius": 0.7}}, "costmap")
+    assert old_style.inflation_radius_m == 0.7
+    # the package's own keys (units in the name) win over the costmap's
+    both = settings_from_mapping({"inflationRadius_m": 0.9, "global_costmap": {"inflation_radius": 0.7}}, "both")
+    assert both.inflation_radius_m == 0.9
 
 
 def test_unknown_rating_warns_and_falls_back_to_simple():
@@ -125,12 +270,12 @@ def test_bad_settings_name_the_source_and_key(key, value, words):
         assert word in str(info.value)
 
 
-def test_missing_setting_is_named(tmp_path):
+def test_settings_file_error_names_the_file_and_key(tmp_path):
     data = read_yaml(REAL)
-    del data["mSigma"]
+    data["mSigma"] = "wide"
     path = tmp_path / "settings.yaml"
     path.write_text("\n".join(f"{k}: {v}" for k, v in data.items()))
-    with pytest.raises(ConfigError, match=r"settings\.yaml: missing key 'mSigma'"):
+    with pytest.raises(ConfigError, match=r"settings\.yaml: 'mSigma' must be a number"):
         load_settings(path)
 
 
@@ -428,7 +573,8 @@ def _aim_error_deg(model, state, centre):
 
 @pytest.mark.parametrize("lateral", [False, True])
 def test_pose_correction_aims_at_the_centre_within_the_limits(real, lateral):
-    model = _lateral_model(SIM) if lateral else MildRobotModel.load(SIM, map_file=False)
+    wide = wide_pan_settings()
+    model = _lateral_model(wide) if lateral else MildRobotModel.load(wide, map_file=False)
     rng = np.random.default_rng(11)
     checked = 0
     for _ in range(300):
@@ -457,12 +603,12 @@ def test_pose_correction_clamps_to_the_limits(real):
     assert "clamped" in above.reason and "clamped" in behind.reason
 
 
-def test_pose_correction_takes_the_pan_closest_to_the_current_one(sim):
+def test_pose_correction_takes_the_pan_closest_to_the_current_one(wide):
     """With +-200 deg the pan has two representations near 180 deg: keep the one nearer the current pan."""
-    d = sim.settings.view_distance_m
+    d = wide.settings.view_distance_m
     behind = [-2.0 - d, 1.0, 1.3]
-    from_left = sim.camera_pose_correction(RobotState(pan=3.0, x=1.0, y=1.0), behind, [0, 0, 0, 1])
-    from_right = sim.camera_pose_correction(RobotState(pan=-3.0, x=1.0, y=1.0), behind, [0, 0, 0, 1])
+    from_left = wide.camera_pose_correction(RobotState(pan=3.0, x=1.0, y=1.0), behind, [0, 0, 0, 1])
+    from_right = wide.camera_pose_correction(RobotState(pan=-3.0, x=1.0, y=1.0), behind, [0, 0, 0, 1])
     assert from_left.pan > 0 > from_right.pan
     assert wrap_to_pi(from_left.pan - from_right.pan) == pytest.approx(0.0, abs=1e-9)
 

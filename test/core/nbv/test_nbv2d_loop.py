@@ -45,12 +45,29 @@ def test_small_body_is_reconstructed(script):
 
 def test_circpix_never_turns_back():
     rf = _rf()
-    res = run(_square(), rf, RunConfig(script="circpix", circ_step_deg=5.0))
-    assert res.termination in ("circle_completed", "growth_points_exhausted")
+    cfg = RunConfig(script="circpix", circ_step_deg=5.0)
+    res = run(_square(), rf, cfg)
+    # circpix ends like the other scripts: candidates it cannot plan from the circle are unmeasurable
+    assert res.termination == "growth_points_exhausted" and res.d0_count == 0
     ring = [r.pos[0] for r in res.records if r.label != "search"]
     centre = np.array([39.5, 39.5])
     ang = np.unwrap([math.atan2(*(p - centre)[::-1]) for p in ring])
-    assert (np.diff(ang) >= -1e-9).all() and ang[-1] - ang[0] <= 2 * math.pi + 1e-6
+    assert (np.diff(ang) >= -1e-9).all() and ang[-1] - ang[0] <= cfg.circ_max_laps * 2 * math.pi + 1e-6
+    radius = np.hypot(*(np.array(ring) - centre).T)
+    np.testing.assert_allclose(radius, radius[0], atol=1e-6)  # on one circle
+
+
+def test_circpix_stops_after_a_lap_without_a_measurement():
+    # a slot the circle cannot look into: its candidates are left after a fruitless lap and marked unmeasurable
+    truth = np.zeros((90, 90), dtype=bool)
+    truth[30:60, 30:60] = True
+    truth[43:47, 40:60] = False
+    rf = _rf()
+    res = run(truth, rf, RunConfig(script="circpix", circ_step_deg=6.0, circ_max_laps=6))
+    assert res.termination == "growth_points_exhausted" and len(res.unmeasurable) > 0
+    # the stop came from a lap that measured nothing, not from the lap cap: a larger cap changes nothing
+    more = run(truth, rf, RunConfig(script="circpix", circ_step_deg=6.0, circ_max_laps=60))
+    assert len(more.records) == len(res.records) and more.unmeasurable == res.unmeasurable
 
 
 def test_termination_on_a_pathological_grid():
@@ -145,3 +162,14 @@ def test_noise_return_margin_must_be_non_negative():
         RunConfig(noise_return_margin_sigmas=-1.0)
     with pytest.raises(NbvInputError):
         RunConfig(noise_return_margin_sigmas=float("nan"))
+
+
+def test_fullpix_goes_round_the_acute_apex():
+    # the 400 x 400 triangle with edge-midpoint aiming: beyond the 30-degree apex no ray has passed, so the strict
+    # candidate rule alone found nothing there and the run ended with the hypotenuse unknown (coverage 0.62)
+    rf = RangeFinder2D.from_config().with_length(40.0)
+    truth = make_object("triangle")
+    res = run(truth, rf, RunConfig(script="fullpix", aim="edge_midpoints"))
+    s = summarize(res, measurable_boundary(truth, rf), "triangle")
+    assert res.termination == "growth_points_exhausted"
+    assert s["coverage"] >= 0.95

@@ -78,3 +78,51 @@ def test_diagonal_contour_direction():
     w[7:, :] = UNKNOWN
     d = compute_direction(w, (6, 6), 5)
     np.testing.assert_allclose(d, np.array([1.0, 1.0]) / np.sqrt(2), atol=1e-9)
+
+
+def _apex_grid():
+    """A measured row (2..5, 3) whose free side is known only near its start (x <= 2): around the end (5, 3) no ray
+    has passed yet, as beyond an acute apex, so no unknown cell there touches an empty one."""
+    w = np.zeros((10, 8))
+    w[0:3, 0:3] = EMPTY
+    w[0:2, 3:] = EMPTY
+    w[2:6, 3] = FULL
+    return w
+
+
+def test_contour_end_takes_the_general_candidates():
+    from agiprobot_measurement.nbv.predicates import contour_end_mask, driving_candidate_mask
+
+    w = _apex_grid()
+    ends = contour_end_mask(w)
+    assert ends[2, 3] and ends[5, 3] and not ends[3, 3] and not ends[4, 3]
+    end = (5, 3)
+    c = {tuple(x) for x in getcandidates2d(w, end)}
+    # the report's strict rule finds nothing here; the end takes its unknown 8-neighbours
+    assert c == {(4, 2), (5, 2), (6, 2), (6, 3), (6, 4), (5, 4), (4, 4)}
+    assert growth_mask(w)[end] and verifypoint2d(w, end) == 1
+    assert predicted_point(w, end) == (6, 3)  # straight on, where the contour most probably continues
+    # the start (2, 3) keeps the strict candidates: it has some
+    assert {tuple(x) for x in getcandidates2d(w, (2, 3))} == {(3, 2), (2, 4)}
+    # the vectorised mask is the union of the per-growth-point candidates
+    union = set()
+    for p in np.argwhere(growth_mask(w)):
+        union |= {tuple(x) for x in getcandidates2d(w, p)}
+    assert {tuple(x) for x in np.argwhere(driving_candidate_mask(w))} == union
+    # used-up candidates stop the end being a growth point
+    for x in c:
+        w[x] = PROBABLY_EMPTY
+    assert not growth_mask(w)[end] and verifypoint2d(w, end) == 0
+
+
+def test_a_right_angle_corner_is_not_a_contour_end():
+    from agiprobot_measurement.nbv.predicates import contour_end_mask
+
+    w = np.zeros((9, 9))
+    w[2:6, 3] = FULL
+    w[5, 4:7] = FULL
+    w[6, 7] = FULL
+    assert {tuple(x) for x in np.argwhere(contour_end_mask(w))} == {(2, 3), (6, 7)}
+    lonely = np.zeros((5, 5))
+    lonely[2, 2] = FULL
+    assert not contour_end_mask(lonely).any()  # an isolated cell is no contour

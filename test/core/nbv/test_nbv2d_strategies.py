@@ -62,3 +62,79 @@ def test_views_from_behind_the_contour_line_are_not_visible():
     assert views.visibility[cos_a > 0].any()
     loose = score_views(rf, aims, circles, normal, None, ScoreConfig())
     assert loose.visibility[cos_a < 0].any()
+
+
+def test_the_camera_must_look_from_the_outer_side_of_the_contour():
+    from agiprobot_measurement.nbv.range_finder import RangeFinder2D
+    from agiprobot_measurement.nbv.scoring import ScoreConfig, score_views
+    from agiprobot_measurement.nbv.visibility import N_SECTORS
+
+    rf = RangeFinder2D.from_config().with_length(250.0)  # a wide triangulation angle: the camera side matters
+    aims = np.array([[50.0, 50.0]])
+    circles = np.ones((1, N_SECTORS), dtype=np.uint8)
+    normal = np.array([0.0, 1.0])  # the empty side is +y
+    views = score_views(rf, aims, circles, normal, None, ScoreConfig(camera_front=True))
+    cam = views.poses[:, 1] - aims[0]
+    behind = cam @ normal <= 0
+    assert behind.any() and not views.visibility[behind].any()
+    assert views.visibility[~behind].any()
+    # a grazing source (80 degrees off the normal) keeps only the camera side that looks from the front
+    k = (views.sector == 10 + 0) & views.visibility  # source at 10.5 deg, normal at 90 deg
+    assert set(views.side[k].tolist()) == {-1}  # side -1 puts the camera at 64 deg, side +1 at -43 deg
+    off = score_views(rf, aims, circles, normal, None, ScoreConfig(camera_front=False))
+    assert off.visibility[behind].any()
+
+
+def test_strategy2_gives_up_after_its_turn():
+    import math
+
+    from agiprobot_measurement.nbv.range_finder import RangeFinder2D
+    from agiprobot_measurement.nbv.strategies import NoView, plan_s2, start_orbit
+
+    rf = RangeFinder2D.from_config()
+    normal = np.array([0.0, -1.0])
+    for turn_deg, expected in ((360.0, 36), (90.0, 9)):
+        orbit = start_orbit((50, 50), normal, np.array([1.0, 0.0]), (51, 50), None, 10.0, max_turn_deg=turn_deg)
+        plans = []
+        while not isinstance(p := plan_s2(rf, orbit), NoView):
+            plans.append(p)
+        assert len(plans) == expected and p.reason == "full_turn"
+        src = np.array([q.pos[0] for q in plans]) - 50.0
+        np.testing.assert_allclose(np.hypot(*src.T), rf.standoff_cells, rtol=1e-9)  # on the orbit
+        ang = np.degrees(np.unwrap(np.arctan2(src[:, 1], src[:, 0])))
+        # it starts on the normal and turns towards the contour's continuation (+x here: counter-clockwise)
+        assert ang[0] == pytest.approx(-90.0 + 10.0) and (np.diff(ang) > 0).all()
+        assert ang[-1] - ang[0] == pytest.approx(turn_deg - 10.0)
+        assert math.isclose(orbit.n_steps, expected)
+
+
+def test_strategy0_loose_d0_check():
+    from agiprobot_measurement.nbv.range_finder import RangeFinder2D
+    from agiprobot_measurement.nbv.scoring import ScoreConfig
+    from agiprobot_measurement.nbv.strategies import NoView, Plan, plan_s0
+    from agiprobot_measurement.nbv.visibility import N_SECTORS
+
+    rf = RangeFinder2D.from_config().with_length(40.0)
+    cc = (60, 60)
+    ii, jj = np.meshgrid(np.arange(120), np.arange(120), indexing="ij")
+    r = np.hypot(ii - 60, jj - 60)
+
+    def ring(r_in, r_out):
+        # a known full wall round cc, unknown cells between: no view is clear behind cc
+        m = np.zeros((120, 120))
+        m[(r > r_in) & (r < r_out)] = FULL
+        m[r >= r_out] = EMPTY
+        return m
+
+    aims = np.array([[60.0, 60.0]])
+    circles = np.ones((1, N_SECTORS), dtype=np.uint8)
+    forbidden = np.zeros((1, N_SECTORS, 2), dtype=bool)
+    rest = (aims, circles, np.array([0.0, -1.0]), None, ScoreConfig(camera_front=False), forbidden)
+    far_wall = ring(8, 10)
+    # the unknown cells right behind cc may stop the laser: loose accepts, strict hands cc to strategy 1
+    assert isinstance(plan_s0(far_wall, rf, cc, *rest, loose=True), Plan)
+    strict = plan_s0(far_wall, rf, cc, *rest, loose=False)
+    assert isinstance(strict, NoView) and strict.reason == "look_through_only"
+    # a known full wall within near_cells (5) behind the aim is refused even by the loose rule
+    near = plan_s0(ring(3, 5), rf, cc, *rest, loose=True)
+    assert isinstance(near, NoView) and near.reason == "look_through_only"

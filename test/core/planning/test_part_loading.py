@@ -199,3 +199,34 @@ def test_bad_transforms_are_rejected():
     shear[3, 0] = 1.0
     with pytest.raises(ValueError, match="last row"):
         validate_rigid_transform(shear)
+
+
+def test_step_is_read_through_cascadio_in_its_own_unit(shared_dir):
+    if importlib.util.find_spec("cascadio") is None:
+        pytest.skip("no STEP reader (cascadio) installed")
+    step = load_part(shared_dir / "parts" / "featuretype.STEP")
+    stl = load_part(shared_dir / "parts" / "featuretype.STL", units="inch")
+    # the STEP file declares inches; the part comes out in mm like the STL read with units='inch'
+    assert step.mesh.extents == pytest.approx(stl.mesh.extents, abs=0.05)
+    assert step.scale_to_mm == 1000.0  # OpenCASCADE -> GLB gives metres
+    # a coarser tessellation tolerance gives fewer triangles, the same part
+    coarse = load_part(shared_dir / "parts" / "featuretype.STEP", tessellation_tolerance_mm=0.5)
+    assert len(coarse.mesh.faces) < len(step.mesh.faces)
+    assert coarse.mesh.extents == pytest.approx(step.mesh.extents, abs=0.5)
+    with pytest.warns(PartWarning, match="declares its own unit"):
+        load_part(shared_dir / "parts" / "featuretype.STEP", units="inch")
+
+
+def test_unreadable_step_and_iges_get_clear_errors(tmp_path):
+    fake = tmp_path / "broken.step"
+    fake.write_text("solid nothing\nendsolid\n")
+    with (
+        pytest.raises(PartLoadError, match="not a STEP file")
+        if importlib.util.find_spec("cascadio")
+        else (pytest.raises(PartLoadError, match="STEP needs a converter"))
+    ):
+        load_part(fake)
+    iges = tmp_path / "part.igs"
+    iges.write_text("S      1\n")
+    with pytest.raises(PartLoadError, match="IGES is not read"):
+        load_part(iges)

@@ -111,7 +111,7 @@ def test_shared_plan_validates(plan, limits):
 
 
 def test_shared_plan_round_trips_exactly(plan_file, plan, tmp_path):
-    written = store_execution_plan(tmp_path / "copy", plan)
+    written = store_execution_plan(tmp_path / "copy.yaml", plan)
     assert written == tmp_path / "copy.yaml"
     assert read_yaml(written) == read_yaml(plan_file)
     with open(written) as stream:  # the reference loader, as the original read it
@@ -172,9 +172,11 @@ def test_segment_dict_conversion(plan):
     [("plan", "plan.yaml"), ("plan.yaml", "plan.yaml"), ("plan.yml", "plan.yml"), ("plan.v2", "plan.v2.yaml")],
 )
 def test_suffix_is_never_doubled(plan, tmp_path, given, written):
+    # plan_path is what the CLI and the node apply to a plan name; store_execution_plan writes exactly its path
     assert plan_path(tmp_path / given) == tmp_path / written
-    assert store_execution_plan(tmp_path / given, plan) == tmp_path / written
+    assert store_execution_plan(plan_path(tmp_path / given), plan) == tmp_path / written
     assert sorted(os.listdir(tmp_path)) == [written]
+    assert store_execution_plan(tmp_path / given, plan) == tmp_path / given
 
 
 def test_store_replaces_atomically_and_leaves_no_temp_files(plan, tmp_path):

@@ -70,6 +70,21 @@ def test_unreadable_part_is_reported_without_traceback(tmp_path):
     assert "broken.stl" in result.stderr and "Traceback" not in result.stderr
 
 
+def test_place_fixture_and_an_overlap_error(tmp_path):
+    # the cube sunk 30 mm into the fixture: refused quickly, before any planning, with the lift that clears it
+    started = time.monotonic()
+    result = run_cli([CUBE, *FAST, "--transform", "0", "0", "-30", "0", "0", "0"], tmp_path)
+    assert result.returncode == 2
+    assert time.monotonic() - started < 30.0  # the process start (imports) included
+    last = result.stderr.strip().splitlines()[-1]
+    assert "'fixture'" in last and "lift the part by 30" in last and "Traceback" not in result.stderr
+    # --place fixture puts it back on the fixture, whatever its frame
+    result = run_cli([CUBE, *FAST, "--place", "fixture", "--summary", "s.yaml"], tmp_path)
+    assert result.returncode == 0, result.stderr
+    summary = yaml.safe_load((tmp_path / "s.yaml").read_text())
+    assert summary["parameters"]["placement"] == "fixture" and summary["covered"] > 0
+
+
 def test_plans_the_cube_and_writes_only_what_was_asked(tmp_path):
     result = run_cli(
         [CUBE, *FAST, "-o", "cube_plan", "--report", "cube.png", "--summary", "summary.yaml", "--seed", "1"], tmp_path
@@ -87,8 +102,12 @@ def test_plans_the_cube_and_writes_only_what_was_asked(tmp_path):
     assert 0.9 <= summary["coverage_of_samples"] <= 1.0
     assert summary["estimated_execution_time_s"] > 0
     assert set(summary["time_s"]) >= {"sampling", "metrology", "mechanics", "set cover", "connection", "total"}
-    for label in ("samples", "valid viewpoints", "views chosen", "coverage of coverable", "est. execution time"):
+    labels = ("samples", "valid viewpoints", "views chosen", "measurable (metrology)", "measurable, executable")
+    for label in (*labels, "covered", "placement", "est. execution time"):
         assert label in result.stdout
+    # the three numbers: covered <= coverable by executable views <= metrologically coverable <= samples
+    assert summary["covered"] <= summary["coverable_executable"] <= summary["coverable_metrology"] <= 250
+    assert summary["reachable_share"] == pytest.approx(1.0)
     assert "cube_plan.yaml" in result.stdout
 
 

@@ -133,10 +133,11 @@ def test_measurement_segments_are_straight_lines_of_the_scanner(cube_plan):
 def test_plan_round_trips_through_yaml(cube_plan, tmp_path, station):
     manager, _, _, _, ordered = cube_plan
     segments = manager.convert_viewpointlist_to_execution_plan(ordered)
+    # the original's store_execution_plan writes exactly the path it is given, with or without a suffix
     assert manager.store_execution_plan(str(tmp_path / "cube_plan"), segments, {"operator": "test"}) is True
-    written = tmp_path / "cube_plan.yaml"
+    written = tmp_path / "cube_plan"
     assert manager.last_plan_path == written and written.exists()
-    assert not list(tmp_path.glob("*.yaml.yaml"))
+    assert not list(tmp_path.glob("*.yaml"))
     plan = load_execution_plan(written)
     assert plan.metadata["operator"] == "test"
     assert plan.metadata["coverage"]["covered"] == manager.coverage_report().n_covered
@@ -227,10 +228,10 @@ def test_bad_input(tmp_path, shared_dir):
         manager.load_target_mesh(str(CUBE), transform=bad)
     # a 5 mm 'part': the unit is almost certainly wrong; warned, still loaded
     with pytest.warns(UserWarning, match="inch"):
-        manager.load_target_mesh(str(shared_dir / "parts" / "angle_block.STL"), units="mm")
+        manager.load_target_mesh(str(shared_dir / "parts" / "angle_block.STL"), units="mm", placement="fixture")
     # a triangle soup is no solid, but still a measurable surface: warned, not a crash
     with pytest.warns(UserWarning):
-        manager.load_target_mesh(str(shared_dir / "parts" / "soup.stl"), units="dm")
+        manager.load_target_mesh(str(shared_dir / "parts" / "soup.stl"), units="dm", placement="fixture")
     manager.load_target_mesh(str(CUBE))
     with pytest.raises(ValueError, match="none, limited, full"):
         manager.generate_samples_and_viewpoints(0.01, 0.1, 4, "sideways")

@@ -47,6 +47,7 @@ import rospy
 import tf2_ros
 from actionlib_msgs.msg import GoalStatus
 from geometry_msgs.msg import PointStamped
+from phoxi_camera.srv import GetFrame
 from sensor_msgs.msg import Image, PointCloud2
 from std_msgs.msg import String
 from std_srvs.srv import SetBool, SetBoolResponse, Trigger, TriggerResponse
@@ -72,7 +73,6 @@ from agiprobot_measurement.ros.action_client import ActionClient
 from agiprobot_measurement.ros.conversions import cloud_xyz, joint_trajectory_to_msg, transform_stamped
 from agiprobot_measurement.ros.joint_states import JointStateCache
 from agiprobot_measurement.ros.phoxi_messages import image_array, pointcloud2_arrays
-from agiprobot_measurement.srv import GetFrame
 from agiprobot_measurement.station import load_joint_limits
 
 __all__ = ["CalibrationNode", "RosCamera", "RosJointDriver", "main"]
@@ -160,7 +160,10 @@ class RosCamera:
         except (rospy.ServiceException, rospy.ROSException) as exc:
             raise StepError(f"camera: {exc}") from exc
         if not response.success:
-            raise StepError(f"camera: {response.message}")
+            hint = ""
+            if "No scanner connected" in response.message:  # the driver starts disconnected when scanner_id is ""
+                hint = f" (give the driver a scanner_id, or call {self.camera_ns}/connect_camera)"
+            raise StepError(f"camera: {response.message}{hint}")
         if not self.cloud_event.wait(self.frame_timeout_s):
             raise StepError("camera: no point cloud after get_frame")
         if not texture:

@@ -18,6 +18,7 @@ Parameters: ~kinematics (config/mild_kinematics.yaml), ~frames (config/mild_robo
 import numpy as np
 import rospy
 import tf2_ros
+from asr_robot_model_services.msg import RobotStateMessage
 from sensor_msgs.msg import JointState
 
 from agiprobot_measurement.common.config import ConfigError
@@ -26,7 +27,6 @@ from agiprobot_measurement.errors import AgiprobotError
 from agiprobot_measurement.mild.config import load_kinematics, load_settings
 from agiprobot_measurement.mild.sim import MildMotion, MotionRefused
 from agiprobot_measurement.mild.state import RobotState
-from agiprobot_measurement.msg import RobotStateMessage
 from agiprobot_measurement.ros.conversions import transform_stamped
 from agiprobot_measurement.ros.mild_messages import state_from_msg, state_to_msg
 from agiprobot_measurement.ros.params import file_param

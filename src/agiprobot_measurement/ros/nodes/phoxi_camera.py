@@ -14,8 +14,9 @@ Services (every handler answers; errors are ``success: false`` with the reason, 
   V2/set_transformation, and the seed's names set_coordinate_space, set_transformation_matrix (same types).
 Topics: pointcloud, depth_map, texture, rgb_texture, confidence_map, normal_map, camera_info, /diagnostics (5 s),
   parameter_descriptions / parameter_updates (dynamic_reconfigure).
-Parameters: the driver's (scanner_id, frame_id, latch_topics, topic_queue_size, init_from_config, organized_cloud,
-  and the reconfigurable ones of phoxi_config.py) and the simulator's: ~camera_config (config/phoxi_camera.yaml),
+Parameters: the driver's (scanner_id: "" starts disconnected, a listed id connects at start; frame_id, latch_topics,
+  topic_queue_size (the cloud's queue is 1, as the driver's), init_from_config, and the reconfigurable ones of
+  sensors/phoxi/reconfigure.py, the driver's cfg) and the simulator's: ~camera_config (config/phoxi_camera.yaml),
   ~model, ~camera_xyz_m, ~camera_rpy_rad, ~parent_frame (override the config file), ~publish_tf (true: publish the
   configured pose on tf; false: take the sensor's pose from tf), ~render_configured_pose (false; true with
   publish_tf false: render at the configured pose, publish nothing on tf: a camera awaiting calibration),
@@ -23,16 +24,22 @@ Parameters: the driver's (scanner_id, frame_id, latch_topics, topic_queue_size, 
   (name of the URDF parameter, "" for no robot), ~output_dir (where relative file names resolve; "" = the node's
   working directory, as the driver's paths), ~allowed_save_dirs (list, or a string of paths separated by spaces or
   colons: where absolute names may also point; default the working directory, ROS_HOME and /tmp), ~frame_buffer_size,
-  ~noise_seed, ~models (config/phoxi_models.yaml), ~hardware_identification, ~tf_timeout_s (0.5, for the sensor's
-  pose when it comes from tf).
-The simulated device has no settings of its own: it starts with the parameters whatever ``init_from_config`` says,
-``timeout`` is accepted and has no effect (a frame is rendered while the service waits), and triggering also works
-in free-run mode (it renders one more frame).
+  ~noise_seed, ~models (config/phoxi_models.yaml), ~devices (the scanners listed, default the models file's
+  ``devices``), ~free_run_rate_hz (1.0: frames per second in free run), ~tf_timeout_s (0.5, for the sensor's pose
+  when it comes from tf).
+Behaviour as the driver's (RosInterface.cpp, PhoXiInterface.cpp of release 1.8.0): trigger_image triggers and answers
+the id, publishing nothing; get_frame(id) publishes (id < 0: triggers first); triggering switches to the software
+trigger and starts acquisition; reconfiguring without a scanner is refused (values put back); free run takes frames
+that only get_frame(id) publishes. The simulated scanner's settings start as the parameters, so ``init_from_config``
+matters only for trigger_mode and start_acquisition (true: the parameters' go to the scanner at connect; false: the
+software trigger that connecting sets stays). ``timeout`` is accepted and has no effect (a frame is rendered while
+the service waits).
 
-Files: save_frame and V2/save_last_frame follow the package's file policy (common.files.FileRoot): ``..``, ``~`` and
-paths outside the allowed folders are refused with a message naming the root; an existing file is replaced atomically
-(the driver overwrites and its services have no flag for it); ``.praw``/``.prawf`` are refused (not supported by the
-simulator). The file is written outside the device lock, so a long export does not hold up the other services.
+Files: save_frame and V2/save_last_frame follow the package's file policy (common.files.FileRoot): a leading ``~`` is
+$HOME (as the driver); ``..`` and paths outside the allowed folders are refused with a message naming them; an
+existing file is replaced atomically (the driver overwrites and its services have no flag for it); ``.praw``/
+``.prawf`` are refused (not supported by the simulator). The file is written outside the device lock, so a long
+export does not hold up the other services.
 """
 
 __all__ = ["PhoxiCameraNode", "main"]
@@ -45,34 +52,8 @@ import rospy
 import tf2_ros
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from dynamic_reconfigure.server import Server as ReconfigureServer
-from sensor_msgs.msg import CameraInfo, Image, PointCloud2
-from std_msgs.msg import Header
-from std_srvs.srv import Empty as StdEmpty
-from std_srvs.srv import EmptyResponse as StdEmptyResponse
-
-from agiprobot_measurement.common.config import ConfigError
-from agiprobot_measurement.errors import AgiprobotError, InternalError
-from agiprobot_measurement.msg import DeviceConnectionStatus, DeviceInformation, DeviceType, PhoXiSize
-from agiprobot_measurement.ros import phoxi_messages
-from agiprobot_measurement.ros.conversions import transform_stamped, transform_to_matrix
-from agiprobot_measurement.ros.params import file_param, vector_param
-from agiprobot_measurement.sensors.phoxi import reconfigure as phoxi_config
-from agiprobot_measurement.sensors.phoxi.device import (
-    API_VERSION,
-    COORDINATE_SPACES,
-    FIRMWARE_VERSION,
-    OK,
-    PhoxiDevice,
-    PhoxiError,
-    default_allowed_save_dirs,
-    frame_output,
-    load_camera_config,
-    overridden_pose,
-    transform_from_quaternion,
-)
-from agiprobot_measurement.sensors.phoxi.models import load_scanner_model
-from agiprobot_measurement.sensors.phoxi.scene_geometry import RobotGeometry, scene_geometry
-from agiprobot_measurement.srv import (
+from phoxi_camera.msg import DeviceConnectionStatus, DeviceInformation, DeviceType, PhoXiSize
+from phoxi_camera.srv import (
     ConnectCamera,
     ConnectCameraResponse,
     Empty,
@@ -104,6 +85,32 @@ from agiprobot_measurement.srv import (
     TriggerImage,
     TriggerImageResponse,
 )
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+from std_msgs.msg import Header
+from std_srvs.srv import Empty as StdEmpty
+from std_srvs.srv import EmptyResponse as StdEmptyResponse
+
+from agiprobot_measurement.common.config import ConfigError
+from agiprobot_measurement.errors import AgiprobotError, InternalError
+from agiprobot_measurement.ros import phoxi_messages
+from agiprobot_measurement.ros.conversions import transform_stamped, transform_to_matrix
+from agiprobot_measurement.ros.params import file_param, vector_param
+from agiprobot_measurement.sensors.phoxi import reconfigure as phoxi_config
+from agiprobot_measurement.sensors.phoxi.device import (
+    API_VERSION,
+    NO_VALUE_SPACE,
+    OK,
+    SETTING_NAMES,
+    PhoxiDevice,
+    PhoxiError,
+    default_allowed_save_dirs,
+    frame_output,
+    load_camera_config,
+    overridden_pose,
+    transform_from_quaternion,
+)
+from agiprobot_measurement.sensors.phoxi.models import load_scanner_model, load_simulated_scanners
+from agiprobot_measurement.sensors.phoxi.scene_geometry import RobotGeometry, scene_geometry
 from agiprobot_measurement.station import load_scene
 from agiprobot_measurement.station.urdf_model import UrdfModel
 
@@ -139,10 +146,17 @@ class PhoxiCameraNode:
         for name, value in static.items():
             rospy.set_param(f"~{name}", value)  # so clients and tests find every parameter, given or not
         self.frame_id = str(static["frame_id"])
+        self.init_from_config = bool(static["init_from_config"])
+        # the simulator's own settings (not the driver's, so not reconfigurable)
+        self.free_run_rate_hz = float(rospy.get_param("~free_run_rate_hz", 1.0))
+        if not 0.0 < self.free_run_rate_hz <= 30.0:
+            raise ConfigError(f"~free_run_rate_hz must be in (0, 30] Hz, got {self.free_run_rate_hz}")
 
         config = load_camera_config(file_param("~camera_config"))
         model_name = rospy.get_param("~model", "") or config.model
-        self.model = load_scanner_model(model_name, file_param("~models"))
+        models_file = file_param("~models")
+        self.model = load_scanner_model(model_name, models_file)
+        scanners = load_simulated_scanners(model_name, models_file, rospy.get_param("~devices", None))
         self.parent_frame = rospy.get_param("~parent_frame", "") or config.parent_frame
         self.configured_pose = overridden_pose(
             config.pose, vector_param("~camera_xyz_m", 3), vector_param("~camera_rpy_rad", 3)
@@ -169,13 +183,15 @@ class PhoxiCameraNode:
             scene_geometry(scene),
             output_dir,
             robot=robot,
-            hardware_identification=rospy.get_param("~hardware_identification", "") or None,
             frame_buffer_size=int(rospy.get_param("~frame_buffer_size", 3)),
             allowed_dirs=_allowed_save_dirs(rospy.get_param("~allowed_save_dirs", "")),
+            scanners=scanners,
         )
         self.noise_seed = int(rospy.get_param("~noise_seed", 0))
-        self.device.update_settings(seed=self.noise_seed)
-        self.config = dict(phoxi_config.defaults)
+        # the configuration as the driver starts it: the cfg's defaults overridden by the node's parameters; the
+        # simulated scanner's own settings start as these (so init_from_config changes nothing at the first connect)
+        self.config = {name: rospy.get_param(f"~{name}", default) for name, default in phoxi_config.defaults.items()}
+        self.device.update_settings(seed=self.noise_seed, **{name: self.config[name] for name in SETTING_NAMES})
 
         self.tf_buffer = tf2_ros.Buffer()
         self.tf_listener = tf2_ros.TransformListener(self.tf_buffer)
@@ -185,7 +201,8 @@ class PhoxiCameraNode:
 
         self.latch, queue = bool(static["latch_topics"]), int(static["topic_queue_size"])
         self.publishers = {
-            name: rospy.Publisher(f"~{name}", kind, queue_size=queue, latch=self.latch)
+            # the driver's cloud publisher has queue size 1 whatever topic_queue_size says
+            name: rospy.Publisher(f"~{name}", kind, queue_size=1 if name == "pointcloud" else queue, latch=self.latch)
             for name, kind in (
                 ("pointcloud", PointCloud2),
                 ("depth_map", Image),
@@ -198,10 +215,23 @@ class PhoxiCameraNode:
         }
         self.diagnostics = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=5)
 
-        try:
-            self.device.connect(str(static["scanner_id"]))
-        except PhoxiError as exc:
-            rospy.logwarn("phoxi_camera: connection to scanner '%s' failed: %s", static["scanner_id"], exc)
+        # as the driver: connect at start only when scanner_id names a scanner, else wait for connect_camera
+        scanner_id = str(static["scanner_id"])
+        if scanner_id:
+            try:
+                self._connect(scanner_id)
+                rospy.loginfo("phoxi_camera: connected to %s", scanner_id)
+            except PhoxiError as exc:
+                rospy.logwarn("phoxi_camera: connection to default scanner %s failed: %s", scanner_id, exc)
+        if self.device.connected:
+            # the reconfigure server below starts from the parameters: give it the scanner's state
+            for name, value in (
+                ("trigger_mode", self.device.trigger_mode),
+                ("start_acquisition", self.device.acquiring),
+                ("coordinate_space", self.device.coordinate_space),
+            ):
+                self.config[name] = value
+                rospy.set_param(f"~{name}", value)
         self.reconfigure = ReconfigureServer(phoxi_config, self._reconfigure)
 
         services = [
@@ -230,12 +260,9 @@ class PhoxiCameraNode:
             ("V2/save_last_frame", SaveLastFrame, self.save_last_frame),
             ("get_hardware_indentification", GetHardwareIdentification, self.get_hardware_identification),
             ("get_supported_capturing_modes", GetSupportedCapturingModes, self.get_supported_capturing_modes),
-            ("get_api_version", GetString, lambda _r: GetStringResponse(value=API_VERSION, message=OK, success=True)),
-            (
-                "get_firmware_version",
-                GetString,
-                lambda _r: GetStringResponse(value=FIRMWARE_VERSION, message=OK, success=True),
-            ),
+            # the driver answers both with an empty message, and success even when it has no scanner
+            ("get_api_version", GetString, lambda _r: GetStringResponse(value=API_VERSION, message="", success=True)),
+            ("get_firmware_version", GetString, self.get_firmware_version),
             ("V2/set_coordinate_space", SetCoordinatesSpace, self.set_coordinate_space),
             ("set_coordinate_space", SetCoordinatesSpace, self.set_coordinate_space),
             ("V2/set_transformation", SetTransformationMatrix, self.set_transformation),
@@ -248,9 +275,9 @@ class PhoxiCameraNode:
         self.free_run = threading.Thread(target=self._free_run_loop, daemon=True)
         self.free_run.start()
         rospy.loginfo(
-            "phoxi_camera: simulated PhoXi %s (%s) in %s at %s, files under %s",
-            self.model.name,
-            self.device.hardware_identification,
+            "phoxi_camera: simulated PhoXi Control with %s (%s) in %s at %s, files under %s",
+            ", ".join(f"{s.hw_identification} ({s.model.name})" for s in self.device.scanners),
+            "connected to " + self.device.hardware_identification if self.device.connected else "not connected",
             self.parent_frame,
             np.round(self.configured_pose[:3, 3], 3).tolist(),
             " or ".join(str(r) for r in self.device.files.roots),
@@ -302,7 +329,10 @@ class PhoxiCameraNode:
             if cfg["send_point_cloud"]:
                 organized = cfg["organized_cloud"]
                 outputs.append(
-                    ("pointcloud", lambda: phoxi_messages.pointcloud2(points, normals, frame.valid, header, organized))
+                    (
+                        "pointcloud",
+                        lambda: phoxi_messages.pointcloud2(points, normals, frame.valid, header, organized),
+                    )
                 )
             if cfg["send_depth_map"]:
                 outputs.append(("depth_map", lambda: phoxi_messages.image(frame.depth_mm, "32FC1", header)))
@@ -318,7 +348,6 @@ class PhoxiCameraNode:
                 # a message nobody receives is not worth building, unless it is latched for later subscribers
                 if self.latch or publisher.get_num_connections() > 0:
                     self._publish(publisher, build(), frame.index)
-            self.device.mark_published(frame)
 
     @staticmethod
     def _publish(publisher, msg, seq):
@@ -333,18 +362,21 @@ class PhoxiCameraNode:
             impl.release()
 
     def _free_run_loop(self):
-        """Trigger frames one after the other at ``free_run_rate_hz`` (at most) while in free-run mode."""
+        """In free-run mode the scanner takes frames one after the other (at most ``~free_run_rate_hz``); as with the
+        driver they are published only when asked for by ``get_frame(id)``."""
+        period = 1.0 / self.free_run_rate_hz
         try:
             while not rospy.is_shutdown():
                 with self.lock:
-                    running = self.device.free_running(self.config["trigger_mode"])
-                    period = 1.0 / max(float(self.config["free_run_rate_hz"]), 1e-3)
+                    running = self.device.free_running()
                 if not running:
                     rospy.sleep(0.1)
                     continue
                 started = rospy.get_time()
                 try:
-                    self.publish_frame(self.capture(-1))
+                    with self.lock:
+                        if self.device.free_running():  # the mode may have changed while waiting for the lock
+                            self.device.capture_free_run(self)
                 except REQUEST_ERRORS as exc:
                     rospy.logwarn_throttle(10.0, "phoxi_camera: free run: %s", exc)
                 rospy.sleep(max(0.0, period - (rospy.get_time() - started)))
@@ -353,18 +385,37 @@ class PhoxiCameraNode:
 
     # -------------------------------------------------------------------------------------- services
     def get_device_list(self, _request):
-        status = DeviceConnectionStatus.Occupied if self.device.connected else DeviceConnectionStatus.Ready
-        info = DeviceInformation(
-            name=f"PhoXi 3D Scanner {self.model.name} (simulated)",
-            type=DeviceType(type=DeviceType.PhoXiScanner),
-            hwIdentification=self.device.hardware_identification,
-            IPaddress="127.0.0.1",
-            status=DeviceConnectionStatus(status=status),
-            firmwareVersion=FIRMWARE_VERSION,
-        )
+        with self.lock:
+            scanners, current = self.device.device_list(), self.device.current
+        infos = []
+        for scanner in scanners:
+            # a scanner this node holds is occupied for everybody else, as PhoXi Control reports it
+            status = DeviceConnectionStatus.Occupied if scanner is current else DeviceConnectionStatus.Ready
+            info = DeviceInformation(
+                name=scanner.name,
+                type=DeviceType(type=DeviceType.PhoXiScanner),
+                hwIdentification=scanner.hw_identification,
+                IPaddress=scanner.ip_address,
+                status=DeviceConnectionStatus(status=status),
+                firmwareVersion=scanner.firmware_version,
+            )
+            if hasattr(info, "variant"):  # release 1.8.0's fields
+                info.variant, info.isAlpha = scanner.variant, scanner.is_alpha
+            infos.append(info)
         return GetDeviceListResponse(
-            len=1, out=[self.device.hardware_identification], device_information_list=[info], message=OK, success=True
+            len=len(infos),
+            out=[s.hw_identification for s in scanners],
+            device_information_list=infos,
+            message=OK,
+            success=True,
         )
+
+    def get_firmware_version(self, _request):
+        with self.lock:
+            current = self.device.current
+        if current is None:  # the driver: the exception's message, success nevertheless
+            return GetStringResponse(value="", message="No scanner connected", success=True)
+        return GetStringResponse(value=current.firmware_version, message="", success=True)
 
     def _call(self, action):
         """{success, message} of ``action()`` for a response; a refusal becomes the message."""
@@ -377,44 +428,82 @@ class PhoxiCameraNode:
             self.publish_diagnostics()
         return {"success": True, "message": OK}
 
+    def _connect(self, name):
+        """The driver's connectCamera: connect (software trigger, acquisition started); with ``init_from_config`` the
+        node's configuration then goes to the scanner (trigger mode and acquisition included), else the
+        configuration is read from the scanner (call :meth:`_sync_reconfigure` afterwards, without the lock)."""
+        with self.lock:
+            self.device.connect(name)
+            if self.init_from_config:
+                self.device.reconfigure(self.config, -1, previous=self.config)
+
+    def _sync_reconfigure(self):
+        """Show the scanner's trigger mode, acquisition and coordinate space in the dynamic_reconfigure values, as the
+        driver updates them after connecting, triggering and switching. Never call it holding ``self.lock``: the
+        reconfigure server's lock is taken first there."""
+        server = getattr(self, "reconfigure", None)
+        with self.lock:
+            if server is None or not self.device.connected:
+                return
+            state = {
+                "trigger_mode": self.device.trigger_mode,
+                "start_acquisition": self.device.acquiring,
+                "coordinate_space": self.device.coordinate_space,
+            }
+            changes = {name: value for name, value in state.items() if self.config.get(name) != value}
+        if changes:
+            server.update_configuration(changes)
+
     def connect_camera(self, request):
-        return ConnectCameraResponse(**self._call(lambda: self.device.connect(request.name)))
+        result = self._call(lambda: self._connect(request.name))
+        self._sync_reconfigure()
+        return ConnectCameraResponse(**result)
 
     def disconnect_camera(self, _request):
         self._call(self.device.disconnect)
         return StdEmptyResponse()
 
+    def _acquisition(self, action):
+        result = self._call(action)
+        self._sync_reconfigure()
+        return result
+
     def start_acquisition(self, _request):
-        result = self._call(self.device.start_acquisition)
+        result = self._acquisition(self.device.start_acquisition)
         if not result["success"]:
             rospy.logerr("phoxi_camera: %s", result["message"])
         return StdEmptyResponse()
 
     def stop_acquisition(self, _request):
-        result = self._call(self.device.stop_acquisition)
+        result = self._acquisition(self.device.stop_acquisition)
         if not result["success"]:
             rospy.logerr("phoxi_camera: %s", result["message"])
         return StdEmptyResponse()
 
     def start_acquisition_v2(self, _request):
-        return EmptyResponse(**self._call(self.device.start_acquisition))
+        return EmptyResponse(**self._acquisition(self.device.start_acquisition))
 
     def stop_acquisition_v2(self, _request):
-        return EmptyResponse(**self._call(self.device.stop_acquisition))
+        return EmptyResponse(**self._acquisition(self.device.stop_acquisition))
 
     def trigger_image(self, _request):
+        """Trigger a frame and answer its id; nothing is published (``get_frame(id)`` does that), as the driver."""
         try:
             frame = self.capture(-1)
-            self.publish_frame(frame)
         except REQUEST_ERRORS as exc:
             return TriggerImageResponse(id=-1, message=str(exc), success=False)
+        finally:
+            self._sync_reconfigure()
         return TriggerImageResponse(id=frame.index, message=OK, success=True)
 
     def get_frame(self, request):
+        """Publish frame ``in_`` (a new one for < 0) on every enabled topic."""
         try:
             self.publish_frame(self.capture(int(request.in_)))
         except REQUEST_ERRORS as exc:
             return GetFrameResponse(message=str(exc), success=False)
+        finally:
+            self._sync_reconfigure()
         return GetFrameResponse(message=OK, success=True)
 
     def save_frame(self, request):
@@ -426,6 +515,8 @@ class PhoxiCameraNode:
             path = write()  # outside the lock: other frame calls go on while the file is written
         except REQUEST_ERRORS as exc:
             return SaveFrameResponse(message=str(exc), success=False)
+        finally:
+            self._sync_reconfigure()
         rospy.loginfo("phoxi_camera: frame %d written to %s", frame.index, path)
         return SaveFrameResponse(message=OK, success=True)
 
@@ -458,8 +549,8 @@ class PhoxiCameraNode:
 
     def set_coordinate_space(self, request):
         result = self._call(lambda: self.device.set_coordinate_space(int(request.coordinates_space)))
-        if result["success"]:
-            self.reconfigure.update_configuration({"coordinate_space": int(request.coordinates_space)})
+        if int(request.coordinates_space) != NO_VALUE_SPACE:
+            self._sync_reconfigure()
         return SetCoordinatesSpaceResponse(**result)
 
     def set_transformation(self, request):
@@ -468,14 +559,14 @@ class PhoxiCameraNode:
             self.device.set_transformation(matrix, request.coordinates_space, request.set_space, request.save_settings)
 
         result = self._call(apply)
-        if result["success"] and request.set_space:
-            self.reconfigure.update_configuration({"coordinate_space": int(request.coordinates_space)})
+        # the space switched whatever set_space said (as the driver's scanner); the reconfigure value shows it
+        self._sync_reconfigure()
         return SetTransformationMatrixResponse(**result)
 
     # ------------------------------------------------------------------------------ reconfigure, status
-    def _reconfigure(self, config, _level):
+    def _reconfigure(self, config, level):
         with self.lock:
-            refusal = self.device.reconfigure(config, previous=self.config)
+            refusal = self.device.reconfigure(config, level, previous=self.config)
             if refusal:
                 rospy.logwarn("phoxi_camera: %s", refusal)
             self.config = {name: config[name] for name in phoxi_config.defaults}
@@ -487,12 +578,8 @@ class PhoxiCameraNode:
             level=DIAGNOSTIC_LEVELS[level],
             name="phoxi_camera: PhoXi3Dscanner",
             message=message,
-            hardware_id=self.device.hardware_identification,
-            values=[
-                KeyValue("model", self.model.name),
-                KeyValue("coordinate_space", COORDINATE_SPACES[self.device.coordinate_space]),
-                KeyValue("frames_taken", str(self.device.next_index)),
-            ],
+            hardware_id="none",  # as the driver's diagnostic updater
+            values=[KeyValue(key, value) for key, value in self.device.diagnostic_values()],
         )
         self.diagnostics.publish(DiagnosticArray(header=Header(stamp=rospy.Time.now()), status=[status]))
 

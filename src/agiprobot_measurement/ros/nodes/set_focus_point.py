@@ -16,6 +16,8 @@ import math
 
 import numpy as np
 import rospy
+from asr_robot_model_services.msg import RobotStateMessage
+from asr_robot_model_services.srv import CalculateCameraPose, CalculateCameraPoseCorrection, GetPose
 from geometry_msgs.msg import Point, PointStamped, Quaternion, Vector3
 from sensor_msgs.msg import JointState
 
@@ -23,10 +25,8 @@ from agiprobot_measurement.errors import AgiprobotError
 from agiprobot_measurement.mild.config import load_kinematics
 from agiprobot_measurement.mild.focus import focus_on
 from agiprobot_measurement.mild.state import RobotState
-from agiprobot_measurement.msg import RobotStateMessage
 from agiprobot_measurement.ros.conversions import pose_to_matrix
 from agiprobot_measurement.ros.mild_messages import state_to_msg, yaw_of
-from agiprobot_measurement.srv import CalculateCameraPose, CalculateCameraPoseCorrection, GetPose
 
 __all__ = ["RobotModelServiceClient", "SetFocusPoint", "main"]
 

@@ -36,7 +36,7 @@ import numpy as np
 import rospy
 import yaml
 from geometry_msgs.msg import Point
-from sensor_msgs.msg import PointCloud2
+from sensor_msgs.msg import PointCloud, PointCloud2
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -57,7 +57,7 @@ from agiprobot_measurement.planning.request import PlanRequest, PlanRequestError
 from agiprobot_measurement.planning.session import GoalError, MeasurementSession
 from agiprobot_measurement.planning.trajectory_manager import PlanningCancelled
 from agiprobot_measurement.ros.action_client import ActionClient
-from agiprobot_measurement.ros.conversions import matrix_to_pose, pose_to_matrix, xyz_cloud
+from agiprobot_measurement.ros.conversions import matrix_to_pose, pose_to_matrix, xyz_cloud, xyz_point_cloud
 from agiprobot_measurement.ros.executor import ControllerWatch, RosSegmentExecutor, ScannerClient
 from agiprobot_measurement.ros.joint_states import JointStateCache
 from agiprobot_measurement.ros.params import file_param
@@ -112,6 +112,9 @@ def plan_request_from_goal(goal, session: MeasurementSession) -> PlanRequest:
         plan_file=goal.plan_file,
         overwrite=goal.overwrite,
         part_transform_mm=part_transform_from_pose(goal.part_pose),
+        time_limit_s=goal.time_limit_s,
+        placement=goal.placement,
+        tessellation_tolerance_mm=goal.tessellation_tolerance_mm,
     )
 
 
@@ -155,7 +158,8 @@ class TrajectoryManagerNode:
         self.viewpoint_pub = rospy.Publisher("~viewpoints", MarkerArray, **latched)
         self.path_pub = rospy.Publisher("~planned_path", Marker, **latched)
         self.part_pub = rospy.Publisher("~part", MarkerArray, **latched)
-        self.current_pub = rospy.Publisher("/currently_measured_points", PointCloud2, **latched)
+        # sensor_msgs/PointCloud, as the original published it: scripts and rviz configs for it subscribe so
+        self.current_pub = rospy.Publisher("/currently_measured_points", PointCloud, **latched)
         self.scanner = ScannerClient(rospy.get_param("~scanner_namespace", "/laser_scanner"))
         self.robot = ActionClient(
             rospy.get_param("~controller_action", "/robot_sim/execute_trajectory"), ExecuteJointTrajectoryAction
@@ -227,11 +231,24 @@ class TrajectoryManagerNode:
         result.coverage = report.coverage_of_coverable
         result.coverage_of_samples = report.coverage_of_samples
         result.estimated_execution_time_s = report.estimated_execution_time_s
+        result.number_of_samples = report.n_samples
+        result.number_coverable_metrology = report.n_coverable_metrology
+        result.number_coverable_executable = report.n_coverable
+        result.number_covered = report.n_covered
+        result.number_unverified = report.n_unverified
+        result.optimality_gap = -1.0 if report.solver_gap is None else float(report.solver_gap)
+        result.time_limit_hit = bool(report.time_limit_hit)
+        result.tilt_mode_used = str(outcome.tilt_choice or report.tilt_mode)
+        result.reachable_share = -1.0 if report.reachable_share is None else float(report.reachable_share)
+        result.warnings = [str(w) for w in report.warnings]
         rospy.loginfo(
-            "trajectory_manager: planned %d views covering %.1f %% of %d coverable points (est. %.1f s)%s",
+            "trajectory_manager: planned %d views covering %.1f %% of %d points coverable by executable views "
+            "(%d measurable, %d samples; est. %.1f s)%s",
             report.n_views,
             100 * report.coverage_of_coverable,
             report.n_coverable,
+            report.n_coverable_metrology,
+            report.n_samples,
             report.estimated_execution_time_s,
             f", stored in {outcome.plan_file}" if outcome.plan_file else "",
         )
@@ -396,9 +413,9 @@ class TrajectoryManagerNode:
     def _show_measured_points(self, view, active: bool) -> None:
         header = Header(stamp=rospy.Time.now(), frame_id="world")
         if active and view is not None and self.session.samples_mm is not None:
-            self.current_pub.publish(xyz_cloud(self.session.samples_mm[view.measurable_indices] / 1000.0, header))
+            self.current_pub.publish(xyz_point_cloud(self.session.samples_mm[view.measurable_indices] / 1000.0, header))
         elif not active:
-            self.current_pub.publish(xyz_cloud(np.zeros((0, 3)), header))
+            self.current_pub.publish(xyz_point_cloud(np.zeros((0, 3)), header))
 
 
 def coverage_summary(predicted: float, measured: float) -> str:

@@ -1,15 +1,23 @@
 """The simulated PhoXi device behind ``nodes/phoxi_camera``: connection, acquisition, frames, spaces, files.
 
 ROS-free: the node turns service requests into calls here and :class:`PhoxiError` into ``success: false`` with its
-message. The semantics follow the real driver (``phoxi_camera``, ROS 1): frames are numbered from 0 in the order
-they are triggered; a frame id < 0 means "trigger a new frame"; an id the device does not hold is an error.
-Frames keep the coordinate space they were captured in (the scanner applies the space while it computes the cloud).
+message. The semantics follow the real driver (``phoxi_camera`` 1.8.0, ROS 1: RosInterface.cpp and
+PhoXiInterface.cpp): the device lists the configured scanners (:class:`~.models.SimulatedScanner`) and connects only
+to one of them by its hardware identification ("" is not a scanner); connecting sets the software trigger and
+starts acquisition; triggering a frame (``trigger`` or a frame id < 0) switches to the software trigger and starts
+acquisition when it is stopped; frames are numbered from 0 in the order they are taken; an id the device does not
+hold is an error. Frames keep the coordinate space they were captured in (the scanner applies the space while it
+computes the cloud).
 
-Coordinate spaces: 1 CameraSpace (the sensor frame), 4 RobotSpace and 5 CustomSpace (p' = R p + t with the
-transformation set by ``set_transformation``; CustomSpace starts as identity, RobotSpace needs a transformation
-first). 2 MountingSpace and 3 MarkerSpace need a marker calibration the simulated scanner does not have. A
-transformation must be finite and rigid (orthonormal rotation, determinant +1) with a translation of at most
-:data:`MAX_TRANSLATION_M`, so that every later frame stays finite; a refused one changes nothing.
+Coordinate spaces 1 CameraSpace (the sensor frame), 2 MountingSpace, 3 MarkerSpace, 4 RobotSpace and 5 CustomSpace
+(p' = A p + t with the space's transformation, identity until one is set; the simulated scanner has no marker
+calibration, so MountingSpace and MarkerSpace stay identity); 0 (NoValue) is accepted and leaves the space as it
+is. ``set_transformation`` stores the transformation of RobotSpace or CustomSpace and switches to that space
+whatever ``set_space`` says (PhoXiInterface.cpp sets the space in both cases). The transformation is taken from a
+translation and a quaternion as the driver's Eigen conversion does (unnormalised: a zero quaternion is the
+identity, as ``geometry_msgs/Transform()`` gives it); it must be finite, its translation at most
+:data:`MAX_TRANSLATION_M` long and its linear part at most :data:`MAX_LINEAR_ENTRY` per entry, so that every later
+frame stays finite; a refused one changes nothing.
 
 Files follow the package's one file policy (:class:`~agiprobot_measurement.common.files.FileRoot`, see
 :class:`PhoxiDevice`); reconfigured numbers that are not finite are put back (:meth:`PhoxiDevice.reconfigure`).
@@ -29,10 +37,10 @@ import numpy as np
 
 from agiprobot_measurement.common.config import require, vector
 from agiprobot_measurement.common.files import FileRoot, PathPolicyError
-from agiprobot_measurement.common.geometry import look_at, matrix_to_rpy, pose_from_quaternion
+from agiprobot_measurement.common.geometry import look_at, matrix_to_rpy
 from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.sensors.phoxi import reconfigure as phoxi_config
-from agiprobot_measurement.sensors.phoxi.models import ScannerModel
+from agiprobot_measurement.sensors.phoxi.models import SIMULATED_SCANNER_ID, ScannerModel, SimulatedScanner
 from agiprobot_measurement.sensors.phoxi.point_cloud_io import (
     write_ply,
     write_point_tiff,
@@ -57,12 +65,16 @@ __all__ = [
     "API_VERSION",
     "CAMERA_CONFIG_FILE",
     "COORDINATE_SPACES",
-    "FIRMWARE_VERSION",
+    "MAX_LINEAR_ENTRY",
     "MAX_TRANSLATION_M",
+    "NOT_CONNECTED",
+    "NO_VALUE_SPACE",
     "OK",
     "RAW_EXTENSIONS",
     "SAVE_LAST_FRAME_EXTENSIONS",
     "SETTING_NAMES",
+    "TRIGGER_FREERUN",
+    "TRIGGER_SOFTWARE",
     "WRITTEN_EXTENSIONS",
     "CameraConfig",
     "PhoxiDevice",
@@ -79,8 +91,13 @@ __all__ = [
 ]
 
 OK = "Ok"
-CAMERA_SPACE, MOUNTING_SPACE, MARKER_SPACE, ROBOT_SPACE, CUSTOM_SPACE = 1, 2, 3, 4, 5
+#: what the driver answers when no scanner is connected (PhoXiInterface::isOk)
+NOT_CONNECTED = "No scanner connected"
+NO_VALUE_SPACE, CAMERA_SPACE, MOUNTING_SPACE, MARKER_SPACE, ROBOT_SPACE, CUSTOM_SPACE = 0, 1, 2, 3, 4, 5
 COORDINATE_SPACES = {1: "CameraSpace", 2: "MountingSpace", 3: "MarkerSpace", 4: "RobotSpace", 5: "CustomSpace"}
+#: pho::api::PhoXiTriggerMode values the simulator runs (Hardware 2 needs a trigger cable)
+TRIGGER_FREERUN, TRIGGER_SOFTWARE = 0, 1
+TRIGGER_MODE_NAMES = {0: "Freerun", 1: "Software", 2: "Hardware", 3: "NoValue"}
 #: extensions V2/save_last_frame accepts (as the driver); the simulator writes ply, ptx and tif
 SAVE_LAST_FRAME_EXTENSIONS = ("praw", "ply", "ptx", "tif", "prawf")
 WRITTEN_EXTENSIONS = ("ply", "ptx", "tif")
@@ -89,10 +106,10 @@ RAW_EXTENSIONS = ("praw", "prawf")
 #: largest accepted translation of a coordinate-space transformation: a station is metres across, and beyond this
 #: every point of a frame loses its millimetres (1e308 made every point inf)
 MAX_TRANSLATION_M = 1e3
-#: how far R R^T of a transformation's rotation may be from the identity (a rotation made of float32 values passes)
-ROTATION_TOLERANCE = 1e-6
+#: largest accepted entry of a transformation's linear part (a rotation's are at most 1; the driver passes a
+#: non-unit quaternion's matrix on unnormalised, which scales the cloud by the quaternion's squared norm)
+MAX_LINEAR_ENTRY = 1e3
 API_VERSION = "1.2.35-sim"
-FIRMWARE_VERSION = "1.2.35-sim"
 CAMERA_CONFIG_FILE = CONFIG_DIR / "phoxi_camera.yaml"
 #: the reconfigurable parameters that are capturing settings (ScanSettings' fields)
 SETTING_NAMES = (
@@ -154,39 +171,46 @@ def load_camera_config(path: str | Path | None = None) -> CameraConfig:
 
 
 def transform_from_quaternion(translation, quaternion_xyzw) -> np.ndarray:
-    """4x4 from a translation (m) and a quaternion (x, y, z, w); the quaternion is normalised; a zero or overflowing
-    one, non-finite values and a translation beyond :data:`MAX_TRANSLATION_M` are refused (:class:`PhoxiError`)."""
+    """4x4 from a translation (m) and a quaternion (x, y, z, w) as the driver builds it (``tf::transformMsgToEigen``:
+    Eigen's quaternion-to-matrix formula, not normalised, so a zero quaternion gives the identity and a unit one its
+    rotation); refused (:class:`PhoxiError`) when not finite or beyond the bounds of :func:`check_transformation`."""
     translation = np.asarray(translation, dtype=float)
     quaternion = np.asarray(quaternion_xyzw, dtype=float)
+    if translation.shape != (3,) or quaternion.shape != (4,):
+        raise PhoxiError("transformation needs a translation (x, y, z) and a quaternion (x, y, z, w)")
     if not (np.all(np.isfinite(quaternion)) and np.all(np.isfinite(translation))):
         raise PhoxiError(
             f"transformation must be finite, got translation {translation.tolist()}, rotation {quaternion.tolist()}"
         )
-    if translation.shape != (3,) or quaternion.shape != (4,):
-        raise PhoxiError("transformation needs a translation (x, y, z) and a quaternion (x, y, z, w)")
-    norm = math.hypot(*quaternion)  # hypot neither overflows nor underflows where the sum of squares would
-    if not math.isfinite(norm):
-        raise PhoxiError(f"transformation's quaternion {quaternion.tolist()} is too large to normalise")
-    if norm < 1e-6:
-        raise PhoxiError("transformation has a zero quaternion (rotation.w = 1 is the identity)")
-    return check_transformation(pose_from_quaternion(translation, quaternion / norm))
+    x, y, z, w = quaternion
+    with np.errstate(over="ignore", invalid="ignore"):
+        linear = np.array(
+            [
+                [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+            ]
+        )
+    matrix = np.eye(4)
+    matrix[:3, :3] = linear
+    matrix[:3, 3] = translation
+    return check_transformation(matrix)
 
 
 def check_transformation(matrix) -> np.ndarray:
-    """``matrix`` as a 4x4 float array if it is a rigid transformation the scanner can apply: finite, its rotation
-    orthonormal with determinant +1, its translation at most :data:`MAX_TRANSLATION_M` long, last row 0 0 0 1;
-    else :class:`PhoxiError` naming the bad part."""
+    """``matrix`` as a 4x4 float array if the scanner can apply it to every later frame: finite, last row 0 0 0 1,
+    translation at most :data:`MAX_TRANSLATION_M` long, linear entries at most :data:`MAX_LINEAR_ENTRY`; else
+    :class:`PhoxiError` naming the bad part. (The driver checks nothing; these bounds only keep frames finite.)"""
     matrix = np.asarray(matrix, dtype=float)
     if matrix.shape != (4, 4) or not np.all(np.isfinite(matrix)):
-        raise PhoxiError("transformation must be a finite 4x4 matrix")
+        raise PhoxiError("transformation must be a finite 4x4 matrix (a quaternion too large gives infinite entries)")
     if not np.allclose(matrix[3], [0.0, 0.0, 0.0, 1.0]):
         raise PhoxiError(f"transformation's last row must be 0 0 0 1, got {matrix[3].tolist()}")
-    rotation = matrix[:3, :3]
-    error = float(np.abs(rotation @ rotation.T - np.eye(3)).max())
-    if error > ROTATION_TOLERANCE or np.linalg.det(rotation) < 0:
+    largest = float(np.abs(matrix[:3, :3]).max())
+    if largest > MAX_LINEAR_ENTRY:
         raise PhoxiError(
-            f"transformation's rotation is not a proper rotation (|R R^T - I| = {error:.3g}, det = "
-            f"{np.linalg.det(rotation):.3g}; expected an orthonormal matrix with determinant +1)"
+            f"transformation's rotation part has an entry of {largest:.3g}, beyond {MAX_LINEAR_ENTRY:g} "
+            "(a unit quaternion gives a rotation, whose entries are at most 1)"
         )
     length = math.hypot(*matrix[:3, 3])
     if length > MAX_TRANSLATION_M:
@@ -235,14 +259,19 @@ class ScenePoses(Protocol):
 
 # --------------------------------------------------------------------------------------------- device
 class PhoxiDevice:
-    """One simulated scanner: state, frame store and file output. Not thread-safe: the node serialises calls,
-    except the writers that :meth:`frame_writer` and :meth:`last_frame_writer` return: they touch only the frame
-    they were given, so the node runs them outside its lock.
+    """The simulated PhoXi Control with its scanners: state, frame store and file output. Not thread-safe: the node
+    serialises calls, except the writers that :meth:`frame_writer` and :meth:`last_frame_writer` return: they touch
+    only the frame they were given, so the node runs them outside its lock.
 
-    Files: requested names resolve under ``output_dir`` (the node's working directory, as the driver's paths);
-    absolute names may also point into ``allowed_dirs``; ``..``, ``~`` and anything else (symlinks resolved) are
-    refused with a message naming the root (:class:`~agiprobot_measurement.common.files.FileRoot`). An existing file
-    is replaced, as the driver does (its API has no overwrite flag), atomically.
+    ``scanners`` is the device list (default: one scanner :data:`~.models.SIMULATED_SCANNER_ID`, or
+    ``hardware_identification``, of ``model``); the device starts disconnected. Capturing settings belong to the
+    device and are kept across connections.
+
+    Files: requested names resolve under ``output_dir`` (the node's working directory, as the driver's paths); a
+    leading ``~`` is the home folder (as the driver replaces it with ``$HOME``); absolute names may also point into
+    ``allowed_dirs``; ``..`` and anything else (symlinks resolved) are refused with a message naming the allowed
+    folders (:class:`~agiprobot_measurement.common.files.FileRoot`). An existing file is replaced, as the driver does
+    (its API has no overwrite flag), atomically.
     """
 
     def __init__(
@@ -255,41 +284,76 @@ class PhoxiDevice:
         frame_buffer_size: int = 3,
         settings: ScanSettings | None = None,
         allowed_dirs: Iterable[str | Path] = (),
+        scanners: Iterable[SimulatedScanner] | None = None,
+        environ: Mapping[str, str] | None = None,
     ):
         if frame_buffer_size < 1:
             raise ConfigError("frame_buffer_size must be at least 1")
-        self.model = model
-        self.scanner = StructuredLightScanner(model)
+        self.scanners = list(scanners or [SimulatedScanner(hardware_identification or SIMULATED_SCANNER_ID, model)])
+        if not self.scanners:
+            raise ConfigError("the simulated PhoXi Control needs at least one scanner")
+        self.default_model = model
         self.scene = scene
         self.robot = robot
         self.files = FileRoot(Path(output_dir), tuple(Path(d) for d in allowed_dirs), purpose="PhoXi frame file")
         self.output_dir = self.files.root
-        self.hardware_identification = hardware_identification or f"PhoXi3DScanner-{model.name}-sim"
+        self.environ = os.environ if environ is None else environ
         self.frame_buffer_size = int(frame_buffer_size)
         self.settings = settings or ScanSettings()
-        self.connected = False
+        self.current: SimulatedScanner | None = None
+        self._scanner_optics: dict[str, StructuredLightScanner] = {}
         self.acquiring = False
+        self.trigger_mode = TRIGGER_SOFTWARE
         self.coordinate_space = CAMERA_SPACE
-        self.transformations = {CUSTOM_SPACE: np.eye(4)}
+        self.transformations = {space: np.eye(4) for space in COORDINATE_SPACES if space != CAMERA_SPACE}
         self.frames: OrderedDict[int, Frame] = OrderedDict()
         self.next_index = 0
         self.last_frame: Frame | None = None
 
     # -------------------------------------------------------------------------- connection, acquisition
-    def connect(self, name: str = "") -> None:
-        """Connect to this scanner: ``name`` is its hardware identification, or empty for the default."""
-        if name not in ("", self.hardware_identification):
-            raise PhoxiError(f"Scanner not found: '{name}' (available: {self.hardware_identification})")
-        self.connected = True
+    @property
+    def connected(self) -> bool:
+        return self.current is not None
+
+    @property
+    def model(self) -> ScannerModel:
+        """The connected scanner's model (the default model while disconnected)."""
+        return self.current.model if self.current is not None else self.default_model
+
+    @property
+    def hardware_identification(self) -> str:
+        """The connected scanner's id, else the first listed one (what a script would connect to)."""
+        return (self.current or self.scanners[0]).hw_identification
+
+    def device_list(self) -> list[SimulatedScanner]:
+        return list(self.scanners)
+
+    def connect(self, name: str) -> None:
+        """The driver's connectCamera: connect to the listed scanner ``name`` (its hardware identification), with the
+        software trigger and acquisition started; connecting again to the connected one only does the latter."""
+        name = str(name)
+        if self.current is not None and self.current.hw_identification == name:
+            self.set_trigger_mode(TRIGGER_SOFTWARE, True)
+            return
+        scanner = next((s for s in self.scanners if s.hw_identification == name), None)
+        if scanner is None:
+            listed = ", ".join(s.hw_identification for s in self.scanners)
+            raise PhoxiError(f"Scanner not found: '{name}' (the simulated PhoXi Control lists {listed})")
+        self.disconnect()
+        self.current = scanner
+        self.trigger_mode = TRIGGER_SOFTWARE
         self.acquiring = True
 
     def disconnect(self) -> None:
-        self.connected = False
+        """Disconnect (nothing happens when not connected); the frames of the connection are gone."""
+        self.current = None
         self.acquiring = False
+        self.frames.clear()
+        self.last_frame = None
 
     def _require_connected(self) -> None:
         if not self.connected:
-            raise PhoxiError("Scanner is not connected (call connect_camera)")
+            raise PhoxiError(NOT_CONNECTED)
 
     def start_acquisition(self) -> None:
         self._require_connected()
@@ -299,6 +363,19 @@ class PhoxiDevice:
         self._require_connected()
         self.acquiring = False
 
+    def set_trigger_mode(self, mode: int, start_acquisition: bool) -> None:
+        """The driver's setTriggerMode: the trigger mode (0 free run, 1 software), then acquisition started or
+        stopped as ``start_acquisition`` says."""
+        mode = int(mode)
+        if mode not in (TRIGGER_FREERUN, TRIGGER_SOFTWARE):
+            raise PhoxiError(
+                f"Invalid trigger mode {mode}: the simulated scanner runs 0 Freerun and 1 Software (a hardware "
+                "trigger needs the cable)"
+            )
+        self._require_connected()
+        self.trigger_mode = mode
+        self.acquiring = bool(start_acquisition)
+
     def status(self) -> tuple[str, str]:
         """(level, message) of the driver's diagnostics: OK Ready / WARN Acquisition not started / ERROR Not connected."""
         if not self.connected:
@@ -307,24 +384,46 @@ class PhoxiDevice:
             return "WARN", "Acquisition not started"
         return "OK", "Ready"
 
+    def diagnostic_values(self) -> list[tuple[str, str]]:
+        """The driver's diagnostics key/values: HardwareIdentification and Trigger mode while connected, else none."""
+        if not self.connected:
+            return []
+        return [
+            ("HardwareIdentification", self.current.hw_identification),
+            ("Trigger mode", TRIGGER_MODE_NAMES.get(self.trigger_mode, "Undefined")),
+        ]
+
     # ------------------------------------------------------------------------------------------ frames
     def trigger(self, camera_pose: np.ndarray, link_poses: dict | None = None) -> Frame:
-        """Take a new frame of the scene (and the robot at ``link_poses``) from ``camera_pose`` (world <- sensor)."""
+        """The driver's triggerImage: switch to the software trigger, start acquisition, take a new frame of the scene
+        (and the robot at ``link_poses``) from ``camera_pose`` (world <- sensor)."""
+        self.set_trigger_mode(TRIGGER_SOFTWARE, True)
+        return self._take(camera_pose, link_poses)
+
+    def free_run_frame(self, camera_pose: np.ndarray, link_poses: dict | None = None) -> Frame:
+        """A frame the scanner takes by itself in free-run mode (the trigger mode stays)."""
         self._require_connected()
-        if not self.acquiring:
-            raise PhoxiError("Acquisition not started (call start_acquisition)")
+        if not self.free_running():
+            raise PhoxiError("the scanner is not in free run with acquisition started")
+        return self._take(camera_pose, link_poses)
+
+    def _take(self, camera_pose: np.ndarray, link_poses: dict | None) -> Frame:
         parts = [self.scene]
         if self.robot is not None and link_poses:
             parts.append(self.robot.posed(link_poses))
         geometry = SceneGeometry.concatenate(parts)
         index = self.next_index
-        frame = self.scanner.capture(geometry, camera_pose, self.settings, index, RayCaster(geometry))
+        optics = self._scanner_optics.get(self.model.name)
+        if optics is None or optics.model is not self.model:
+            optics = self._scanner_optics[self.model.name] = StructuredLightScanner(self.model)
+        frame = optics.capture(geometry, camera_pose, self.settings, index, RayCaster(geometry))
         frame.coordinate_space = self.coordinate_space
         frame.output_transform = self.output_transform().copy()
         self.next_index += 1
         self.frames[index] = frame
         while len(self.frames) > self.frame_buffer_size:
             self.frames.popitem(last=False)
+        self.last_frame = frame
         return frame
 
     def frame(self, index: int) -> Frame:
@@ -343,8 +442,16 @@ class PhoxiDevice:
         """:meth:`get_frame` with the poses asked of ``poses`` only when a new frame is taken."""
         if index >= 0:
             return self.frame(index)
-        links = poses.link_poses(self.robot.link_names) if self.robot is not None else {}
-        return self.trigger(poses.camera_pose(), links)
+        self._require_connected()
+        return self.trigger(poses.camera_pose(), self._link_poses(poses))
+
+    def capture_free_run(self, poses: ScenePoses) -> Frame:
+        """:meth:`free_run_frame` with the poses asked of ``poses``."""
+        self._require_connected()
+        return self.free_run_frame(poses.camera_pose(), self._link_poses(poses))
+
+    def _link_poses(self, poses: ScenePoses) -> dict:
+        return poses.link_poses(self.robot.link_names) if self.robot is not None else {}
 
     def save_captured_frame(self, index: int, requested: str, poses: ScenePoses, organized: bool = True):
         """The driver's saveFrame: frame ``index`` (a new one for < 0) as PLY; a bad path is refused before rendering.
@@ -359,9 +466,6 @@ class PhoxiDevice:
         frame = self.capture(index, poses)
         return frame, self.frame_writer(frame, requested, organized)
 
-    def mark_published(self, frame: Frame) -> None:
-        self.last_frame = frame
-
     # ---------------------------------------------------------------------------------------- information
     def require_connected(self) -> None:
         """PhoxiError unless connected: what hardware identification and capturing modes need."""
@@ -372,31 +476,46 @@ class PhoxiDevice:
         self._require_connected()
         return self.model.supported_resolutions()
 
-    def free_running(self, trigger_mode: int) -> bool:
-        """Whether frames should be taken one after the other (trigger mode 0 = free run while acquiring)."""
-        return trigger_mode == 0 and self.connected and self.acquiring
+    def free_running(self) -> bool:
+        """Whether the scanner takes frames one after the other (free-run trigger while acquiring)."""
+        return self.connected and self.acquiring and self.trigger_mode == TRIGGER_FREERUN
 
     # ----------------------------------------------------------------------------------------- settings
     def update_settings(self, **changes) -> None:
         self.settings = replace(self.settings, **changes)
 
-    def reconfigure(self, config: dict, previous: Mapping | None = None) -> str:
-        """Apply a dynamic_reconfigure configuration (changed in place: a refused coordinate space is put back to the
-        device's, a number that is not finite to its ``previous`` value, the defaults without one); returns why
-        something was refused, or ''. (dynamic_reconfigure clamps to the ranges, but NaN passes its comparisons.)"""
-        previous = phoxi_config.defaults if previous is None else previous
+    def reconfigure(self, config: dict, level: int = -1, previous: Mapping | None = None) -> str:
+        """The driver's dynamic_reconfigure callback: apply what ``level``'s bits name (-1: everything) and change
+        ``config`` in place to what holds afterwards. Not connected: ``config`` becomes ``previous`` (the driver
+        refuses to reconfigure without a scanner). A number that is not finite is put back to its ``previous`` value
+        (dynamic_reconfigure clamps to the ranges, but NaN passes its comparisons); a refused trigger mode or space
+        is put back to the device's. Returns why something was refused, or ''."""
+        previous = dict(phoxi_config.defaults if previous is None else previous)
+        if not self.connected:
+            config.clear()
+            config.update(previous)
+            return "Node is not connected to scanner"
         refusals = []
         for name in _DOUBLE_PARAMETERS:
             if not math.isfinite(float(config[name])):
                 refusals.append(f"{name} {config[name]} refused: not a finite number (kept {previous[name]})")
                 config[name] = previous[name]
-        if config["coordinate_space"] != self.coordinate_space:
+        if level & phoxi_config.LEVEL_TRIGGER:
+            try:
+                self.set_trigger_mode(config["trigger_mode"], config["start_acquisition"])
+            except PhoxiError as exc:
+                refusals.append(f"trigger_mode {config['trigger_mode']} refused: {exc}")
+        config["trigger_mode"], config["start_acquisition"] = self.trigger_mode, self.acquiring
+        if level & phoxi_config.LEVEL_COORDINATE_SPACE and config["coordinate_space"] != self.coordinate_space:
             try:
                 self.set_coordinate_space(config["coordinate_space"])
             except PhoxiError as exc:
                 refusals.append(f"coordinate_space {config['coordinate_space']} refused: {exc}")
-                config["coordinate_space"] = self.coordinate_space
-        self.update_settings(**{name: config[name] for name in SETTING_NAMES})
+        config["coordinate_space"] = self.coordinate_space
+        changes = {name: config[name] for name in SETTING_NAMES if level & phoxi_config.level[name]}
+        self.update_settings(**changes)
+        for name in SETTING_NAMES:  # what the scanner holds, also for the levels not applied
+            config[name] = getattr(self.settings, name)
         return "; ".join(refusals)
 
     # -------------------------------------------------------------------------------- coordinate spaces
@@ -404,38 +523,36 @@ class PhoxiDevice:
         space = self.coordinate_space if space is None else space
         return np.eye(4) if space == CAMERA_SPACE else self.transformations[space]
 
-    def check_space(self, space: int) -> None:
+    def set_coordinate_space(self, space: int) -> None:
+        """Spaces 1-5 switch (2 and 3 are identity: no marker calibration); 0 NoValue is accepted and changes
+        nothing; anything else is refused."""
+        space = int(space)
+        self._require_connected()
+        if space == NO_VALUE_SPACE:
+            return
         if space not in COORDINATE_SPACES:
             known = ", ".join(f"{k} {v}" for k, v in COORDINATE_SPACES.items())
-            raise PhoxiError(f"Unknown coordinate space {space} (known: {known})")
-        if space in (MOUNTING_SPACE, MARKER_SPACE):
-            raise PhoxiError(
-                f"{COORDINATE_SPACES[space]} needs a marker calibration that the simulated scanner does not have "
-                "(use 1 CameraSpace, or 5 CustomSpace with V2/set_transformation)"
-            )
-        if space != CAMERA_SPACE and space not in self.transformations:
-            raise PhoxiError(
-                f"{COORDINATE_SPACES[space]} has no transformation yet: set one with V2/set_transformation"
-            )
-
-    def set_coordinate_space(self, space: int) -> None:
-        self.check_space(int(space))
-        self.coordinate_space = int(space)
+            raise PhoxiError(f"Unknown coordinate space {space} (known: 0 NoValue, {known})")
+        self.coordinate_space = space
 
     def set_transformation(self, matrix: np.ndarray, space: int, set_space: bool, save_settings: bool) -> None:
-        """Store the transformation of RobotSpace or CustomSpace; ``set_space`` also switches to that space.
+        """Store the transformation of RobotSpace or CustomSpace and switch to that space. ``set_space`` makes no
+        difference, as in the driver (PhoXiInterface.cpp switches in both cases).
 
         ``save_settings`` is accepted: the real scanner persists the transformation in PhoXi Control, the simulated
         one keeps it for the node's lifetime either way.
         """
+        self._require_connected()
         space = int(space)
         if space not in (ROBOT_SPACE, CUSTOM_SPACE):
             name = COORDINATE_SPACES.get(space, f"unknown space {space}")
-            raise PhoxiError(f"A transformation can be set for 4 RobotSpace and 5 CustomSpace only, not {name}")
+            raise PhoxiError(
+                f"Coordinate space is not supported: a transformation is set for 4 RobotSpace and 5 CustomSpace "
+                f"only, not {name}"
+            )
         matrix = check_transformation(matrix)
         self.transformations[space] = matrix.copy()
-        if set_space:
-            self.coordinate_space = space
+        self.coordinate_space = space
 
     # -------------------------------------------------------------------------------------------- files
     def output_path(self, requested: str, ply_only: bool = False) -> Path:
@@ -444,10 +561,22 @@ class PhoxiDevice:
         extension = Path(str(requested)).suffix.lower().lstrip(".")
         if ply_only and extension in RAW_EXTENSIONS:
             raise PhoxiError(self._raw_refusal(extension))
+        requested = self._expand_home(str(requested))
         try:
             return self.files.for_writing(requested, overwrite=True)
         except PathPolicyError as exc:
             raise PhoxiError(str(exc)) from exc
+
+    def _expand_home(self, requested: str) -> str:
+        """A leading ``~`` is the home folder, as the driver replaces it with ``$HOME`` (and refuses without one)."""
+        if requested == "~" or requested.startswith("~/"):
+            home = self.environ.get("HOME")
+            if not home:
+                raise PhoxiError(
+                    "'~' found in 'path' parameter but environment variable 'HOME' not found: pass an absolute path"
+                )
+            return home + requested[1:]
+        return requested
 
     @staticmethod
     def _raw_refusal(extension: str) -> str:
@@ -467,11 +596,11 @@ class PhoxiDevice:
         return lambda: self._write_ply(frame, path, organized)
 
     def save_last_frame(self, requested: str, organized: bool = True) -> Path:
-        """The last published frame in the format its extension names (ply, ptx, tif)."""
+        """The last triggered frame (as the driver's SaveLastOutput) in the format its extension names (ply, ptx, tif)."""
         return self.last_frame_writer(requested, organized)()
 
     def last_frame_writer(self, requested: str, organized: bool = True) -> Callable[[], Path]:
-        """A writer of the last published frame in the format its extension names (ply, ptx, tif); extension, frame
+        """A writer of the last triggered frame in the format its extension names (ply, ptx, tif); extension, frame
         and path are checked now, so the writer, which needs no device state, can run outside the node's lock."""
         extension = Path(str(requested)).suffix.lower().lstrip(".")
         if extension not in SAVE_LAST_FRAME_EXTENSIONS:
@@ -479,7 +608,9 @@ class PhoxiDevice:
         if extension not in WRITTEN_EXTENSIONS:
             raise PhoxiError(self._raw_refusal(extension))
         if self.last_frame is None:
-            raise PhoxiError("There is no frame to save: trigger or get a frame first")
+            raise PhoxiError(
+                "Unsuccessful save: no frame triggered since the scanner was connected (trigger_image or get_frame -1)"
+            )
         path = self.output_path(requested)
         frame = self.last_frame
         if extension == "ply":

@@ -23,17 +23,23 @@ __all__ = [
     "PHOXI_MODELS_FILE",
     "RESOLUTION_HIGH",
     "RESOLUTION_LOW",
+    "SIMULATED_SCANNER_ID",
     "CameraIntrinsics",
     "NoiseModel",
     "ScannerModel",
+    "SimulatedScanner",
     "load_scanner_model",
     "load_scanner_models",
+    "load_simulated_scanners",
+    "simulated_scanners_from_entries",
 ]
 
 PHOXI_MODELS_FILE = CONFIG_DIR / "phoxi_models.yaml"
 
 RESOLUTION_LOW = 0
 RESOLUTION_HIGH = 1
+#: the hardware identification of the one scanner listed when the configuration lists none
+SIMULATED_SCANNER_ID = "PhoXi3DScanner-sim"
 
 
 @dataclass(frozen=True)
@@ -182,3 +188,81 @@ def load_scanner_model(name: str, path: str | Path | None = None) -> ScannerMode
     if name not in models:
         raise ConfigError(f"unknown PhoXi model {name!r}; models in {path or PHOXI_MODELS_FILE}: {', '.join(models)}")
     return models[name]
+
+
+@dataclass(frozen=True)
+class SimulatedScanner:
+    """One scanner the simulated PhoXi Control lists (get_device_list) and connects to: its hardware identification
+    (what a real scanner reports, e.g. ``2019-04-011-LC3``), its model and the device information it reports."""
+
+    hw_identification: str
+    model: ScannerModel
+    name: str = ""
+    firmware_version: str = "1.2.35"
+    variant: str = ""
+    ip_address: str = "127.0.0.1"
+    is_alpha: bool = False
+
+    def __post_init__(self):
+        if not self.hw_identification.strip():
+            raise ConfigError("a simulated scanner needs a non-empty hw_identification")
+        if not self.name:
+            object.__setattr__(self, "name", f"PhoXi3DScanner {self.model.name} (simulated)")
+        if not self.variant:
+            object.__setattr__(self, "variant", self.model.name)
+
+
+_SCANNER_KEYS = {"hw_identification", "model", "name", "firmware_version", "variant", "ip_address", "is_alpha"}
+
+
+def simulated_scanners_from_entries(
+    entries, models: dict[str, ScannerModel], default_model: str, where: str
+) -> list[SimulatedScanner]:
+    """The scanner list of ``devices`` entries (mappings with the :class:`SimulatedScanner` keys; ``model`` empty or
+    missing = ``default_model``); an empty list gives one scanner :data:`SIMULATED_SCANNER_ID` of the default model."""
+    if default_model not in models:
+        raise ConfigError(f"{where}: unknown PhoXi model {default_model!r} (models: {', '.join(models)})")
+    if not entries:
+        return [SimulatedScanner(SIMULATED_SCANNER_ID, models[default_model])]
+    if not isinstance(entries, list):
+        raise ConfigError(f"{where}: devices must be a list of scanners, got {type(entries).__name__}")
+    scanners, seen = [], set()
+    for i, entry in enumerate(entries):
+        here = f"{where}: devices[{i}]"
+        if not isinstance(entry, dict):
+            raise ConfigError(f"{here}: expected a mapping with hw_identification, model, ...")
+        unknown = set(entry) - _SCANNER_KEYS
+        if unknown:
+            raise ConfigError(f"{here}: unknown key(s) {sorted(unknown)} (known: {', '.join(sorted(_SCANNER_KEYS))})")
+        hw_id = str(require(entry, "hw_identification", here)).strip()
+        if not hw_id or hw_id in seen:
+            raise ConfigError(f"{here}: hw_identification {hw_id!r} is empty or listed twice")
+        seen.add(hw_id)
+        model_name = str(entry.get("model") or default_model)
+        if model_name not in models:
+            raise ConfigError(f"{here}: unknown PhoXi model {model_name!r} (models: {', '.join(models)})")
+        is_alpha = entry.get("is_alpha", False)
+        if not isinstance(is_alpha, bool):
+            raise ConfigError(f"{here}: is_alpha must be true or false")
+        scanners.append(
+            SimulatedScanner(
+                hw_identification=hw_id,
+                model=models[model_name],
+                name=str(entry.get("name") or ""),
+                firmware_version=str(entry.get("firmware_version", "1.2.35")),
+                variant=str(entry.get("variant") or ""),
+                ip_address=str(entry.get("ip_address", "127.0.0.1")),
+                is_alpha=is_alpha,
+            )
+        )
+    return scanners
+
+
+def load_simulated_scanners(default_model: str, path: str | Path | None = None, entries=None) -> list[SimulatedScanner]:
+    """The scanners of ``entries`` (e.g. the node's ``~devices``) or else of the models file's ``devices`` list."""
+    path = Path(path) if path else PHOXI_MODELS_FILE
+    models = load_scanner_models(path)
+    if entries is None:
+        data = read_yaml(path)
+        return simulated_scanners_from_entries(data.get("devices"), models, default_model, str(path))
+    return simulated_scanners_from_entries(entries, models, default_model, "~devices")

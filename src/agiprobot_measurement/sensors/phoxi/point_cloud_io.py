@@ -227,8 +227,10 @@ def write_point_tiff(path: str | Path, points: np.ndarray) -> Path:
         raise ValueError("TIFF needs an organised cloud (H, W, 3)")
 
     def write(tmp: Path) -> None:
-        # OpenCV stores 3-channel images as RGB from its BGR order: reverse so the file holds x, y, z
-        if not cv2.imwrite(str(tmp), np.ascontiguousarray(points[:, :, ::-1])):
+        # OpenCV stores 3-channel images as RGB from its BGR order: reverse so the file holds x, y, z. LZW is
+        # named explicitly: OpenCV 4's default for 3-channel float is the lossy SGI LogLuv coding.
+        lossless = [cv2.IMWRITE_TIFF_COMPRESSION, 5]
+        if not cv2.imwrite(str(tmp), np.ascontiguousarray(points[:, :, ::-1]), lossless):
             raise OSError(f"OpenCV could not write {tmp}")
 
     return atomic_write(path, write, suffix=Path(path).suffix, make_parents=True)

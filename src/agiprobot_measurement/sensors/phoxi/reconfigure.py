@@ -3,13 +3,16 @@
 ``dynamic_reconfigure.server.Server(phoxi_config, callback)`` takes this module in place of a ``*Config.py``
 generated from a ``.cfg`` file (it reads ``config_description``, ``defaults``, ``min``, ``max``), so the package needs
 no dynamic_reconfigure code generation in CMake. Names, ranges, defaults and levels follow the real driver's
-``phoxi_camera.cfg`` and the reference (``send_depth_map``, ``coordinate_space``); ``organized_cloud`` and
-``free_run_rate_hz`` are the simulator's additions. Pure data: importable without ROS.
+``cfg/phoxi_camera.cfg`` (release 1.8.0) exactly, every parameter and nothing else (the simulator's own settings,
+such as ``~free_run_rate_hz``, are private parameters read at start-up). Pure data: importable without ROS.
 """
 
 from __future__ import annotations
 
 __all__ = [
+    "LEVEL_COORDINATE_SPACE",
+    "LEVEL_RESOLUTION",
+    "LEVEL_TRIGGER",
     "PARAMETERS",
     "STATIC_PARAMETERS",
     "all_level",
@@ -42,21 +45,40 @@ def _enum(description: str, *constants) -> str:
 
 
 _EXPOSURE_ENUM = _enum(
-    "Time for projecting one pattern (ms)",
+    "The time for projection of one pattern",
     *[
-        (f"Exposure_{str(ms).replace('.', '_')}", "int", i, f"{ms} ms")
-        for i, ms in enumerate(
-            (10.24, 14.336, 20.48, 24.576, 30.72, 34.816, 40.96, 49.152, 75.776, 79.872, 90.112, 100.352)
+        (name, "int", i, name)
+        for i, name in enumerate(
+            (
+                "10_240",
+                "14_336",
+                "20_480",
+                "24_576",
+                "30_720",
+                "34_816",
+                "40_960",
+                "49_152",
+                "75_776",
+                "79_872",
+                "90_112",
+                "100_352",
+            )
         )
     ],
 )
 
-#: name, type, level, description, default, min, max, edit_method
+#: the bits of ``level`` that name what a reconfiguration changed (the driver applies only those)
+LEVEL_RESOLUTION = 1 << 1
+LEVEL_TRIGGER = 1 << 4  # trigger_mode and start_acquisition
+LEVEL_COORDINATE_SPACE = 1 << 12
+
+#: name, type, level, description, default, min, max, edit_method: the driver's cfg/phoxi_camera.cfg (1.8.0), in its
+#: order, with its levels, ranges, defaults and enum names
 PARAMETERS = (
     (
         "resolution",
         "int",
-        1 << 1,
+        LEVEL_RESOLUTION,
         "Resolution: 1 High (2064x1544), 0 Low (1032x772)",
         1,
         0,
@@ -67,65 +89,71 @@ PARAMETERS = (
             ("High", "int", 1, "High resolution (2064x1544)"),
         ),
     ),
-    ("scan_multiplier", "int", 1 << 2, "Scans averaged into one frame", 1, 1, 50, ""),
-    ("shutter_multiplier", "int", 1 << 3, "Exposures per pattern", 1, 1, 20, ""),
+    ("scan_multiplier", "int", 1 << 2, "Scan multiplier", 1, 1, 50, ""),
+    ("shutter_multiplier", "int", 1 << 3, "Shutter multiplier", 1, 1, 20, ""),
     (
         "trigger_mode",
         "int",
-        1 << 4,
-        "Trigger mode: 0 free run (continuous), 1 software trigger",
+        LEVEL_TRIGGER,
+        "Trigger mode: 0 free run, 1 software trigger",
         1,
         0,
         1,
-        _enum("Trigger mode", ("Freerun", "int", 0, "Free run"), ("Software", "int", 1, "Software trigger")),
+        _enum("Trigger enum", ("Freerun", "int", 0, "Freerun."), ("Software", "int", 1, "Software trigger.")),
     ),
-    ("timeout", "int", 1 << 5, "Timeout (ms): 0 zero, -1 infinite, -2 last stored, -3 default", -3, -3, 3600000, ""),
+    ("start_acquisition", "bool", LEVEL_TRIGGER, "Start acquisition", True, False, True, ""),
+    (
+        "timeout",
+        "int",
+        1 << 5,
+        "Timeout (ms): 0 zero, -1 infinite, -2 last stored, -3 default (10 s)",
+        -3,
+        -3,
+        0,
+        _enum(
+            "Timeout",
+            ("ZeroTimeout", "int", 0, "ZeroTimeout"),
+            ("Infinity", "int", -1, "Infinity"),
+            ("LastStored", "int", -2, "LastStored"),
+            ("Default", "int", -3, "Default timeout 10s"),
+        ),
+    ),
     ("confidence", "double", 1 << 6, "Max inaccuracy (mm) of a kept point", 3.0, 0.0, 10.0, ""),
-    ("send_point_cloud", "bool", 1 << 7, "Publish the point cloud", True, False, True, ""),
-    ("send_normal_map", "bool", 1 << 8, "Publish the normal map", True, False, True, ""),
-    ("send_confidence_map", "bool", 1 << 9, "Publish the confidence map", True, False, True, ""),
-    ("send_texture", "bool", 1 << 10, "Publish texture and rgb_texture", True, False, True, ""),
-    ("send_depth_map", "bool", 1 << 11, "Publish the depth map", True, False, True, ""),
+    ("send_point_cloud", "bool", 1 << 7, "Send point cloud.", True, False, True, ""),
+    ("send_normal_map", "bool", 1 << 8, "Send normal map.", True, False, True, ""),
+    ("send_confidence_map", "bool", 1 << 9, "Send confidence map", True, False, True, ""),
+    ("send_texture", "bool", 1 << 10, "Send texture", True, False, True, ""),
+    ("send_depth_map", "bool", 1 << 11, "Send depth map", True, False, True, ""),
     (
         "coordinate_space",
         "int",
-        1 << 12,
+        LEVEL_COORDINATE_SPACE,
         "Coordinate space of the cloud",
         1,
         1,
         5,
         _enum(
             "Coordinate space",
-            ("CameraSpace", "int", 1, "Camera space"),
-            ("MountingSpace", "int", 2, "Mounting space"),
-            ("MarkerSpace", "int", 3, "Marker space"),
-            ("RobotSpace", "int", 4, "Robot space"),
-            ("CustomSpace", "int", 5, "Custom space"),
+            ("CameraSpace", "int", 1, "CameraSpace"),
+            ("MountingSpace", "int", 2, "MountingSpace"),
+            ("MarkerSpace", "int", 3, "MarkerSpace"),
+            ("RobotSpace", "int", 4, "RobotSpace"),
+            ("CustomSpace", "int", 5, "CustomSpace"),
         ),
     ),
+    ("organized_cloud", "bool", 1 << 13, "Send organized cloud (if true).", True, False, True, ""),
     (
         "ambient_light_suppression",
         "bool",
-        1 << 13,
+        1 << 14,
         "Ambient light suppression (shutter multiplier 2)",
         False,
         False,
         True,
         "",
     ),
-    ("single_pattern_exposure", "int", 1 << 14, "Single pattern exposure (index)", 2, 0, 11, _EXPOSURE_ENUM),
-    ("camera_only_mode", "bool", 1 << 15, "2D camera only: texture, no 3D points", False, False, True, ""),
-    (
-        "organized_cloud",
-        "bool",
-        1 << 16,
-        "Organised cloud (H x W, zeros kept) or valid points only",
-        True,
-        False,
-        True,
-        "",
-    ),
-    ("free_run_rate_hz", "double", 1 << 17, "Frame rate in free-run mode (Hz)", 1.0, 0.01, 30.0, ""),
+    ("single_pattern_exposure", "int", 1 << 15, "Single pattern exposure (index)", 2, 0, 11, _EXPOSURE_ENUM),
+    ("camera_only_mode", "bool", 1 << 16, "2D camera only: texture, no 3D points", False, False, True, ""),
 )
 
 config_description = {

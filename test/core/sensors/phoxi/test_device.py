@@ -11,8 +11,12 @@ from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.sensors.phoxi import reconfigure as phoxi_config
 from agiprobot_measurement.sensors.phoxi.device import (
     CUSTOM_SPACE,
+    MAX_LINEAR_ENTRY,
     MAX_TRANSLATION_M,
+    NOT_CONNECTED,
     ROBOT_SPACE,
+    TRIGGER_FREERUN,
+    TRIGGER_SOFTWARE,
     PhoxiDevice,
     PhoxiError,
     check_transformation,
@@ -23,7 +27,13 @@ from agiprobot_measurement.sensors.phoxi.device import (
     overridden_pose,
     transform_from_quaternion,
 )
-from agiprobot_measurement.sensors.phoxi.models import RESOLUTION_HIGH, RESOLUTION_LOW, load_scanner_model
+from agiprobot_measurement.sensors.phoxi.models import (
+    RESOLUTION_HIGH,
+    RESOLUTION_LOW,
+    SIMULATED_SCANNER_ID,
+    SimulatedScanner,
+    load_scanner_model,
+)
 from agiprobot_measurement.sensors.phoxi.point_cloud_io import read_ply, read_point_tiff
 from agiprobot_measurement.sensors.phoxi.scene_geometry import SceneGeometry, primitive_mesh
 
@@ -40,7 +50,7 @@ def device(tmp_path):
     # a small sensor keeps the tests fast; the optics are the PhoXi M's
     model = replace(load_scanner_model("M"), resolutions={RESOLUTION_HIGH: (160, 120), RESOLUTION_LOW: (80, 60)})
     dev = PhoxiDevice(model, _wall(), tmp_path / "out", frame_buffer_size=2)
-    dev.connect("")
+    dev.connect(SIMULATED_SCANNER_ID)
     return dev
 
 
@@ -50,25 +60,80 @@ CAMERA = np.eye(4)
 # ------------------------------------------------------------------------------ connection, frames
 def test_connect_by_hardware_id_and_refuse_unknown_scanners(device):
     device.disconnect()
-    assert device.status() == ("ERROR", "Not connected")
-    with pytest.raises(PhoxiError, match="Scanner not found: 'nope'"):
-        device.connect("nope")
+    assert device.status() == ("ERROR", "Not connected") and device.diagnostic_values() == []
+    for name in ("nope", ""):  # "" is no scanner, as the driver's cameraList lookup
+        with pytest.raises(PhoxiError, match=f"^Scanner not found: '{name}'"):
+            device.connect(name)
+        assert not device.connected
     device.connect(device.hardware_identification)
     assert device.connected and device.acquiring and device.status() == ("OK", "Ready")
+    assert device.diagnostic_values() == [
+        ("HardwareIdentification", SIMULATED_SCANNER_ID),
+        ("Trigger mode", "Software"),
+    ]
 
 
-def test_acquisition_gates_triggering(device):
+def test_a_new_device_starts_disconnected(tmp_path):
+    model = load_scanner_model("M")
+    device = PhoxiDevice(model, _wall(), tmp_path)
+    assert not device.connected and not device.acquiring
+    for call in (device.start_acquisition, device.supported_capturing_modes, lambda: device.trigger(CAMERA)):
+        with pytest.raises(PhoxiError, match=f"^{NOT_CONNECTED}$"):
+            call()
+
+
+def test_the_device_list_is_configuration_and_a_real_id_can_be_simulated(tmp_path):
+    small = replace(load_scanner_model("S"), resolutions={RESOLUTION_HIGH: (40, 30), RESOLUTION_LOW: (20, 15)})
+    medium = replace(load_scanner_model("M"), resolutions={RESOLUTION_HIGH: (40, 30), RESOLUTION_LOW: (20, 15)})
+    scanners = [SimulatedScanner("2019-04-011-LC3", medium), SimulatedScanner("1711004", small, variant="S-old")]
+    device = PhoxiDevice(medium, _wall(), tmp_path, scanners=scanners)
+    assert [s.hw_identification for s in device.device_list()] == ["2019-04-011-LC3", "1711004"]
+    assert device.device_list()[0].variant == "M" and device.device_list()[1].variant == "S-old"
+    with pytest.raises(PhoxiError, match="lists 2019-04-011-LC3, 1711004"):
+        device.connect(SIMULATED_SCANNER_ID)
+    device.connect("1711004")
+    assert device.model is small and device.hardware_identification == "1711004"
+    first = device.trigger(CAMERA)
+    device.connect("2019-04-011-LC3")  # another scanner: the first one's frames are gone
+    assert device.model is medium and device.frames == {}
+    assert device.trigger(CAMERA).index == first.index + 1
+
+
+def test_triggering_switches_to_the_software_trigger_and_starts_acquisition(device):
     device.stop_acquisition()
     assert device.status() == ("WARN", "Acquisition not started")
-    with pytest.raises(PhoxiError, match="Acquisition not started"):
-        device.trigger(CAMERA)
-    device.start_acquisition()
-    assert device.trigger(CAMERA).index == 0
+    assert device.trigger(CAMERA).index == 0  # as PhoXiInterface::triggerImage: software trigger, acquisition on
+    assert device.acquiring and device.trigger_mode == TRIGGER_SOFTWARE
+    device.set_trigger_mode(TRIGGER_FREERUN, True)
+    assert device.free_running()
+    assert device.get_frame(-1, CAMERA).index == 1 and device.trigger_mode == TRIGGER_SOFTWARE
+    device.set_trigger_mode(TRIGGER_SOFTWARE, False)
+    assert not device.acquiring
+    with pytest.raises(PhoxiError, match="Invalid trigger mode 2"):
+        device.set_trigger_mode(2, True)
     device.disconnect()
-    with pytest.raises(PhoxiError, match="not connected"):
+    with pytest.raises(PhoxiError, match=NOT_CONNECTED):
         device.trigger(CAMERA)
-    with pytest.raises(PhoxiError, match="not connected"):
+    with pytest.raises(PhoxiError, match=NOT_CONNECTED):
         device.start_acquisition()
+
+
+def test_connecting_again_sets_the_software_trigger_and_starts_acquisition(device):
+    device.set_trigger_mode(TRIGGER_FREERUN, False)
+    frame = device.trigger(CAMERA)
+    device.set_trigger_mode(TRIGGER_FREERUN, False)
+    device.connect(device.hardware_identification)
+    assert (device.trigger_mode, device.acquiring) == (TRIGGER_SOFTWARE, True)
+    assert device.frame(frame.index) is frame, "the same connection keeps its frames"
+
+
+def test_free_run_frames_keep_the_trigger_mode(device):
+    with pytest.raises(PhoxiError, match="not in free run"):
+        device.free_run_frame(CAMERA)
+    device.set_trigger_mode(TRIGGER_FREERUN, True)
+    frames = [device.free_run_frame(CAMERA).index for _ in range(2)]
+    assert frames == [0, 1] and device.trigger_mode == TRIGGER_FREERUN
+    assert device.frame(1).index == 1
 
 
 def test_frame_ids_count_up_and_only_held_frames_are_served(device):
@@ -90,16 +155,23 @@ def test_settings_reach_the_frames(device):
 
 
 # ---------------------------------------------------------------------------------------- spaces
-def test_coordinate_spaces(device):
-    with pytest.raises(PhoxiError, match="MarkerSpace needs a marker calibration"):
-        device.set_coordinate_space(3)
-    with pytest.raises(PhoxiError, match="RobotSpace has no transformation yet"):
-        device.set_coordinate_space(ROBOT_SPACE)
+def test_coordinate_spaces_0_to_5_are_accepted_as_by_the_driver(device):
+    for space in (1, 2, 3, 4, 5):
+        device.set_coordinate_space(space)
+        assert device.coordinate_space == space
+        np.testing.assert_array_equal(device.output_transform(), np.eye(4))  # identity until one is set
+    device.set_coordinate_space(0)  # NoValue: accepted, the space stays
+    assert device.coordinate_space == 5
     with pytest.raises(PhoxiError, match="Unknown coordinate space 9"):
         device.set_coordinate_space(9)
-    device.set_coordinate_space(CUSTOM_SPACE)  # identity until a transformation is set
-    with pytest.raises(PhoxiError, match="4 RobotSpace and 5 CustomSpace only"):
+    with pytest.raises(PhoxiError, match=r"^Coordinate space is not supported: .*4 RobotSpace and 5 CustomSpace only"):
         device.set_transformation(np.eye(4), 1, True, False)
+    device.disconnect()
+    with pytest.raises(PhoxiError, match=NOT_CONNECTED):
+        device.set_coordinate_space(1)
+
+
+def test_custom_space_frames(device):
     shift = transform_from_quaternion([0.0, 0.0, 1.0], [0.0, 0.0, 0.0, 1.0])
     device.set_transformation(shift, CUSTOM_SPACE, set_space=True, save_settings=False)
     custom = device.trigger(CAMERA)
@@ -116,14 +188,31 @@ def test_coordinate_spaces(device):
     np.testing.assert_array_equal(again, points_custom)
 
 
-def test_transformations_must_be_proper(device):
-    with pytest.raises(PhoxiError, match="zero quaternion"):
-        transform_from_quaternion([0, 0, 0], [0, 0, 0, 0])
-    mirror = np.diag([1.0, 1.0, -1.0, 1.0])
-    with pytest.raises(PhoxiError, match="not a proper rotation"):
-        device.set_transformation(mirror, CUSTOM_SPACE, True, False)
-    # a quaternion that is not normalised is normalised (rotation by 90 deg about z)
-    np.testing.assert_allclose(transform_from_quaternion([0, 0, 0], [0, 0, 2, 2])[:3, 0], [0, 1, 0], atol=1e-12)
+@pytest.mark.parametrize("space", [ROBOT_SPACE, CUSTOM_SPACE])
+def test_set_transformation_switches_the_space_even_without_set_space(device, space):
+    shift = transform_from_quaternion([0.0, 0.5, 0.0], [0.0, 0.0, 0.0, 1.0])
+    device.set_transformation(shift, space, set_space=False, save_settings=False)  # PhoXiInterface.cpp:287/294
+    assert device.coordinate_space == space
+    np.testing.assert_array_equal(device.output_transform(), shift)
+    device.set_coordinate_space(1)
+    device.set_coordinate_space(space)  # the transformation stays with its space
+    np.testing.assert_array_equal(device.output_transform(), shift)
+
+
+def test_transformations_are_built_as_the_drivers_eigen_conversion(device):
+    # geometry_msgs/Transform() has a zero quaternion: Eigen's formula gives the identity, and the driver accepts it
+    np.testing.assert_array_equal(transform_from_quaternion([0, 0, 0], [0, 0, 0, 0]), np.eye(4))
+    # a unit quaternion is its rotation (90 deg about z)
+    half = np.sqrt(0.5)
+    np.testing.assert_allclose(transform_from_quaternion([0, 0, 0], [0, 0, half, half])[:3, 0], [0, 1, 0], atol=1e-12)
+    # a non-unit one is not normalised: the driver hands Eigen's matrix on as it is
+    scaled = transform_from_quaternion([0, 0, 0], [0, 0, 2, 2])
+    np.testing.assert_allclose(scaled[:3, :3], [[-7, -8, 0], [8, -7, 0], [0, 0, 1]], atol=1e-12)
+    device.set_transformation(scaled, CUSTOM_SPACE, True, False)
+    frame = device.trigger(CAMERA)
+    points, _ = frame_output(frame)
+    camera_points = frame.points_m()
+    np.testing.assert_allclose(points[frame.valid], camera_points[frame.valid] @ scaled[:3, :3].T, rtol=1e-5, atol=1e-6)
 
 
 @pytest.mark.parametrize(
@@ -133,8 +222,8 @@ def test_transformations_must_be_proper(device):
         ([0, 0, 1001], [0, 0, 0, 1], ["translation", "1e+03 m long"]),
         ([0, np.inf, 0], [0, 0, 0, 1], ["must be finite", "inf"]),
         ([0, 0, 0], [np.nan, 0, 0, 1], ["must be finite", "nan"]),
-        ([0, 0, 0], [1e308, 1e308, 1e308, 1e308], ["too large to normalise"]),
-        ([0, 0, 0], [0, 0, 0, 1e-300], ["zero quaternion"]),
+        ([0, 0, 0], [1e308, 1e308, 1e308, 1e308], ["finite 4x4"]),
+        ([0, 0, 0], [100, 0, 0, 0], ["entry of 2e+04", "beyond 1000"]),
     ],
 )
 def test_absurd_transformations_are_refused_and_later_frames_stay_finite(device, translation, quaternion, words):
@@ -149,21 +238,22 @@ def test_absurd_transformations_are_refused_and_later_frames_stay_finite(device,
     assert np.all(np.isfinite(points)) and np.all(np.isfinite(normals))
 
 
-def test_check_transformation_refuses_matrices_that_are_not_rigid():
+def test_check_transformation_keeps_frames_finite():
     np.testing.assert_array_equal(check_transformation(np.eye(4)), np.eye(4))
     at_limit = np.eye(4)
     at_limit[0, 3] = MAX_TRANSLATION_M
     check_transformation(at_limit)
-    sheared, scaled, bottom = np.eye(4), np.diag([2.0, 2.0, 2.0, 1.0]), np.eye(4)
+    sheared, scaled, bottom, huge = np.eye(4), np.diag([2.0, 2.0, 2.0, 1.0]), np.eye(4), np.eye(4)
     sheared[0, 1] = 0.1
     bottom[3, 0] = 1.0
-    for matrix, word in ((sheared, "not a proper rotation"), (scaled, "orthonormal"), (bottom, "last row")):
+    huge[1, 1] = 2 * MAX_LINEAR_ENTRY
+    check_transformation(sheared)  # the driver checks nothing: what stays finite is accepted
+    check_transformation(scaled)
+    for matrix, word in ((bottom, "last row"), (huge, "rotation part has an entry")):
         with pytest.raises(PhoxiError, match=word):
             check_transformation(matrix)
     with pytest.raises(PhoxiError, match="finite 4x4"):
         check_transformation(np.eye(3))
-    # huge but finite components are only a quaternion to normalise
-    np.testing.assert_allclose(transform_from_quaternion([0, 0, 0], [0, 0, 1e300, 1e300])[:3, 0], [0, 1, 0], atol=1e-12)
 
 
 # ----------------------------------------------------------------------------------------- files
@@ -188,17 +278,15 @@ def test_refused_paths_write_nothing(device, tmp_path):
     for requested in ("../escape.ply", str(tmp_path / "escape.ply"), ""):
         with pytest.raises(PhoxiError, match=r"is not allowed in|outside the allowed folder|empty"):
             device.save_frame(frame, requested)
-    device.mark_published(frame)
     with pytest.raises(PhoxiError, match=r"'\.\.' is not allowed.*names resolve under"):
         device.save_last_frame("../../escape.ply")
     assert sorted(p.name for p in tmp_path.rglob("*")) == before
 
 
 def test_save_last_frame_by_extension(device):
-    with pytest.raises(PhoxiError, match="There is no frame to save"):
+    with pytest.raises(PhoxiError, match="Unsuccessful save"):
         device.save_last_frame("a.ply")
     frame = device.trigger(CAMERA)
-    device.mark_published(frame)
     for name in ("a.pcd", "a.PLYX", "noextension"):
         with pytest.raises(PhoxiError) as error:
             device.save_last_frame(name)
@@ -218,10 +306,9 @@ def _policy_device(tmp_path, allowed=()):
     root = tmp_path / "cwd"
     root.mkdir(exist_ok=True)
     model = replace(load_scanner_model("M"), resolutions={RESOLUTION_HIGH: (40, 30), RESOLUTION_LOW: (20, 15)})
-    dev = PhoxiDevice(model, _wall(), root, allowed_dirs=allowed)
-    dev.connect("")
+    dev = PhoxiDevice(model, _wall(), root, allowed_dirs=allowed, environ={"HOME": str(tmp_path / "home")})
+    dev.connect(dev.hardware_identification)
     frame = dev.trigger(CAMERA)
-    dev.mark_published(frame)
     return dev, frame
 
 
@@ -246,7 +333,7 @@ def test_a_good_relative_name_resolves_under_the_working_directory_and_is_replac
     [
         ("../x.ply", ["'..' is not allowed", "names resolve under", "cwd"]),
         ("run/../../x.ply", ["'..' is not allowed"]),
-        ("~/x.ply", ["'~' is not expanded", "names resolve under"]),
+        ("~/x.ply", ["home/x.ply is outside the allowed folder", "cwd"]),  # ~ is $HOME, as the driver
         ("/etc/x.ply", ["/etc/x.ply is outside the allowed folder", "cwd"]),
         ("run/.ply", []),  # a hidden file name: allowed, below
         (".", ["is a directory"]),
@@ -303,6 +390,27 @@ def test_absolute_names_may_point_into_the_allowed_folders_only(tmp_path):
     assert defaults == [Path("/work"), Path("/rh"), Path("/tmp")]
 
 
+def test_a_leading_tilde_is_home_as_the_driver_and_home_must_be_allowed(tmp_path):
+    home = tmp_path / "home"
+    home.mkdir()
+    device, frame = _policy_device(tmp_path, allowed=[home])
+    assert device.save_frame(frame, "~/x.ply") == home / "x.ply" and (home / "x.ply").is_file()
+    assert device.save_frame(frame, "a~b.ply") == tmp_path / "cwd" / "a~b.ply"  # only a leading ~ is HOME
+    device.environ = {}
+    with pytest.raises(PhoxiError, match="environment variable 'HOME' not found"):
+        device.save_frame(frame, "~/y.ply")
+
+
+def test_save_last_frame_saves_the_last_triggered_frame_of_this_connection(tmp_path):
+    device, _ = _policy_device(tmp_path)
+    second = device.trigger(CAMERA)
+    assert f"frame {second.index}" in " ".join(read_ply(device.save_last_frame("last.ply"))["comments"])
+    device.disconnect()
+    device.connect(device.hardware_identification)
+    with pytest.raises(PhoxiError, match="Unsuccessful save"):  # the driver forgets its last frame id
+        device.save_last_frame("again.ply")
+
+
 def test_raw_formats_are_not_supported_by_the_simulator(tmp_path):
     device, frame = _policy_device(tmp_path)
     for requested in ("frame.praw", "frame.PRAWF"):
@@ -346,7 +454,10 @@ def test_pointcloud_and_depth_map_agree_pixel_by_pixel(device):
     intr = frame.intrinsics
     u = np.arange(intr.width)[None, :]
     np.testing.assert_allclose(xyz[:, :, 0], (u - intr.cx) / intr.fx * depth_mm / 1000.0, atol=1e-6)
-    np.testing.assert_array_equal(nrm, normals)
+    # the driver divides the cloud's normals by 1000 (PhoXiInterface.cpp); the normal map keeps unit normals
+    assert phoxi_messages.CLOUD_NORMAL_SCALE == 1e-3
+    np.testing.assert_allclose(nrm, normals * 1e-3, rtol=1e-6)
+    np.testing.assert_allclose(np.linalg.norm(nrm[frame.valid], axis=1), 1e-3, rtol=1e-4)
     np.testing.assert_array_equal(curvature, 0.0)
     flat = phoxi_messages.pointcloud2(points, normals, frame.valid, header, organized=False)
     assert flat.height == 1 and flat.width == frame.valid.sum()
@@ -368,34 +479,52 @@ def test_camera_info_holds_the_intrinsics(device):
 
 
 # ---------------------------------------------------------------------------------- configuration
-REFERENCE_DEFAULTS = {
-    "resolution": 1,
-    "scan_multiplier": 1,
-    "shutter_multiplier": 1,
-    "confidence": 3.0,
-    "send_confidence_map": True,
-    "send_depth_map": True,
-    "send_normal_map": True,
-    "send_point_cloud": True,
-    "send_texture": True,
-    "timeout": -3,
-    "trigger_mode": 1,
-    "coordinate_space": 1,
-    "ambient_light_suppression": False,
-    "single_pattern_exposure": 2,
-    "camera_only_mode": False,
-    "organized_cloud": True,
+#: the driver's cfg/phoxi_camera.cfg (release 1.8.0): name -> (level, default, min, max, enum names), in its order
+REFERENCE_CFG = {
+    "resolution": (1 << 1, 1, 0, 1, ["Low", "High"]),
+    "scan_multiplier": (1 << 2, 1, 1, 50, None),
+    "shutter_multiplier": (1 << 3, 1, 1, 20, None),
+    "trigger_mode": (1 << 4, 1, 0, 1, ["Freerun", "Software"]),
+    "start_acquisition": (1 << 4, True, False, True, None),
+    "timeout": (1 << 5, -3, -3, 0, ["ZeroTimeout", "Infinity", "LastStored", "Default"]),
+    "confidence": (1 << 6, 3.0, 0.0, 10.0, None),
+    "send_point_cloud": (1 << 7, True, False, True, None),
+    "send_normal_map": (1 << 8, True, False, True, None),
+    "send_confidence_map": (1 << 9, True, False, True, None),
+    "send_texture": (1 << 10, True, False, True, None),
+    "send_depth_map": (1 << 11, True, False, True, None),
+    "coordinate_space": (
+        1 << 12,
+        1,
+        1,
+        5,
+        ["CameraSpace", "MountingSpace", "MarkerSpace", "RobotSpace", "CustomSpace"],
+    ),
+    "organized_cloud": (1 << 13, True, False, True, None),
+    "ambient_light_suppression": (1 << 14, False, False, True, None),
+    "single_pattern_exposure": (
+        1 << 15,
+        2,
+        0,
+        11,
+        "10_240 14_336 20_480 24_576 30_720 34_816 40_960 49_152 75_776 79_872 90_112 100_352".split(),
+    ),
+    "camera_only_mode": (1 << 16, False, False, True, None),
 }
 
 
-def test_reconfigure_description_matches_the_reference():
-    for name, default in REFERENCE_DEFAULTS.items():
-        assert phoxi_config.defaults[name] == default, name
-        assert type(phoxi_config.defaults[name]) is type(default), name
-    ranges = {"scan_multiplier": (1, 50), "shutter_multiplier": (1, 20), "confidence": (0.0, 10.0)}
-    ranges.update({"single_pattern_exposure": (0, 11), "resolution": (0, 1), "coordinate_space": (1, 5)})
-    for name, (low, high) in ranges.items():
-        assert (phoxi_config.min[name], phoxi_config.max[name]) == (low, high), name
+def test_reconfigure_description_is_the_drivers_cfg():
+    import ast
+
+    described = phoxi_config.config_description["parameters"]
+    assert [p["name"] for p in described] == list(REFERENCE_CFG), "every parameter of the cfg, in order, no extras"
+    for entry in described:
+        level, default, low, high, enum = REFERENCE_CFG[entry["name"]]
+        got = (entry["level"], entry["default"], entry["min"], entry["max"])
+        assert got == (level, default, low, high), entry["name"]
+        assert type(entry["default"]) is type(default), entry["name"]
+        names = [c["name"] for c in ast.literal_eval(entry["edit_method"])["enum"]] if entry["edit_method"] else None
+        assert names == enum, entry["name"]
     assert phoxi_config.STATIC_PARAMETERS == {
         "scanner_id": "",
         "frame_id": "PhoXi3Dscanner_sensor",
@@ -408,7 +537,6 @@ def test_reconfigure_description_matches_the_reference():
     description = encode_description(phoxi_config)
     names = [p.name for group in description.groups for p in group.parameters]
     assert names == [p["name"] for p in extract_params(phoxi_config.config_description)]
-    assert len(set(phoxi_config.level.values())) == len(names), "each parameter has its own level bit"
 
 
 def test_camera_config_errors_name_the_key(tmp_path):
@@ -461,24 +589,38 @@ def test_save_captured_frame_refuses_a_bad_path_before_rendering(device, tmp_pat
     assert len(read_ply(path)["x"]) == int(frame.valid.sum())
 
 
-def test_reconfigure_applies_settings_and_puts_back_a_refused_space(device):
+def test_reconfigure_applies_what_the_level_names(device):
     config = dict(phoxi_config.defaults)
     config.update(coordinate_space=ROBOT_SPACE, resolution=RESOLUTION_LOW, confidence=1.5)
-    refusal = device.reconfigure(config)
-    assert "RobotSpace has no transformation yet" in refusal
-    assert config["coordinate_space"] == device.coordinate_space == 1
+    level = phoxi_config.level["resolution"] | phoxi_config.level["confidence"]
+    assert device.reconfigure(config, level) == ""
     assert device.settings.resolution == RESOLUTION_LOW and device.settings.confidence == 1.5
+    assert config["coordinate_space"] == device.coordinate_space == 1, "a level not named changes nothing"
     config["coordinate_space"] = CUSTOM_SPACE
-    assert device.reconfigure(config) == "" and device.coordinate_space == CUSTOM_SPACE
+    assert device.reconfigure(config, phoxi_config.level["coordinate_space"]) == ""
+    assert device.coordinate_space == CUSTOM_SPACE
+    config.update(trigger_mode=TRIGGER_FREERUN, start_acquisition=False)
+    device.reconfigure(config, phoxi_config.level["start_acquisition"])
+    assert (device.trigger_mode, device.acquiring) == (TRIGGER_FREERUN, False)
+    everything = dict(phoxi_config.defaults)
+    device.reconfigure(everything, -1)  # what the server's first call names
+    assert (device.trigger_mode, device.acquiring, device.coordinate_space) == (TRIGGER_SOFTWARE, True, 1)
+
+
+def test_reconfigure_without_a_scanner_puts_everything_back(device):
+    device.disconnect()
+    previous = dict(phoxi_config.defaults, confidence=2.0)
+    config = dict(previous, confidence=4.0, resolution=RESOLUTION_LOW)
+    assert device.reconfigure(config, -1, previous) == "Node is not connected to scanner"
+    assert config == previous and device.settings.confidence != 4.0
 
 
 def test_reconfigure_puts_back_numbers_that_are_not_finite(device):
     previous = dict(phoxi_config.defaults, confidence=2.0)
-    config = dict(previous, confidence=float("nan"), free_run_rate_hz=float("inf"), resolution=RESOLUTION_LOW)
-    refusal = device.reconfigure(config, previous=previous)
+    config = dict(previous, confidence=float("nan"), resolution=RESOLUTION_LOW)
+    refusal = device.reconfigure(config, -1, previous=previous)
     assert "confidence nan refused: not a finite number (kept 2.0)" in refusal
-    assert "free_run_rate_hz inf refused" in refusal
-    assert config["confidence"] == 2.0 and config["free_run_rate_hz"] == phoxi_config.defaults["free_run_rate_hz"]
+    assert config["confidence"] == 2.0
     assert device.settings.confidence == 2.0 and device.settings.resolution == RESOLUTION_LOW
     frame = device.trigger(CAMERA)
     assert frame.valid.any()
@@ -486,12 +628,14 @@ def test_reconfigure_puts_back_numbers_that_are_not_finite(device):
 
 def test_capturing_modes_and_free_run_need_a_connection(device):
     assert device.supported_capturing_modes() == [(160, 120), (80, 60)]
-    assert device.free_running(0) and not device.free_running(1)
+    assert not device.free_running()
+    device.set_trigger_mode(TRIGGER_FREERUN, True)
+    assert device.free_running()
     device.disconnect()
-    assert not device.free_running(0)
-    with pytest.raises(PhoxiError, match="not connected"):
+    assert not device.free_running()
+    with pytest.raises(PhoxiError, match=NOT_CONNECTED):
         device.supported_capturing_modes()
-    with pytest.raises(PhoxiError, match="not connected"):
+    with pytest.raises(PhoxiError, match=NOT_CONNECTED):
         device.require_connected()
 
 
@@ -515,3 +659,28 @@ def test_overridden_pose_replaces_only_what_is_given():
 def test_default_output_dir_follows_ros_home():
     assert default_output_dir({"ROS_HOME": "/tmp/rh"}) == Path("/tmp/rh/phoxi_frames")
     assert default_output_dir({}) == Path("~/.ros/phoxi_frames").expanduser()
+
+
+# ------------------------------------------------------------------------------------- device list
+def test_the_bundled_device_list_and_its_checks():
+    from agiprobot_measurement.sensors.phoxi.models import load_simulated_scanners
+    from agiprobot_measurement.station import ConfigError
+
+    bundled = load_simulated_scanners("L")
+    assert [(s.hw_identification, s.model.name, s.variant, s.is_alpha) for s in bundled] == [
+        (SIMULATED_SCANNER_ID, "L", "L", False)
+    ]
+    real = load_simulated_scanners("L", entries=[{"hw_identification": "2019-04-011-LC3", "model": "M"}])
+    assert real[0].hw_identification == "2019-04-011-LC3" and real[0].model.name == "M"
+    assert load_simulated_scanners("S", entries=[])[0].hw_identification == SIMULATED_SCANNER_ID
+    for entries, words in (
+        ([{"hw_identification": "a"}, {"hw_identification": "a"}], "listed twice"),
+        ([{"hw_identification": ""}], "empty"),
+        ([{"hw_identification": "a", "model": "XXL"}], "unknown PhoXi model 'XXL'"),
+        ([{"hw_identification": "a", "colour": "red"}], "unknown key(s) ['colour']"),
+        ([{"hw_identification": "a", "is_alpha": "yes"}], "is_alpha must be true or false"),
+        ({"hw_identification": "a"}, "must be a list"),
+    ):
+        with pytest.raises(ConfigError) as info:
+            load_simulated_scanners("L", entries=entries)
+        assert words in str(info.value) and "~devices" in str(info.value)
