@@ -7,7 +7,7 @@ bolted to the flange, each frame gives the board's pose in the camera (corners f
 (Shah, Li) solve for the camera in the robot base frame. For eye-to-hand OpenCV documents passing the inverted robot
 poses (base -> gripper) in place of gripper -> base; the "cam2gripper" result is then base <- camera.
 
-The project pins OpenCV 4.12 (opencv-python-headless==4.12.0.88): the 5.0.0 wheels lack these two solvers in their
+The project pins OpenCV 4.14 (opencv-python-headless==4.14.0.94): the 5.0.0 wheels lack these two solvers in their
 Python bindings (opencv/opencv#29565, fixed after that release).
 
 Frames: ``base`` = the robot base frame (base_link), ``tool0`` = the flange, ``board`` = the board's corner plane
