@@ -210,14 +210,18 @@ def _test_errors_mm(sim, true_kin, h_base_camera, corners_camera, truth, normal,
     poses[:, :3, :3] = np.column_stack([x, np.cross(z, x), z])
     poses[:, :3, 3] = targets[ok] - z * offset_m
     q, solved = sim.ik.solve_nearest(poses, sim.seed_q)
-    reached = true_kin.fk(np.asarray(q)) if true_kin is not None else sim.kinematics.fk(np.asarray(q))
-    tips = reached[:, :3, 3] + reached[:, :3, 2] * offset_m
+    # an estimate off the reachable space has no IK solution (NaN joints): it counts as a missed corner (NaN error)
+    good = np.asarray(solved, dtype=bool) & np.isfinite(np.asarray(q)).all(axis=1)
     errors = np.full(len(targets), np.nan)
-    idx = np.flatnonzero(ok)[np.asarray(solved, dtype=bool)]
+    if not good.any():
+        return errors
+    q_good = np.asarray(q)[good]
+    reached = true_kin.fk(q_good) if true_kin is not None else sim.kinematics.fk(q_good)
+    tips = reached[:, :3, 3] + reached[:, :3, 2] * offset_m
+    idx = np.flatnonzero(ok)[good]
     from agiprobot_measurement.calibration.chessboard_test import match_to_truth
 
-    good = np.asarray(solved, dtype=bool)
-    errors[idx] = np.linalg.norm(tips[good] - truth[match_to_truth(targets[idx], truth)], axis=1) * 1000.0
+    errors[idx] = np.linalg.norm(tips - truth[match_to_truth(targets[idx], truth)], axis=1) * 1000.0
     return errors
 
 
