@@ -5,15 +5,32 @@ import rospy
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from agiprobot_measurement.msg import ExecuteJointTrajectoryAction, ExecuteJointTrajectoryGoal
+from agiprobot_measurement.msg import ExecuteJointTrajectoryAction, ExecuteJointTrajectoryGoal, PlanMeasurementGoal
 from agiprobot_measurement.ros.action_client import ActionClient
 from agiprobot_measurement.srv import SetJointState
-from agiprobot_measurement.station import load_joint_limits, load_named_states
+from agiprobot_measurement.station import PACKAGE_ROOT, load_joint_limits, load_named_states
 
 ACTION = "/robot_sim/execute_trajectory"
 LIMITS = load_joint_limits()
 NAMED = load_named_states()
 JOINTS = list(LIMITS.names)
+CUBE = str(PACKAGE_ROOT / "parts" / "objectA_wuerfel.stl")
+
+
+def quick_goal(solver_type: str = "IP_basic", **overrides) -> PlanMeasurementGoal:
+    """A plan goal for the demo cube that plans in seconds (coarse sampling, 6 orientations, no tilts)."""
+    goal = PlanMeasurementGoal(
+        part_file=CUBE,
+        units="mm",
+        sampling_density=0.01,
+        orientations_around_boresight=6,
+        viewpoint_tilt_mode="none",
+        solver_type=solver_type,
+        uncertainty_threshold_mm=0.1,
+    )
+    for key, value in overrides.items():
+        setattr(goal, key, value)
+    return goal
 
 
 def current_positions(timeout_s=5.0):

@@ -22,8 +22,9 @@ from geometry_msgs.msg import Pose
 from sensor_msgs.msg import JointState, PointCloud, PointCloud2
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from station_test_utils import quick_goal
 
-from agiprobot_measurement.msg import ExecutePlanAction, ExecutePlanGoal, PlanMeasurementAction, PlanMeasurementGoal
+from agiprobot_measurement.msg import ExecutePlanAction, ExecutePlanGoal, PlanMeasurementAction
 from agiprobot_measurement.planning.plan_io import load_execution_plan
 from agiprobot_measurement.ros.action_client import ActionClient
 from agiprobot_measurement.ros.bag_coverage import coverage_from_bag
@@ -32,23 +33,7 @@ from agiprobot_measurement.srv import GetCoverageReport, LoadPlan, StorePlan
 from agiprobot_measurement.station import PACKAGE_ROOT
 
 ARTIFACTS = Path(os.environ.get("ROS_HOME", "/tmp")) / "test_artifacts"
-CUBE = str(PACKAGE_ROOT / "parts" / "objectA_wuerfel.stl")
 STATE = {}  # shared between the ordered tests
-
-
-def quick_goal(**overrides) -> PlanMeasurementGoal:
-    goal = PlanMeasurementGoal(
-        part_file=CUBE,
-        units="mm",
-        sampling_density=0.01,
-        orientations_around_boresight=6,
-        viewpoint_tilt_mode="none",
-        solver_type="IP_basic",
-        uncertainty_threshold_mm=0.1,
-    )
-    for key, value in overrides.items():
-        setattr(goal, key, value)
-    return goal
 
 
 class MeasurementNodeTest(unittest.TestCase):

@@ -30,27 +30,18 @@ from std_msgs.msg import Bool
 from agiprobot_measurement.msg import ExecutePlanAction, ExecutePlanGoal, PlanMeasurementAction, PlanMeasurementGoal
 from agiprobot_measurement.ros.action_client import ActionClient
 from agiprobot_measurement.srv import GetCoverageReport, LoadPlan, StorePlan
-from agiprobot_measurement.station import PACKAGE_ROOT
 
-CUBE = str(PACKAGE_ROOT / "parts" / "objectA_wuerfel.stl")
-NODE = "/trajectory_manager"
-ESCAPES = ["../victim/settings", "../../x", "~/x", "/etc/agiprobot_fault_plan", "sub/../../y"]
-LOAD_CALLS = 200
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from station_test_utils import quick_goal as station_quick_goal
 
 
 def quick_goal(**overrides) -> PlanMeasurementGoal:
-    goal = PlanMeasurementGoal(
-        part_file=CUBE,
-        units="mm",
-        sampling_density=0.01,
-        orientations_around_boresight=6,
-        viewpoint_tilt_mode="none",
-        solver_type="greedy",
-        uncertainty_threshold_mm=0.1,
-    )
-    for key, value in overrides.items():
-        setattr(goal, key, value)
-    return goal
+    return station_quick_goal(solver_type="greedy", **overrides)
+
+
+NODE = "/trajectory_manager"
+ESCAPES = ["../victim/settings", "../../x", "~/x", "/etc/agiprobot_fault_plan", "sub/../../y"]
+LOAD_CALLS = 200
 
 
 def alias_bomb(levels: int = 9, width: int = 9) -> str:
