@@ -79,6 +79,9 @@ OPTION_LABELS = {
     "tessellation_tolerance_mm": "--tessellation-tolerance (mm)",
     "orientations_around_boresight": "--orientations",
     "part_transform_mm": "--transform",
+    "workers": "--workers",
+    "scheduler": "--scheduler",
+    "max_memory_gb": "--max-memory (GB)",
 }
 BAR_FORMAT = "{desc} {percentage:3.0f}%|{bar:30}| "
 
@@ -165,6 +168,26 @@ def build_parser() -> argparse.ArgumentParser:
         metavar=("X", "Y", "Z", "ROLL", "PITCH", "YAW"),
         help="placement of the part relative to the scene's part pose: mm and degrees (URDF roll-pitch-yaw)",
     )
+    parser.add_argument(
+        "--workers",
+        type=int,
+        default=d.workers,
+        help="evaluate the candidates on a local Dask cluster of N worker processes (0 = in this process)",
+    )
+    parser.add_argument(
+        "--scheduler",
+        default=d.scheduler,
+        metavar="ADDRESS",
+        help="evaluate the candidates on the existing Dask cluster at ADDRESS (tcp://host:8786); the plan is the same",
+    )
+    parser.add_argument(
+        "--max-memory",
+        type=float,
+        default=d.max_memory_gb,
+        metavar="GB",
+        help="memory budget of the candidate store in GB (0 = 80 %% of the memory available); larger work is "
+        "refused with its estimate",
+    )
     parser.add_argument("--scene", help="scene file (default: config/scene.yaml)")
     parser.add_argument("--no-mirrors", action="store_true", help="leave out the scene's wbk_mirrors obstacles")
     parser.add_argument(
@@ -231,6 +254,9 @@ def validate(args: argparse.Namespace) -> PlanRequest:
         placement=args.place,
         min_reachable_share=args.min_reachable_share,
         tessellation_tolerance_mm=args.tessellation_tolerance,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        max_memory_gb=args.max_memory,
         scan_speed_mm_s=args.scan_speed,
         seed=args.seed,
         add_wbk_mirrors=not args.no_mirrors,
@@ -455,7 +481,10 @@ def run(args: argparse.Namespace, request: PlanRequest, progress: StageProgress)
     t0 = time.perf_counter()
     station = Station.load(scene=args.scene)
     manager = TrajectoryManager.for_request(request, station, progress=progress, work_budget=args.work_budget)
-    ordered = manager.plan_request(request)
+    try:
+        ordered = manager.plan_request(request)
+    finally:
+        manager.close()  # a local Dask cluster ends with the evaluation's last use
     total_s = time.perf_counter() - t0
     manager.timings_s["total"] = total_s
     progress.close()

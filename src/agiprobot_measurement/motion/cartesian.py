@@ -16,7 +16,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation, Slerp
+from scipy.spatial.transform import Rotation
 
 from agiprobot_measurement.motion.ik import IKSolver, check_joint_states, check_poses
 
@@ -58,6 +58,19 @@ def _wrap(angle: np.ndarray) -> np.ndarray:
     return np.mod(angle + np.pi, 2.0 * np.pi) - np.pi
 
 
+def _axis_angle_matrices(rotvec: np.ndarray, fractions: np.ndarray) -> np.ndarray:
+    """Rotation matrices (K, 3, 3) of the rotation vector ``rotvec`` (rad) scaled by each of ``fractions``."""
+    angle = float(np.linalg.norm(rotvec))
+    out = np.broadcast_to(np.eye(3), (len(fractions), 3, 3)).copy()
+    if angle < 1e-15:
+        return out
+    x, y, z = rotvec / angle
+    k = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+    theta = angle * np.asarray(fractions, dtype=float)
+    out += np.sin(theta)[:, None, None] * k + (1.0 - np.cos(theta))[:, None, None] * (k @ k)
+    return out
+
+
 def interpolate_poses(
     start: np.ndarray, waypoints: np.ndarray, step_m: float, max_rotation_step_rad: float
 ) -> np.ndarray:
@@ -70,13 +83,15 @@ def interpolate_poses(
     previous = start
     for target in waypoints:
         distance = float(np.linalg.norm(target[:3, 3] - previous[:3, 3]))
-        rotations = Rotation.from_matrix(np.stack([previous[:3, :3], target[:3, :3]]))
-        angle = float((rotations[0].inv() * rotations[1]).magnitude())
+        # slerp as R0 exp(s log(R0^T R1)) with Rodrigues' formula: the same rotations as scipy's Slerp, without
+        # its per-call set-up (scan lines keep their orientation, so this is called for thousands of short lines)
+        rotvec = Rotation.from_matrix(previous[:3, :3].T @ target[:3, :3]).as_rotvec()
+        angle = float(np.linalg.norm(rotvec))
         # the small slack keeps 0.2 m / 0.002 m at 100 steps despite rounding
         steps = max(1, math.ceil(distance / step_m - 1e-9), math.ceil(angle / max_rotation_step_rad - 1e-9))
         s = np.linspace(0.0, 1.0, steps + 1)[1:]
         segment = np.zeros((steps, 4, 4))
-        segment[:, :3, :3] = Slerp([0.0, 1.0], rotations)(s).as_matrix()
+        segment[:, :3, :3] = previous[:3, :3] @ _axis_angle_matrices(rotvec, s)
         segment[:, :3, 3] = previous[:3, 3] + s[:, None] * (target[:3, 3] - previous[:3, 3])
         segment[:, 3, 3] = 1.0
         segment[-1] = target  # end exactly on the waypoint
@@ -85,10 +100,25 @@ def interpolate_poses(
     return np.concatenate(out)
 
 
+#: the compiled walk (numba, imported on first use) takes over after this many paths in a process: loading it
+#: costs about 0.6 s, it saves about 0.35 ms per path
+COMPILED_AFTER_PATHS = 1500
+_paths_followed = 0
+
+
 def _follow_all_solutions(ik, start_q: np.ndarray, poses: np.ndarray) -> tuple[np.ndarray, int]:
     """Branch-following over every closed-form solution: (chosen raw angles (M, dof), count reachable)."""
+    global _paths_followed
     solutions, valid = ik.solve_all(poses, start_q)
     solutions = np.where(valid[..., None], solutions, 0.0)
+    _paths_followed += 1
+    if _paths_followed > COMPILED_AFTER_PATHS:
+        from agiprobot_measurement.motion.cartesian_kernels import follow_branches
+
+        chosen, count = follow_branches(
+            np.ascontiguousarray(solutions), np.ascontiguousarray(valid), np.asarray(start_q, dtype=np.float64)
+        )
+        return solutions[np.arange(count), chosen[:count]], int(count)
     # pairwise joint-space distances between consecutive waypoints' solutions, modulo 2 pi, so the
     # sequential pick below is only index arithmetic
     first = np.where(valid[0], np.linalg.norm(_wrap(solutions[0] - start_q), axis=-1), np.inf)
@@ -97,7 +127,7 @@ def _follow_all_solutions(ik, start_q: np.ndarray, poses: np.ndarray) -> tuple[n
     chosen = np.empty(len(poses), dtype=int)
     current = int(np.argmin(first))
     if not np.isfinite(first[current]):
-        return solutions[:0], 0
+        return solutions[:0, 0], 0  # (0, dof): no waypoint reached
     chosen[0] = current
     count = 1
     for k in range(len(poses) - 1):

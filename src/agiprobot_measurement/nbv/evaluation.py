@@ -145,6 +145,8 @@ def summarize(result, measurable: np.ndarray, object_name: str) -> dict:
         "false_full_cells": int((full_model & (truth != FULL)).sum()),
         "measurements": len(result.records),
         "path_length_cells": pm["path_length_cells"],
+        # the camera's own path (the rig turning about the laser moves the camera, not the source)
+        "camera_path_length_cells": path_metrics(result.cameras)["path_length_cells"],
         "median_move_cells": pm["median_move_cells"],
         "transfers": pm["transfers"],
         "transfer_length_cells": pm["transfer_length_cells"],

@@ -17,14 +17,37 @@ Documented choices where the report is silent:
   growth points): it is what the implemented stop drives to zero.
 - Every cell that was ``cc`` once and is still unknown is marked in the working copy (+0.1 unmeasurable, -0.1
   otherwise), so it is never a candidate again.
-- With depth noise, the laser's free part stops half a cell before the point and the return path's free part starts
-  half a cell (+ ``noise_return_margin_sigmas`` x sigma) after it: a point measured too deep lies inside the body,
-  and carving the first stretch of its return path would erase the surface just measured.
+- With depth noise (the report's main real-data failure, no rule given): the return is filed under the cell half a
+  cell deeper than the measured point; if that cell is known empty, under the first cell further along the laser,
+  within ``noise_window_sigmas`` sigma, that is not known empty (:func:`.range_finder.assign_noisy_cell`; if all
+  are known empty, the report's fusion makes the conflicting cell unknown so it can be measured again). The
+  laser's free part stops half a cell before the point; the return path's free part starts only where a point
+  measured ``noise_return_margin_sigmas`` sigma too deep would have left the body, ``0.5 + k sigma / cos(theta)``
+  with ``theta`` the laser-camera angle at the point (:func:`.range_finder.noisy_return_margin_cells`). With a
+  fixed half cell, at RFlength 250 (theta = 54 deg) the returns of too deep points erased the surface just
+  measured (disc, fullpix, long, sigma 0.3: coverage 0.614 -> 0.95 with k = 2).
+- Contour fits and predicted points use the model's cells as in the noise-free case; the raw (noisy) points are
+  kept per cell for the export.
 - The camera-in-front rule of :mod:`.scoring` applies to ``getcandidates2d`` candidates only, not to the general
   candidates of a contour end (beyond an apex the outer side of the continuation is not known yet).
 - A candidate is unmeasurable only once every planning strategy has failed to plan it. In ``fullpix`` (recovery
   S0 <-> S1 only) a strategy that planned before may plan again when the other finds no view, its failed
   configurations being forbidden (``retry_planned_strategies``); in ``stratpix`` a strategy is not re-entered.
+- ``stratpix`` switches E0 -> S2 and D1 -> S2 (``fullpix``: E0 -> S1, D1 -> S0). Strategy 2 cannot tell an
+  unmeasurable candidate (the report), strategy 1's circle of visibility can: before an orbit starts, strategy 1's
+  planner is asked, without measuring, for a look-through view; if it has none, the candidate is unmeasurable and
+  no orbit is flown (``s2_feasibility_check``; U-shape short path 30102 -> 10876 cells).
+- ``stratpix``'s orbit budget (``s2_orbit_budget``; the report claims a smoother path for S2, not a shorter one,
+  and gives no rule): the same probe's planned look-through view is strategy 1's alternative, and its source
+  motion from the sensor (the motion that the Pohyb term scores) prices it. ``"s1_jump"`` (default): the orbit's
+  accumulated source motion, lead-in included, may reach ``s2_orbit_budget_factor`` times that jump; the step that
+  would exceed it is not flown and strategy 1 takes over. Should that jump fail too (D1), strategy 2 flies its full
+  orbit unprobed and unbudgeted for this candidate. ``"predicted"``: decided once before the orbit, by the motion
+  until the orbit's laser aims at ``cc`` (:func:`.strategies.orbit_motion_to`). ``"none"``: the full turn.
+  Measured (noise-free, centre aim, stratpix paths vs fullpix over the six objects, short / long baseline): none
+  3/6 and 2/6; s1_jump with factor 1 5/6 and 4/6, but the long-baseline triangle's coverage fell 0.988 -> 0.842
+  (leaving the orbit round the acute apex left later candidates without a look-through view); factor 2 5/6 and
+  2/6; factor 3 5/6 and 3/6 with every coverage unchanged, so 3 is the default; predicted 4/6 and 2/6.
 - ``circpix``: the source moves on the circle around the scene centre through the first hit at the standoff, in
   steps of ``circ_step_deg`` counter-clockwise and never back. At each stop it measures, one after the other, the
   candidates it can see (laser and camera path free of known full cells, depth within the camera's field, no known
@@ -51,7 +74,14 @@ import numpy as np
 from .errors import NbvInputError
 from .grid import EMPTY, FULL, PROBABLY_EMPTY, PROBABLY_FULL, UNKNOWN, MeasuredPoints, validate_truth
 from .predicates import compute_direction, driving_candidate_mask, growth_mask, outward_normal, predicted_point
-from .range_finder import RangeFinder2D, apply_measurement, cell_of_point, scan
+from .range_finder import (
+    RangeFinder2D,
+    apply_measurement,
+    assign_noisy_cell,
+    cell_of_point,
+    noisy_return_margin_cells,
+    scan,
+)
 from .scoring import AIM_MODES, ScoreConfig, aim_points
 from .strategies import (
     SCRIPTS,
@@ -62,15 +92,19 @@ from .strategies import (
     classify,
     is_strict_candidate,
     label_of,
+    orbit_motion_to,
     plan_s0,
     plan_s1,
     plan_s2,
+    predicted_return_free,
     start_orbit,
 )
 from .traversal import first_blocking
 from .visibility import N_SECTORS, make_circle_of_visibility, update_circ
 
 __all__ = ["TERMINATION_REASONS", "MeasurementRecord", "RunConfig", "RunResult", "run"]
+
+S2_ORBIT_BUDGETS = ("predicted", "s1_jump", "none")
 
 TERMINATION_REASONS = (
     "growth_points_exhausted",
@@ -107,6 +141,11 @@ class RunConfig:
     circ_step_deg: float = 2.0
     # circpix: laps on the circle (always onward); the sweep also stops after a lap that measured nothing
     circ_max_laps: int = 3
+    # option (off): circpix plans no view in which a known full cell on the laser behind the candidate, within the
+    # depth window, could answer with a free return (an empty candidate would give a D0). Measured: it removes the
+    # one D0 left (rotated rectangle, long baseline) but cuts short-baseline circpix coverage to 0.56-0.85
+    # (rectangle 1.000 -> 0.723), because the far side of the body, already measured, lies within the window
+    circ_strict_d0_check: bool = False
     max_switches_per_candidate: int = 4
     max_measurements_per_candidate: int = 60
     max_measurements: int | None = None
@@ -115,18 +154,40 @@ class RunConfig:
     search_step_cells: float = 4.0
     side_step_cells: float = 1.0
     eight_connected: bool = False
-    # with noise, the part of the return path within this many noise sigmas (plus the half cell of the cell guess)
-    # of the point is left uncarved: a point measured too deep lies in the body and its return path starts there
-    noise_return_margin_sigmas: float = 0.0
+    # with noise, a return belongs to the first cell not known empty within this many sigmas of the measured
+    # point along the laser (range_finder.assign_noisy_cell)
+    noise_window_sigmas: float = 2.0
+    # with noise, the return path is left uncarved until it is this many sigmas (of depth along the laser, divided by
+    # the cosine of the laser-return angle) out of a body surface that a too deep point lies under
+    noise_return_margin_sigmas: float = 2.0
     # fullpix: after a strategy finds no view, one that planned before may plan again (see ``_Engine.resolve``)
     retry_planned_strategies: bool = True
     # strategy 0 may take a view whose first not-known-empty cell behind cc is not known full when no view has a
     # clear stretch behind cc (see strategies.plan_s0)
     s0_loose_d0_check: bool = True
+    # strategy 0 checks the return from the laser's entry point into cc, not only the circle at the aim
+    # point (strategies.predicted_return_free)
+    predicted_return_check: bool = True
+    # strategy 0 prefers views whose return would also be free from the unknown cell the laser reaches should cc be
+    # empty (strategies.plan_s0)
+    s0_continuation_return_check: bool = False
+    # stratpix: before an orbit, strategy 1's planner checks that cc can be looked at at all (see resolve)
+    s2_feasibility_check: bool = True
+    # strategy 2's camera side: "leading" (ahead of the source in the sense of the turn) or "away" (further from pp)
+    s2_camera: str = "leading"
     # where strategy 2's orbit begins: "normal" (the outward normal of pp) or "sensor" (where the sensor is)
     s2_start: str = "normal"
+    # strategy 2 counts a hit on any unknown cell next to a full one as its success (A2), the report's general
+    # candidate: its candidates are the unit-circle points round the growth point (strategies.classify)
+    s2_general_candidates: bool = True
     # how far strategy 2 orbits before it gives up (degrees; the report: a full turn, 360)
     s2_max_turn_deg: float = 360.0
+    # stratpix: strategy 2's orbit may cost at most the source motion of strategy 1's planned jump (``"s1_jump"``),
+    # else the orbit is left for that jump; ``"none"``: the orbit runs its full turn (see the module docstring)
+    s2_orbit_budget: str = "s1_jump"
+    # the budget is this multiple of strategy 1's jump (measured: 1 cuts the long-baseline triangle to 0.842
+    # coverage, 2 and 3 keep every coverage; 3 gives the most stratpix <= fullpix wins, see the module docstring)
+    s2_orbit_budget_factor: float = 3.0
 
     def __post_init__(self) -> None:
         if self.script not in SCRIPTS:
@@ -137,10 +198,18 @@ class RunConfig:
         _positive("s1_reach_cells", self.s1_reach_cells)
         _positive("s2_step_deg", self.s2_step_deg)
         _positive("s2_max_turn_deg", self.s2_max_turn_deg)
+        _positive("s2_orbit_budget_factor", self.s2_orbit_budget_factor)
         _positive("circ_step_deg", self.circ_step_deg)
         _positive("search_step_cells", self.search_step_cells)
         _positive("side_step_cells", self.side_step_cells)
         _positive("noise_return_margin_sigmas", self.noise_return_margin_sigmas, allow_zero=True)
+        _positive("noise_window_sigmas", self.noise_window_sigmas, allow_zero=True)
+        if self.s2_camera not in ("leading", "away"):
+            raise NbvInputError(f"s2_camera must be 'leading' or 'away', got {self.s2_camera!r}")
+        if self.s2_orbit_budget not in S2_ORBIT_BUDGETS:
+            raise NbvInputError(
+                f"s2_orbit_budget must be one of {', '.join(S2_ORBIT_BUDGETS)}, got {self.s2_orbit_budget!r}"
+            )
         if self.s2_start not in ("normal", "sensor"):
             raise NbvInputError(f"s2_start must be 'normal' or 'sensor', got {self.s2_start!r}")
         _positive("max_time_s", self.max_time_s, allow_none=True)
@@ -183,6 +252,10 @@ class RunResult:
     @property
     def sources(self) -> np.ndarray:
         return np.array([r.pos[0] for r in self.records]).reshape(-1, 2)
+
+    @property
+    def cameras(self) -> np.ndarray:
+        return np.array([r.pos[1] for r in self.records]).reshape(-1, 2)
 
     @property
     def d0_count(self) -> int:
@@ -231,17 +304,21 @@ class _Engine:
         point = cell = None
         if reading is not None:
             d = (pos[2] - pos[0]) / np.hypot(*(pos[2] - pos[0]))
-            if self.cfg.noise_sigma_cells > 0:
+            sigma = self.cfg.noise_sigma_cells
+            if sigma > 0:
                 # depth noise along the laser, the report's real-data failure mode
-                point = reading.point + self.rng.normal(0.0, self.cfg.noise_sigma_cells) * d
-                # a surface point lies on its cell's entry edge: with depth noise the best guess of that cell is the
-                # one half a cell deeper (right for |error| < 0.5 cells instead of only for errors into the body)
-                cell = cell_of_point(point + 0.5 * d, d)
+                point = reading.point + self.rng.normal(0.0, sigma) * d
+                if self.cfg.noise_window_sigmas > 0:
+                    cell, snapped = assign_noisy_cell(self.m, pos, point, self.cfg.noise_window_sigmas * sigma)
+                else:
+                    cell, snapped = cell_of_point(point + 0.5 * d, d), False
+                if snapped:
+                    self.outcomes["noise: snapped past known empty"] += 1
             else:
                 point, cell = reading.point, reading.cell
             if not (0 <= cell[0] < self.shape[0] and 0 <= cell[1] < self.shape[1]):
                 point = cell = None
-        kind = classify(cell, target, self.m, self.w)
+        kind = classify(cell, target, self.m, self.w, strategy == Strategy.S2 and self.cfg.s2_general_candidates)
         label = label_of(strategy, kind) if strategy is not None else "search"
         self.outcomes[label] += 1
         self.records.append(MeasurementRecord(np.array(pos, dtype=float), point, cell, label, target))
@@ -251,10 +328,13 @@ class _Engine:
         return kind, cell, label
 
     def _fuse(self, pos, point, cell) -> None:
+        """Fuse a return (free rays, the full cell) and file the measured point under ``cell``."""
         was_full = self.m == FULL  # a full copy is cheap next to the traversal and keeps the bookkeeping exact
         sigma = self.cfg.noise_sigma_cells
-        margin = 0.5 if sigma > 0 else 0.0  # the half cell of the cell guess above
-        back_margin = margin + self.cfg.noise_return_margin_sigmas * sigma if sigma > 0 else 0.0
+        margin = 0.5 if sigma > 0 else 0.0  # the half cell of the cell guess (range_finder.assign_noisy_cell)
+        back_margin = 0.0
+        if sigma > 0:
+            back_margin = noisy_return_margin_cells(pos, point, self.cfg.noise_return_margin_sigmas * sigma)
         free, full_cell = apply_measurement(self.m, pos, point, cell, self.cfg.eight_connected, margin, back_margin)
         touched = free if full_cell is None else np.vstack([free, np.array([full_cell])])
         if len(touched) == 0:
@@ -381,6 +461,8 @@ class _Engine:
         switches = 0
         spent = 0
         orbit = None
+        orbit_budget, orbit_spent = math.inf, 0.0  # strategy 2's motion budget (s2_orbit_budget) and its use
+        orbit_left = False  # an orbit of this candidate was left for strategy 1's jump
         tried: set[Strategy] = set()
         planned: set[Strategy] = set()
         self.circles = {}
@@ -399,6 +481,7 @@ class _Engine:
                 plan = plan_s0(
                     self.m, self.rf, cc, aims, self.circles_for(aims), normal, self.current_source, score_cfg,
                     self.forbid_array(strategy, cc, len(aims)), loose=cfg.s0_loose_d0_check,
+                    return_check=cfg.predicted_return_check, continuation_check=cfg.s0_continuation_return_check,
                 )  # fmt: skip
             elif strategy == Strategy.S1:
                 plan = plan_s1(
@@ -406,12 +489,52 @@ class _Engine:
                     self.forbid_array(strategy, cc, len(aims)), cfg.s1_reach_cells,
                 )  # fmt: skip
             else:
+                # once an orbit of this candidate was left for strategy 1's jump and that jump failed too, strategy 2
+                # runs its full orbit unprobed: strategy 1 was tried for real, and orbiting is what remains
+                mode = "none" if orbit_left or Strategy.S1 in tried else cfg.s2_orbit_budget
+                probe = None
+                if orbit is None and not orbit_left and (cfg.s2_feasibility_check or mode != "none"):
+                    # strategy 2 cannot tell an unmeasurable candidate (the report): strategy 1's circle-of-visibility
+                    # test, which can, is asked first, without measuring; no look-through view -> unmeasurable
+                    probe = plan_s1(
+                        self.m, self.w, self.rf, cc, aims, self.circles_for(aims), normal, self.current_source,
+                        cfg.score, self.forbid_array(Strategy.S1, cc, len(aims)), cfg.s1_reach_cells,
+                    )  # fmt: skip
+                    if isinstance(probe, NoView) and cfg.s2_feasibility_check:
+                        self.outcomes["S2 not started: S1 finds no view"] += 1
+                        return self._unmeasurable(cc, pp)
+                    orbit_budget, orbit_spent = math.inf, 0.0
+                    if mode != "none" and not isinstance(probe, NoView) and self.current_source is not None:
+                        # the orbit's motion budget: the source motion of strategy 1's planned jump
+                        orbit_budget = cfg.s2_orbit_budget_factor * float(
+                            np.hypot(*(probe.pos[0] - self.current_source))
+                        )
                 if orbit is None:
                     orbit = start_orbit(
                         pp, normal, direction, cc, self.current_source, cfg.s2_step_deg, cfg.s2_start,
-                        cfg.s2_max_turn_deg,
+                        cfg.s2_max_turn_deg, cfg.s2_camera,
                     )  # fmt: skip
+                    if (
+                        mode == "predicted"
+                        and math.isfinite(orbit_budget)
+                        and switches < cfg.max_switches_per_candidate
+                    ):
+                        predicted = orbit_motion_to(self.rf, orbit, cc, self.current_source)
+                        if predicted > orbit_budget:
+                            # reaching a view of cc on the orbit would cost more motion than strategy 1's jump
+                            self.outcomes["S2 not started: S1's jump is shorter"] += 1
+                            strategy, switches, orbit, orbit_left = Strategy.S1, switches + 1, None, True
+                            continue
+                        orbit_budget = math.inf
                 plan = plan_s2(self.rf, orbit)
+                if not isinstance(plan, NoView) and mode == "s1_jump":
+                    step = float(np.hypot(*(plan.pos[0] - self.current_source)))
+                    if orbit_spent + step > orbit_budget and switches < cfg.max_switches_per_candidate:
+                        # the orbit would now cost more motion than strategy 1's single jump: take the jump
+                        self.outcomes["S2 orbit left for S1: longer than S1's jump"] += 1
+                        strategy, switches, orbit, orbit_left = Strategy.S1, switches + 1, None, True
+                        continue
+                    orbit_spent += step
             if isinstance(plan, NoView):
                 # a candidate is unmeasurable only once every planning strategy has failed to plan it. In fullpix,
                 # whose only recovery is S0 <-> S1, a strategy that planned before (its failed configurations now
@@ -455,6 +578,7 @@ class _Engine:
                 if nxt_cc is None:
                     return pp
                 cc, strategy, switches, spent, orbit, tried, planned = nxt_cc, nxt, 0, 0, None, set(), set()
+                orbit_left = False
                 self.circles = {}
                 continue
             return self._unmeasurable(cc, pp)
@@ -537,6 +661,12 @@ class _Engine:
             # should cc be empty the laser goes on: a known full cell behind cc, before any cell that is not known
             # empty or within the near stretch, would answer with an already seen cell (a D0); not planned
             d = (np.asarray(cc, dtype=float) - src) / depth[k]
+            behind = None
+            if self.cfg.circ_strict_d0_check:
+                # the first known full cell on the laser behind cc within the camera's depth window: should cc and
+                # the unknown cells before it be empty, it answers (a D0) unless its return is blocked
+                bi, bj = first_blocking(full, cc, src + (reach + 2.0) * d, skip=cc)
+                behind = None if bi < 0 else (bi, bj)
             bi, bj = first_blocking(self.m != EMPTY, cc, src + reach * d, skip=cc)
             if bi >= 0 and full[bi, bj]:
                 continue
@@ -544,6 +674,11 @@ class _Engine:
                 continue
             for side in (1, -1):
                 pos = self.rf.pose_through(src, cc, side)
+                if behind is not None and predicted_return_free(full, pos, behind):
+                    continue
+                # the return is checked from the centre of cc: a view whose return from the laser's entry point
+                # is blocked still measures an empty cc (measured: checking from the entry point here, as strategy
+                # 0 does, cut the long-baseline rotated rectangle from 0.411 to 0.174 coverage)
                 if first_blocking(full, cc, pos[1], skip=cc)[0] < 0:
                     return pos, cc
         return None

@@ -37,9 +37,11 @@ __all__ = [
     "RangeFinder2D",
     "Reading",
     "apply_measurement",
+    "assign_noisy_cell",
     "bkrangef2d",
     "bkrangef2d_",
     "default_laser_scanner_config_path",
+    "noisy_return_margin_cells",
     "rangef2d",
     "rangef2d_",
     "scan",
@@ -245,6 +247,52 @@ def cell_of_point(point_xy, laser_dir) -> tuple[int, int]:
     """The cell a measured point falls in; a point on an edge belongs to the cell the laser enters there."""
     q = np.asarray(point_xy, dtype=float) + _END_NUDGE * np.asarray(laser_dir, dtype=float)
     return math.floor(q[0] + 0.5), math.floor(q[1] + 0.5)
+
+
+def assign_noisy_cell(model: np.ndarray, pos, point_xy, window_cells: float):
+    """The cell a noisy return is filed under, given the model: ``(cell, snapped)``.
+
+    Documented choices (the report names noise as its main failure and gives no rule):
+
+    - A surface point lies on the entry edge of its cell, so with depth noise the best single guess of that cell is
+      the one half a cell deeper than the measured point (right for an error below half a cell either way).
+    - If that cell is already known empty, the laser has passed it before: the return is filed under the first cell
+      further along the laser, within ``window_cells`` (k noise sigmas) of the measured point, that is not known
+      empty (``snapped`` is True). If every such cell is known empty the guess stands: the return contradicts the
+      model and the report's fusion turns the cell unknown (a conflict), so that it can be measured again.
+    """
+    p = _check_pose(pos)
+    src = p[0]
+    x = np.asarray(point_xy, dtype=float)
+    d = (p[2] - src) / np.hypot(*(p[2] - src))
+    guess = cell_of_point(x + 0.5 * d, d)
+    m = np.asarray(model)
+    inside = 0 <= guess[0] < m.shape[0] and 0 <= guess[1] < m.shape[1]
+    if not inside or m[guess] != EMPTY:
+        return guess, False
+    ahead = supercover_cells(x + 0.5 * d, x + max(window_cells, 0.5) * d + 0.5 * d, m.shape)
+    if len(ahead):
+        keep = m[ahead[:, 0], ahead[:, 1]] != EMPTY
+        if keep.any():
+            k = int(np.flatnonzero(keep)[0])
+            return (int(ahead[k, 0]), int(ahead[k, 1])), True
+    return guess, False
+
+
+def noisy_return_margin_cells(pos, point_xy, depth_margin_cells: float) -> float:
+    """How much of the return path next to a noisy point to leave uncarved (cells).
+
+    Documented choice: a point measured ``e`` too deep lies ``e`` under the surface, and its return path, at angle
+    ``theta`` to the laser, leaves the body only after about ``e / cos(theta)`` (a surface facing the laser). With
+    ``e = depth_margin_cells`` (k sigma) plus the half cell of the cell guess, that stretch is not carved empty.
+    With a long laser-camera distance ``theta`` is large (54 deg at RFlength 250) and a fixed margin of half a cell
+    let the return of every too deep point erase the surface cell just measured. ``cos(theta)`` is floored at 0.2.
+    """
+    p = _check_pose(pos)
+    d = (p[2] - p[0]) / np.hypot(*(p[2] - p[0]))
+    r = p[1] - np.asarray(point_xy, dtype=float)
+    cos_t = max(float(-(r @ d)) / (float(np.hypot(*r)) + 1e-300), 0.2)
+    return 0.5 + float(depth_margin_cells) / cos_t
 
 
 def measurement_cells(

@@ -57,6 +57,7 @@ __all__ = [
     "Strategy",
     "classify",
     "label_of",
+    "orbit_motion_to",
     "plan_s0",
     "plan_s1",
     "plan_s2",
@@ -133,8 +134,13 @@ def _is_strict_candidate(w: np.ndarray, cell) -> bool:
     return bool((block == EMPTY).any() and (block == FULL).any())
 
 
-def classify(hit_cell, cc, m_before: np.ndarray, w_before: np.ndarray) -> Kind:
-    """The kind of a measurement (see the module table); ``hit_cell`` is ``None`` for no return."""
+def classify(hit_cell, cc, m_before: np.ndarray, w_before: np.ndarray, general_candidates: bool = False) -> Kind:
+    """The kind of a measurement (see the module table); ``hit_cell`` is ``None`` for no return.
+
+    ``general_candidates`` uses the report's general candidate rule for kind B (an unknown cell 8-adjacent to a full
+    cell) instead of ``getcandidates2d``'s stricter one: strategy 2's candidates are the points of the unit circle
+    around the growth point, whatever is known about the empty side (see :func:`plan_s2`).
+    """
     if hit_cell is None:
         return Kind.E
     hit = (int(hit_cell[0]), int(hit_cell[1]))
@@ -144,6 +150,10 @@ def classify(hit_cell, cc, m_before: np.ndarray, w_before: np.ndarray) -> Kind:
         return Kind.D
     if _is_strict_candidate(w_before, hit):
         return Kind.B
+    if general_candidates:
+        i, j = hit
+        if (w_before[max(i - 1, 0) : i + 2, max(j - 1, 0) : j + 2] == FULL).any():
+            return Kind.B
     return Kind.C
 
 
@@ -174,6 +184,25 @@ def _continuation_first(m: np.ndarray, aim, laser_dir, cc, reach_cells: float):
     return first_blocking(m != EMPTY, aim, far, skip=cc)
 
 
+def predicted_return_free(full: np.ndarray, pos, cc) -> bool:
+    """The return from where the laser enters cell ``cc`` to the camera touches no known full cell but ``cc``.
+
+    Documented choice: the circle of visibility is built at the aim point (the cell centre or an edge midpoint), but
+    a return leaves from the laser's entry point on the cell's boundary. With a long laser-camera distance the camera
+    ray is nearly tangent to the contour, and from the entry point it grazes the known full neighbour that the
+    sectors at the centre miss (on the long-baseline rotated rectangle this was the cause of most E0s). The
+    report's two-ray condition ("neither ray may cross a full region") is therefore checked on the predicted rays.
+    """
+    src, cam, aim = np.asarray(pos, dtype=float)
+    d = (aim - src) / np.hypot(*(aim - src))
+    far = aim + 2.0 * d
+    t = segment_box_entry(src, far, cc)
+    if t < 0:
+        return True
+    hit = src + t * (far - src)
+    return first_blocking(full, hit, cam, skip=(int(cc[0]), int(cc[1])))[0] < 0
+
+
 def _key(views: ViewSet, idx: int) -> tuple[int, int, int]:
     return int(views.aim_index[idx]), int(views.sector[idx]), int((1 - views.side[idx]) // 2)
 
@@ -191,6 +220,8 @@ def plan_s0(
     max_checks: int = 60,
     loose: bool = True,
     near_cells: float = 5.0,
+    return_check: bool = True,
+    continuation_check: bool = True,
 ) -> Plan | NoView:
     """Strategy 0: the best perpendicular view of ``cc`` by Viditelnost x Kolmost x Pohyb.
 
@@ -200,6 +231,10 @@ def plan_s0(
     ``cc`` is not known full and that has no known full cell within ``near_cells`` behind the aim (such a view can
     still end in a D0 when the unknown cells it crosses are empty); if
     there is none either, ``cc`` goes to strategy 1 ("look_through_only").
+
+    With ``return_check`` a view is taken only if the return the model predicts is free: the laser enters ``cc`` on
+    its boundary, not at the aim point the circle of visibility is built on, and from there the camera ray must touch
+    no known full cell (see :func:`predicted_return_free`).
     """
     views: ViewSet = score_views(rf, aims, circles, normal, current_source, cfg, forbidden)
     ranked = views.ranked()
@@ -208,25 +243,39 @@ def plan_s0(
     # a return can only come from within the camera's depth window: known full cells further away cannot give a D0
     reach = min(rf.depth_window_cells()[1], float(m.shape[0] + m.shape[1])) - rf.standoff_cells + 2.0
     full = m == FULL
-    fallback = None
+    # fallbacks by preference: loose with the continuation's return free, strict without, loose without
+    fallback: list = [None, None, None]
     for idx in ranked[:max_checks]:
         pos = views.poses[idx]
         d = (pos[2] - pos[0]) / np.hypot(*(pos[2] - pos[0]))
+        if return_check and not predicted_return_free(full, pos, cc):
+            continue
         # should cc be empty, the laser goes on through unknown cells that may be empty too: a known full cell on
         # that stretch could answer (a D0). Preferred: no known full cell within the reach (strict); accepted
         # when no view is strict: the first cell beyond cc that is not known empty is not known full (loose).
         far = pos[2] + max(reach, 1.0) * d
-        if first_blocking(full, pos[2], far, skip=cc)[0] < 0:
+        strict = first_blocking(full, pos[2], far, skip=cc)[0] < 0
+        ci, cj = _continuation_first(m, pos[2], d, cc, reach)
+        # should cc be empty, the unknown cell the laser reaches next may answer: a view whose return from there is
+        # blocked by a known full cell would then see nothing (an E0 that teaches nothing); such views come last
+        cont_ok = not continuation_check or ci < 0 or m[ci, cj] != UNKNOWN or predicted_return_free(full, pos, (ci, cj))
+        if strict and cont_ok:
             return Plan(pos, _key(views, idx), float(views.score[idx]))
-        if loose and fallback is None:
-            ci, cj = _continuation_first(m, pos[2], d, cc, reach)
+        if strict:
+            if fallback[1] is None:
+                fallback[1] = idx
+            continue
+        if loose:
             # the first cell may be an unknown one the laser only grazes: a known full cell right behind cc
             # (within ``near_cells``) would still answer, so that is excluded as well
             near_full = first_blocking(full, pos[2], pos[2] + near_cells * d, skip=cc)[0] >= 0
             if (ci < 0 or m[ci, cj] != FULL) and not near_full:
-                fallback = idx
-    if fallback is not None:
-        return Plan(views.poses[fallback], _key(views, fallback), float(views.score[fallback]))
+                k = 0 if cont_ok else 2
+                if fallback[k] is None:
+                    fallback[k] = idx
+    for f in fallback:
+        if f is not None:
+            return Plan(views.poses[f], _key(views, f), float(views.score[f]))
     return NoView("look_through_only")
 
 
@@ -293,6 +342,7 @@ class OrbitState:
     step_rad: float
     k: int = 0
     max_turn_rad: float = 2 * math.pi
+    camera: str = "away"
 
     @property
     def n_steps(self) -> int:
@@ -300,7 +350,15 @@ class OrbitState:
 
 
 def start_orbit(
-    pp, normal, direction, cc, current_source, step_deg: float, start_at: str = "normal", max_turn_deg: float = 360.0
+    pp,
+    normal,
+    direction,
+    cc,
+    current_source,
+    step_deg: float,
+    start_at: str = "normal",
+    max_turn_deg: float = 360.0,
+    camera: str = "away",
 ) -> OrbitState:
     """Begin the orbit on the outward normal of ``pp`` (where strategy 0 looked from) and turn towards where the
     contour goes on (``direction``, else towards ``cc``); without a normal, start where the sensor is. The orbit
@@ -320,8 +378,29 @@ def start_orbit(
     rotation = 1 if cross >= 0 else -1
     return OrbitState(
         (int(pp[0]), int(pp[1])), math.atan2(start[1], start[0]), rotation, math.radians(step_deg),
-        max_turn_rad=math.radians(max_turn_deg),
+        max_turn_rad=math.radians(max_turn_deg), camera=camera,
     )  # fmt: skip
+
+
+def orbit_motion_to(rf, orbit: OrbitState, cell, current_source) -> float:
+    """Predicted source motion (cells) until the orbit's laser aims at the unit-circle point towards ``cell``.
+
+    The laser of step ``k`` aims at ``pp + u(theta_k + rotation * 90 deg)`` (:func:`plan_s2`), so ``cell`` is aimed
+    at once ``theta_k`` has turned to ``atan2(cell - pp) - rotation * 90 deg``: the motion is the move from
+    ``current_source`` to the first orbit pose plus the arc (radius standoff) of the remaining steps. ``inf`` when the
+    orbit gives up before that angle. ``orbit`` is not advanced."""
+    centre = np.asarray(orbit.centre, dtype=float)
+    rel = np.asarray(cell, dtype=float) - centre
+    target = math.atan2(rel[1], rel[0]) - orbit.rotation * math.pi / 2
+    turn = (orbit.rotation * (target - orbit.theta0_rad)) % (2 * math.pi)
+    k = max(1, math.ceil(turn / orbit.step_rad - 1e-9))
+    if k > orbit.n_steps:
+        return math.inf
+    theta1 = orbit.theta0_rad + orbit.rotation * (orbit.k + 1) * orbit.step_rad
+    first = centre + rf.standoff_cells * np.array([math.cos(theta1), math.sin(theta1)])
+    lead_in = 0.0 if current_source is None else float(np.hypot(*(first - np.asarray(current_source, dtype=float))))
+    chord = 2 * rf.standoff_cells * math.sin(orbit.step_rad / 2)
+    return lead_in + chord * max(k - (orbit.k + 1), 0)
 
 
 def plan_s2(rf, orbit: OrbitState) -> Plan | NoView:
@@ -342,5 +421,11 @@ def plan_s2(rf, orbit: OrbitState) -> Plan | NoView:
     side_ang = theta + orbit.rotation * math.pi / 2
     q = centre + np.array([math.cos(side_ang), math.sin(side_ang)])
     poses = [rf.pose_through(src, q, side) for side in (1, -1)]
-    best = max(poses, key=lambda p: float(np.hypot(*(p[1] - centre))))
+    if orbit.camera == "leading":
+        # the camera ahead of the source in the sense of the turn, facing the surface the orbit is looking for
+        rel_s = src - centre
+        lead = [orbit.rotation * float(rel_s[0] * (p[1] - centre)[1] - rel_s[1] * (p[1] - centre)[0]) for p in poses]
+        best = poses[int(np.argmax(lead))]
+    else:
+        best = max(poses, key=lambda p: float(np.hypot(*(p[1] - centre))))
     return Plan(best, None, 1.0)

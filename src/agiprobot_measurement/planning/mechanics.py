@@ -13,15 +13,20 @@ import numpy as np
 
 from agiprobot_measurement.motion.cartesian import compute_cartesian_path
 from agiprobot_measurement.motion.time_parameterization import constant_speed_scan_trajectory
-from agiprobot_measurement.sensors.laser_line.model import MeasurabilityResult
+
+# the chunked metrology moved to the streaming module; re-exported here for its callers
+from agiprobot_measurement.planning.streaming import evaluate_in_chunks
 
 __all__ = [
     "SCAN_ACCELERATION_MM_S2",
+    "check_scan_line",
     "estimate_scan_duration",
     "evaluate_in_chunks",
     "reachable_anchors",
     "scan_line_extents",
+    "scan_line_starts_free",
     "scan_path",
+    "set_scan_trajectory",
     "tip_pose_m",
     "verify_scan_line",
 ]
@@ -45,38 +50,6 @@ def reachable_anchors(ik, anchor_poses_mm: np.ndarray, chunk: int = 20000) -> np
         _, valid = ik.solve_all(poses)
         out[start : start + chunk] = valid.any(axis=1)
     return out
-
-
-def evaluate_in_chunks(
-    sensor_model,
-    poses: np.ndarray,
-    threshold_mm: float,
-    deflection: float,
-    report: Callable[[str, float, str], None] | None = None,
-) -> MeasurabilityResult:
-    """Batch metrology with progress (stage 'metrology'): chunks of views, merged into one result."""
-    n = len(poses)
-    if n == 0:
-        return sensor_model.evaluate_viewpoints_batch(np.zeros((0, 4, 4)), threshold_mm, deflection)
-    chunk = max(2000, n // 20)
-    parts = []
-    for start in range(0, n, chunk):
-        parts.append(sensor_model.evaluate_viewpoints_batch(poses[start : start + chunk], threshold_mm, deflection))
-        if report is not None:
-            report("metrology", min(start + chunk, n) / n, f"{min(start + chunk, n)} of {n} viewpoints")
-    indptr = [np.zeros(1, dtype=np.int64)]
-    offset = 0
-    for part in parts:
-        indptr.append(part.indptr[1:] + offset)
-        offset += part.nnz
-    return MeasurabilityResult(
-        parts[0].n_points,
-        n,
-        np.concatenate(indptr),
-        np.concatenate([p.point_indices for p in parts]),
-        np.concatenate([p.uncertainties for p in parts]),
-        np.concatenate([p.trajectory_distances for p in parts]),
-    )
 
 
 def scan_line_extents(t0_min, t0_max, overmeasure_mm: float, min_length_mm: float):
@@ -135,6 +108,33 @@ def scan_path(view, line: tuple[float, float], step_mm: float, jump_rad: float, 
     return best
 
 
+def scan_line_starts_free(views, ik, collision, preferred_state: np.ndarray, chunk: int = 4096) -> np.ndarray:
+    """Whether each view's scan line has a collision-free IK branch at one of its two ends, for many views in
+    one vectorised pass (closed-form IK of all end poses at once, one batched collision check).
+
+    A view without one is rejected by :func:`verify_scan_line` for certain (both scan directions start at an
+    end, with the same IK seed and the same collision check), so the batch settles such views cheaply; a
+    view with one still needs the full check along its line.
+    """
+    out = np.zeros(len(views), dtype=bool)
+    for begin in range(0, len(views), chunk):
+        part = views[begin : begin + chunk]
+        anchors = np.stack([v.get_anchor_pose() for v in part])
+        lines = np.array([v.scan_line for v in part], dtype=float)
+        ends = np.concatenate([anchors, anchors])
+        x_axis = anchors[:, :3, 0]
+        ends[: len(part), :3, 3] += lines[:, 0, None] * x_axis
+        ends[len(part) :, :3, 3] += lines[:, 1, None] * x_axis
+        solutions, valid = ik.solve_all(tip_pose_m(ends), seeds=preferred_state)
+        rows, branches = np.nonzero(valid)
+        free = np.zeros(valid.shape, dtype=bool)
+        if rows.size:
+            free[rows, branches] = collision.check_states(solutions[rows, branches])
+        any_end = free.any(axis=1)
+        out[begin : begin + len(part)] = any_end[: len(part)] | any_end[len(part) :]
+    return out
+
+
 def verify_scan_line(
     view,
     settings: dict,
@@ -154,6 +154,37 @@ def verify_scan_line(
     ``connect_from_current(q)`` plans a motion from the current state to ``q`` (None if there is none); it is
     used when ``plan_path_to_check_reachability`` is set. Sets the view's mechanics fields; returns validity.
     """
+    path = check_scan_line(
+        view,
+        settings,
+        ik=ik,
+        collision=collision,
+        preferred_state=preferred_state,
+        scan_speed_mm_s=scan_speed_mm_s,
+        connect_from_current=connect_from_current,
+    )
+    if path is None:
+        return False
+    set_scan_trajectory(view, path, kinematics=kinematics, limits=limits, scan_speed_mm_s=scan_speed_mm_s)
+    return True
+
+
+def check_scan_line(
+    view,
+    settings: dict,
+    *,
+    ik,
+    collision,
+    preferred_state: np.ndarray,
+    scan_speed_mm_s: float,
+    connect_from_current: Callable[[np.ndarray], object] | None = None,
+) -> np.ndarray | None:
+    """The geometric part of :func:`verify_scan_line`: the joint path (K, dof) rad of the view's executable
+    scan line, or None (the view is rejected). Shortens the view like :func:`verify_scan_line` and sets
+    ``mechanics_verified``, ``mechanics_valid``, ``scan_line`` and an estimated duration (s), but not the
+    measurement trajectory: :func:`set_scan_trajectory` time-parameterises the path (about twice the cost of
+    this check), so a set cover that verifies many views needs it only for the views it keeps.
+    """
     view.mechanics_verified = True
     step = settings["trajectory_sample_step"]
     overmeasure = settings["minimum_required_overmeasure"]
@@ -167,14 +198,14 @@ def verify_scan_line(
             break
     if best is None:
         view.mechanics_valid = False
-        return False
+        return None
     fraction, path, line = best
     start_t, end_t = line
     achieved_end = start_t + fraction * (end_t - start_t)
     achieved_lo, achieved_hi = sorted((start_t, achieved_end))
     if achieved_hi - achieved_lo < settings["minimum_trajectory_length"] - 1e-6:
         view.mechanics_valid = False
-        return False
+        return None
     if fraction < 1.0:
         # partial acceptance: keep the points the laser line still sweeps, with the overmeasure margin
         indices = np.asarray(view.get_measurable_surface_point_indices())
@@ -183,19 +214,25 @@ def verify_scan_line(
         keep = (t0s >= achieved_lo + overmeasure - 1e-9) & (t0s <= achieved_hi - overmeasure + 1e-9)
         if not keep.any():
             view.mechanics_valid = False
-            return False
+            return None
         view.set_measurable_surface_point_indices_and_uncertainties(indices[keep], uncert[keep], t0s[keep])
     if settings.get("plan_path_to_check_reachability") and connect_from_current is not None:
         if connect_from_current(path[0]) is None:
             view.mechanics_valid = False
-            return False
+            return None
+    view.scan_line = (start_t, achieved_end)
+    view.reversed = False
+    view.estimated_duration_s = estimate_scan_duration(view.scan_line, scan_speed_mm_s)
+    view.mechanics_valid = True
+    return path
+
+
+def set_scan_trajectory(view, path: np.ndarray, *, kinematics, limits, scan_speed_mm_s: float) -> None:
+    """Time-parameterise a checked scan line's joint path (rad) at constant tip speed (mm/s): sets the view's
+    measurement trajectory, its scan speed and its duration (s)."""
     scan = constant_speed_scan_trajectory(
         path, limits, scan_speed_mm_s, spacing_mm=None, tip_positions_m=kinematics.fk_batch(path)[:, :3, 3]
     )
     view.set_trajectory_for_measurement(scan.trajectory)
-    view.scan_line = (start_t, achieved_end)
-    view.reversed = False
     view.scan_speed_mm_s = scan.scan_speed_mm_s
     view.estimated_duration_s = scan.trajectory.duration
-    view.mechanics_valid = True
-    return True

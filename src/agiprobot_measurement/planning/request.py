@@ -88,6 +88,13 @@ def check_choice(value, valid: Iterable[str], field_name: str, label: str | None
     )
 
 
+def _looks_like_address(text: str) -> bool:
+    """``[protocol://]host:port`` with a port number (Dask's tcp, tls, ucx, inproc addresses)."""
+    rest = text.split("://", 1)[1] if "://" in text else text
+    host, _, port = rest.rpartition(":")
+    return bool(host) and port.isdigit() and 0 < int(port) < 65536 and not any(c.isspace() for c in rest)
+
+
 def load_planning_defaults(path: str | Path | None = None) -> dict:
     """The ``planning`` section of ``config/trajectory_manager.yaml`` (or of ``path``)."""
     path = Path(path) if path is not None else DEFAULTS_FILE
@@ -108,17 +115,22 @@ SAMPLING_OVERSAMPLING = 5
 #: measurability entries of a view are bounded by the samples on it
 VIEW_FOOTPRINT_MM2 = 150.0 * 150.0
 #: bytes per random point while sampling (point, normal, face), per candidate (4x4 pose and its indices) and per
-#: measurability entry (point index, uncertainty, trajectory distance)
+#: kept measurability entry (point index int32, uncertainty and trajectory distance float64: the streamed store)
 BYTES_PER_DRAWN_POINT = 3 * 8 + 3 * 8 + 8
 BYTES_PER_CANDIDATE = 16 * 8 + 3 * 8
-BYTES_PER_ENTRY = 8 + 8 + 8
+BYTES_PER_ENTRY = 4 + 8 + 8
+#: largest local Dask cluster a request may ask for (worker processes)
+MAX_LOCAL_WORKERS = 256
 
 
 @dataclass(frozen=True)
 class WorkEstimate:
     """The largest work a planning run may cause, known before anything is allocated: ``samples`` (area x
-    density), ``candidates`` (samples x orientations x tilts), ``measurability_entries`` (candidates x the
-    samples one view can see) and ``memory_gb``, the arrays those take."""
+    density), ``candidates`` (samples x orientations x tilts), ``measurability_entries`` (an upper bound:
+    candidates x the samples one view can see) and ``memory_gb``, the dense arrays of samples and candidates.
+    The measurability store is streamed: its size is projected from a pilot of the candidates and checked
+    against the run's memory budget (``max_memory_gb``) before the evaluation
+    (:func:`~agiprobot_measurement.planning.streaming.evaluate_streaming`)."""
 
     area_mm2: float
     samples: float
@@ -129,7 +141,7 @@ class WorkEstimate:
     def describe(self) -> str:
         return (
             f"{_count(self.samples)} samples ({_count(self.area_mm2)} mm^2 x density), {_count(self.candidates)} "
-            f"candidate viewpoints, {_count(self.measurability_entries)} measurability entries, "
+            f"candidate viewpoints, at most {_count(self.measurability_entries)} measurability entries, "
             f"~{_count(self.memory_gb, 2)} GB"
         )
 
@@ -149,11 +161,7 @@ def estimate_work(
     candidates = samples * float(orientations_around_boresight) * tilts
     per_view = min(samples, float(sampling_density) * VIEW_FOOTPRINT_MM2)
     entries = candidates * per_view
-    memory = (
-        samples * SAMPLING_OVERSAMPLING * BYTES_PER_DRAWN_POINT
-        + candidates * BYTES_PER_CANDIDATE
-        + entries * BYTES_PER_ENTRY
-    )
+    memory = samples * SAMPLING_OVERSAMPLING * BYTES_PER_DRAWN_POINT + candidates * BYTES_PER_CANDIDATE
     return WorkEstimate(float(area_mm2), samples, candidates, entries, memory / 1e9)
 
 
@@ -225,6 +233,10 @@ class PlanRequest:
     ``placement``: one of :data:`PLACEMENTS`. ``min_reachable_share``: below this share of samples with a
     reachable anchor a warning suggests another placement or tilts. ``tessellation_tolerance_mm``: the linear
     deflection of STEP tessellation (0 = the reader's default).
+    ``workers``: evaluate the candidates on a local Dask cluster of that many worker processes (0 = in the
+    planning process); ``scheduler``: ... or on the existing Dask cluster at this address (``tcp://host:8786``,
+    '' = none; it overrides ``workers``); ``max_memory_gb``: the memory budget of the evaluation's store (0 = 80 %
+    of the memory available). The plan does not depend on these three.
     """
 
     part_file: str = ""
@@ -251,6 +263,9 @@ class PlanRequest:
     placement: str = "scene"
     min_reachable_share: float = 0.3
     tessellation_tolerance_mm: float = 0.0
+    workers: int = 0
+    scheduler: str = ""
+    max_memory_gb: float = 0.0
 
     @classmethod
     def field_names(cls) -> list[str]:
@@ -348,6 +363,33 @@ class PlanRequest:
                 "orientations_around_boresight",
                 f"{label('orientations_around_boresight')} must be at least 1, got {self.orientations_around_boresight}",
             )
+        workers = self.workers
+        if isinstance(workers, float) and workers.is_integer():
+            workers = int(workers)
+        if (
+            not isinstance(workers, int | np.integer)
+            or isinstance(workers, bool)
+            or not 0 <= workers <= MAX_LOCAL_WORKERS
+        ):
+            raise PlanRequestError(
+                "workers", f"{label('workers')} must be a whole number in [0, {MAX_LOCAL_WORKERS}], got {self.workers}"
+            )
+        scheduler = str(self.scheduler or "").strip()
+        if scheduler and not _looks_like_address(scheduler):
+            raise PlanRequestError(
+                "scheduler",
+                f"{label('scheduler')} must be a Dask scheduler address like tcp://host:8786 (or host:8786), got "
+                f"{self.scheduler!r}",
+            )
+        try:
+            max_memory = float(self.max_memory_gb)
+        except (TypeError, ValueError):
+            max_memory = float("nan")
+        if not (math.isfinite(max_memory) and max_memory >= 0):
+            raise PlanRequestError(
+                "max_memory_gb",
+                f"{label('max_memory_gb')} must be a number of GB >= 0 (0 = from the machine), got {self.max_memory_gb}",
+            )
         transform = np.asarray(self.part_transform_mm, dtype=float)
         if transform.shape != (4, 4) or not np.all(np.isfinite(transform)):
             raise PlanRequestError(
@@ -369,6 +411,9 @@ class PlanRequest:
             part_transform_mm=transform,
             plan_file=str(self.plan_file or ""),
             overwrite=bool(self.overwrite),
+            workers=int(workers),
+            scheduler=scheduler,
+            max_memory_gb=max_memory,
             **positives,
             **fractions,
         )

@@ -150,7 +150,10 @@ class MeasurementSession:
         manager = TrajectoryManager.for_request(
             request, self.station, progress=progress, start_state=start_state, work_budget=self.work_budget
         )
-        ordered = manager.plan_request(request)
+        try:
+            ordered = manager.plan_request(request)
+        finally:
+            manager.close()  # ends the evaluation's local Dask cluster, if the request asked for one
         segments = manager.convert_viewpointlist_to_execution_plan(ordered)
         plan = plan_io.ExecutionPlan(manager.plan_metadata(), segments)
         written = ""

@@ -14,7 +14,9 @@ Pipeline (``generate_samples_and_viewpoints`` -> ``solve_scp`` -> ``connect_view
    ones are evaluated metrologically in one batch (sparse points x viewpoints matrix);
 4. mechanics without waste: the full scan line (Cartesian path, joint jumps, collisions, partial acceptance)
    is computed for the views the set cover picks and, in the same round, for the views it is likely to pick
-   next (the greedy cover's, the LP's favourites, a few views of every point no verified view measures yet);
+   next (the greedy cover's, the LP's favourites, the views sharing most points with each pick, views of every
+   point no verified view measures yet); one batched IK + collision pass over the batch's scan-line ends rejects
+   the views that cannot start first, and the time parameterisation waits for the views the final cover keeps;
    failed or shortened columns are corrected and the cover solved again, over a candidate pool after the
    first round, until the chosen views are all verified or the whole-plan time limit comes (then: the best
    cover of verified views, with its gap);
@@ -61,11 +63,12 @@ from agiprobot_measurement.planning.execution import (
     segment_triples,
 )
 from agiprobot_measurement.planning.mechanics import (
+    check_scan_line,
     estimate_scan_duration,
-    evaluate_in_chunks,
     reachable_anchors,
     scan_line_extents,
-    verify_scan_line,
+    scan_line_starts_free,
+    set_scan_trajectory,
 )
 from agiprobot_measurement.planning.ordering import order_views, p2p_durations, unwrapped_towards
 from agiprobot_measurement.planning.part_loading import LoadedPart, PartLoadError, SurfaceSamples, load_part
@@ -84,6 +87,7 @@ from agiprobot_measurement.planning.request import (
     estimate_work,
 )
 from agiprobot_measurement.planning.set_cover import SOLVER_TYPES, SetCoverResult, solve_set_cover
+from agiprobot_measurement.planning.streaming import EvaluationSettings, StreamStats, evaluate_streaming
 from agiprobot_measurement.planning.viewpoint import (
     TILT_MODES,
     ViewPoint,
@@ -122,12 +126,18 @@ AUTO_SAME_COVERAGE = 0.005
 
 #: an IP solve of one verification round stops after this long (s): its cover only names what to verify next
 ROUND_IP_TIME_S = 2.0
+#: ... and one over all views after this long (s): its reductions name the candidate pool of the next rounds
+FULL_ROUND_IP_TIME_S = 8.0
 #: the set cover loop solves the problem over all views at most this often (the rest over the candidate pool)
 MAX_FULL_SOLVES = 3
 #: each verification round takes up to this many unverified views of every point no verified view measures yet
-POINT_VIEWS_PER_ROUND = 3
+POINT_VIEWS_PER_ROUND = 24
 #: ... but no more than this many in one round (the next round's cover may settle the rest)
-MAX_POINT_VIEWS_PER_ROUND = 400
+MAX_POINT_VIEWS_PER_ROUND = 2000
+#: each verification round also takes this many unverified views sharing the most points with each picked one
+SUBSTITUTES_PER_VIEW = 20
+#: the candidate pool takes at most this many of a solve's most likely columns (or four times the batch)
+POOL_LIKELY_COLUMNS = 6000
 
 
 def open_point_views(matrix, views: list[ViewPoint], per_point: int) -> np.ndarray:
@@ -158,6 +168,59 @@ def open_point_views(matrix, views: list[ViewPoint], per_point: int) -> np.ndarr
     return unique[np.lexsort((-sizes[unique], -counts))]
 
 
+def _select_columns(result: MeasurabilityResult, columns: np.ndarray) -> MeasurabilityResult:
+    """The columns ``columns`` (ascending) of ``result``, entries gathered once."""
+    starts = result.indptr[columns]
+    lengths = result.indptr[columns + 1] - starts
+    indptr = np.zeros(len(columns) + 1, dtype=np.int64)
+    np.cumsum(lengths, out=indptr[1:])
+    gather = np.repeat(starts - indptr[:-1], lengths) + np.arange(indptr[-1])
+    return MeasurabilityResult(
+        result.n_points,
+        len(columns),
+        indptr,
+        result.point_indices[gather],
+        result.uncertainties[gather],
+        result.trajectory_distances[gather],
+        None if result.extent_min is None else result.extent_min[columns],
+        None if result.extent_max is None else result.extent_max[columns],
+    )
+
+
+def _executable_columns(views: list[ViewPoint]) -> np.ndarray:
+    """Indices of the views verified executable."""
+    return np.flatnonzero([v.mechanics_verified is True and v.mechanics_valid for v in views])
+
+
+def substitute_views(matrix, views: list[ViewPoint], columns: np.ndarray, per_view: int) -> np.ndarray:
+    """The unverified columns sharing the most points with each of ``columns`` (points x views matrix, CSC,
+    non-zero = measurable), up to ``per_view`` each, the largest overlaps first.
+
+    When a picked view fails or is shortened, the next cover takes the views that measure the same points,
+    which a reduction had hidden as dominated: verifying them in the same round spares the rounds that would
+    uncover them one by one.
+    """
+    columns = np.asarray(columns, dtype=np.int64)
+    if columns.size == 0 or per_view <= 0:
+        return np.zeros(0, dtype=np.int64)
+    measurable = (scipy.sparse.csc_matrix(matrix) != 0).astype(np.float32)
+    overlap = (measurable[:, columns].T.tocsr() @ measurable).tocoo()  # len(columns) x views
+    unverified = np.array([v.mechanics_verified is False for v in views], dtype=bool)
+    keep = unverified[overlap.col] & (overlap.col != columns[overlap.row])
+    r, c, w = overlap.row[keep], overlap.col[keep], overlap.data[keep]
+    if r.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    order = np.lexsort((-w, r))
+    r, c, w = r[order], c[order], w[order]
+    rank = np.arange(r.size) - np.searchsorted(r, r, side="left")
+    chosen = rank < per_view
+    # best overlaps first across all picked views, each column once
+    c, w = c[chosen], w[chosen]
+    c = c[np.argsort(-w, kind="stable")]
+    _, first = np.unique(c, return_index=True)
+    return c[np.sort(first)]
+
+
 #: progress callback: (stage, fraction done 0..1, message)
 ProgressCallback = Callable[[str, float, str], None]
 
@@ -180,6 +243,11 @@ class TrajectoryManager:
     :param progress: optional callback ``(stage, fraction, message)``; raising :class:`PlanningCancelled` in it
         cancels planning.
     :param seed: seeds sampling and planning, so plans are reproducible.
+    :param workers: evaluate the candidates on a local Dask cluster of this many worker processes (0 = in this
+        process); :param scheduler: ... or on the existing Dask cluster at this address (``tcp://host:8786``);
+        :param max_memory_bytes: the memory budget of the evaluation's store (None = 80 % of the memory
+        available); work whose projected store does not fit is refused before the evaluation. The plan does
+        not depend on where the candidates are evaluated. :meth:`close` ends a local cluster.
     """
 
     def __init__(
@@ -192,7 +260,14 @@ class TrajectoryManager:
         start_state: np.ndarray | str = "home",
         preferred_state: np.ndarray | str = "up",
         work_budget: WorkBudget | None = None,
+        workers: int = 0,
+        scheduler: str = "",
+        max_memory_bytes: float | None = None,
     ):
+        self.evaluation = EvaluationSettings(int(workers or 0), str(scheduler or ""), max_memory_bytes)
+        self._evaluator = None
+        #: what the last candidate evaluation did (candidates, kept pairs, chunks, projection, times)
+        self.last_stream_stats: StreamStats | None = None
         self.station = station or Station.load()
         self.work_budget = work_budget if work_budget is not None else WorkBudget()
         self.last_work_estimate: WorkEstimate | None = None
@@ -224,6 +299,8 @@ class TrajectoryManager:
         self.timings_s: dict[str, float] = {}
         self.parameters: dict = {}
         self.mechanics_checked = 0
+        #: id(view) -> (view, joint path rad) of checked scan lines whose trajectory is not computed yet
+        self._pending_scan_paths: dict[int, tuple[ViewPoint, np.ndarray]] = {}
         self.measurability = None
         #: doubts about the run the caller should hear of (low reachability, time limit hit, ...)
         self.warnings: list[str] = []
@@ -256,6 +333,20 @@ class TrajectoryManager:
     def _report(self, stage: str, fraction: float, message: str = "") -> None:
         if self.progress is not None:
             self.progress(stage, float(min(max(fraction, 0.0), 1.0)), message)
+
+    def evaluator(self):
+        """The Dask evaluator of this manager's settings (made on first use), or None to evaluate here."""
+        if self._evaluator is None and self.evaluation.distributed:
+            from agiprobot_measurement.planning.distributed import DaskEvaluator
+
+            self._evaluator = DaskEvaluator(self.evaluation.workers, self.evaluation.scheduler)
+        return self._evaluator
+
+    def close(self) -> None:
+        """End the Dask client (and a local cluster) of the evaluation, if one was started."""
+        if self._evaluator is not None:
+            self._evaluator.close()
+            self._evaluator = None
 
     @property
     def planner(self):
@@ -444,39 +535,40 @@ class TrajectoryManager:
         self._report("metrology", 0.0, f"{int(reachable.sum())} of {len(reachable)} anchors reachable")
         t2 = time.perf_counter()
         index = np.flatnonzero(reachable)
-        result = evaluate_in_chunks(
-            self.sensor_model, candidates.poses[index], threshold, maximum_deflection, self._report
+        stats = StreamStats()
+        # what this process holds beside the store: the samples and every candidate's pose and indices
+        fixed = samples.points.nbytes * 4 + candidates.poses.nbytes * 2 + len(candidates.poses) * 40
+        result, useful_index = evaluate_streaming(
+            self.sensor_model,
+            candidates.poses[index],
+            threshold,
+            maximum_deflection,
+            self._report,
+            settings=self.evaluation,
+            executor=self.evaluator(),
+            fixed_bytes=fixed,
+            stats=stats,
         )
-        counts = result.counts
-        useful = counts > 0
+        self.last_stream_stats = stats
         if viewpoint_tilt_mode == "limited":
             valid_all = np.zeros(len(candidates.poses), dtype=bool)
-            valid_all[index[useful]] = True
+            valid_all[index[useful_index]] = True
             keep_all = select_limited_tilt(
                 valid_all, candidates.sample_index, candidates.orientation_index, candidates.tilt_index
             )
-            useful &= keep_all[index]
+            chosen = np.flatnonzero(keep_all[index[useful_index]])
+            if chosen.size < result.n_views:
+                result = _select_columns(result, chosen)
+                useful_index = useful_index[chosen]
         timings["metrology"] = time.perf_counter() - t2
-        kept = index[useful]
+        kept = index[useful_index]
         self._report("metrology", 1.0, f"{kept.size} viewpoints measure something")
         t3 = time.perf_counter()
-        # the returned views' columns, gathered once: views hold slices of these arrays (no per-view copies),
-        # and the set cover's matrix is built from them directly
-        columns = np.flatnonzero(useful)
-        starts = result.indptr[columns]
-        lengths = result.indptr[columns + 1] - starts
-        indptr = np.zeros(len(columns) + 1, dtype=np.int64)
-        np.cumsum(lengths, out=indptr[1:])
-        gather = np.repeat(starts - indptr[:-1], lengths) + np.arange(indptr[-1])
-        self.measurability = MeasurabilityResult(
-            result.n_points,
-            len(columns),
-            indptr,
-            result.point_indices[gather],
-            result.uncertainties[gather],
-            result.trajectory_distances[gather],
-        )
-        del result, gather
+        # the views hold slices of the store's arrays (no per-view copies); the set cover's matrix is built from
+        # them directly
+        indptr = result.indptr
+        self.measurability = result
+        del result
         store = self.measurability
         self._entry_alive = np.ones(store.nnz, dtype=bool)
         self._metrology_coverable = np.zeros(len(samples), dtype=bool)
@@ -572,39 +664,99 @@ class TrajectoryManager:
             return None
         return int(self.measurability.indptr[j]), int(self.measurability.indptr[j + 1])
 
-    def _verify_mechanics(self, view: ViewPoint, settings: dict | None = None) -> bool:
-        """Compute the view's measurement trajectory; shorten the view to what is executable or reject it."""
+    def _verify_mechanics(self, view: ViewPoint, settings: dict | None = None, time_parameterize: bool = True) -> bool:
+        """Compute the view's measurement trajectory; shorten the view to what is executable or reject it.
+
+        With ``time_parameterize=False`` only the scan line's path is checked (the view is verified, valid or
+        not, its duration an estimate); the trajectory is computed later by :meth:`_finish_scan_trajectories`
+        for the views a cover keeps (the time parameterisation costs twice the check).
+        """
         started = time.perf_counter()
+        path = None
         try:
-            valid = verify_scan_line(
+            path = check_scan_line(
                 view,
                 settings or self._mechanics,
                 ik=self.ik,
                 collision=self.collision,
-                kinematics=self.kinematics,
-                limits=self.limits,
                 preferred_state=self.preferred_state,
                 scan_speed_mm_s=self.scan_speed_mm_s,
                 connect_from_current=lambda q: self.connect(self.current_state, q, planning_time_s=1.0),
             )
+            if path is not None:
+                if time_parameterize:
+                    self._set_scan_trajectory(view, path)
+                else:
+                    view.set_trajectory_for_measurement(None)
+                    self._pending_scan_paths[id(view)] = (view, path)
         finally:
             self.timings_s["mechanics"] = self.timings_s.get("mechanics", 0.0) + time.perf_counter() - started
             self.mechanics_checked += 1
+        valid = path is not None
         span = self._column_range(view)
         if span is not None:
             a, b = span
             if not valid:
                 self._entry_alive[a:b] = False
             else:
-                kept = np.isin(self.measurability.point_indices[a:b], view.measurable_indices)
-                self._entry_alive[a:b] &= kept
-                j = view.coverage_column
-                # estimates must not be optimistic, or IP_time keeps preferring views not yet verified
-                ratio = view.estimated_duration_s / max(self._durations_estimate[j], 1e-9)
-                self._duration_bias = max(self._duration_bias, ratio)
-                self._durations[j] = view.estimated_duration_s
-                self._duration_verified[j] = True
+                if view.measurable_indices.size < b - a:  # shortened: only the points it still sweeps
+                    kept = np.isin(self.measurability.point_indices[a:b], view.measurable_indices)
+                    self._entry_alive[a:b] &= kept
+                if time_parameterize:
+                    self._record_duration(view)
         return valid
+
+    def _set_scan_trajectory(self, view: ViewPoint, path: np.ndarray) -> None:
+        self._pending_scan_paths.pop(id(view), None)
+        set_scan_trajectory(
+            view, path, kinematics=self.kinematics, limits=self.limits, scan_speed_mm_s=self.scan_speed_mm_s
+        )
+
+    def _record_duration(self, view: ViewPoint) -> None:
+        """A verified view's trajectory duration (s) replaces its estimate in the set cover's durations."""
+        if self._column_range(view) is None:
+            return
+        j = view.coverage_column
+        # estimates must not be optimistic, or IP_time keeps preferring views not yet verified
+        ratio = view.estimated_duration_s / max(self._durations_estimate[j], 1e-9)
+        self._duration_bias = max(self._duration_bias, ratio)
+        self._durations[j] = view.estimated_duration_s
+        self._duration_verified[j] = True
+
+    def _finish_scan_trajectories(self, views) -> None:
+        """Time-parameterise the checked scan lines of ``views`` whose trajectory was deferred."""
+        started = time.perf_counter()
+        try:
+            for view in views:
+                pending = self._pending_scan_paths.get(id(view))
+                if pending is not None and pending[0] is view and view.get_trajectory_for_measurement() is None:
+                    self._set_scan_trajectory(view, pending[1])
+                    self._record_duration(view)
+        finally:
+            self.timings_s["mechanics"] = self.timings_s.get("mechanics", 0.0) + time.perf_counter() - started
+
+    def _screen_scan_lines(self, views) -> int:
+        """Reject, in one batched pass, the unverified views whose scan line has no collision-free IK branch
+        at either end (:func:`scan_line_starts_free`): the full check would reject them too. Returns how many
+        it rejected."""
+        todo = [v for v in views if v.mechanics_verified is False]
+        if not todo:
+            return 0
+        started = time.perf_counter()
+        free = scan_line_starts_free(todo, self.ik, self.collision, self.preferred_state)
+        rejected = 0
+        for view, ok in zip(todo, free.tolist(), strict=True):
+            if ok:
+                continue
+            view.mechanics_verified = True
+            view.mechanics_valid = False
+            span = self._column_range(view)
+            if span is not None:
+                self._entry_alive[span[0] : span[1]] = False
+            rejected += 1
+        self.mechanics_checked += rejected
+        self.timings_s["mechanics"] = self.timings_s.get("mechanics", 0.0) + time.perf_counter() - started
+        return rejected
 
     # ------------------------------------------------------------------------------------ set cover
     def solve_scp(
@@ -637,6 +789,11 @@ class TrajectoryManager:
             raise PlanningError("solve_scp needs at least one viewpoint")
         n_points = len(self.sampled_surface_points) or 1 + max(int(v.measurable_indices.max(initial=0)) for v in views)
         t0 = time.perf_counter()
+        # only IP_time needs the verified views' real durations while solving; the others time-parameterise
+        # the scan lines of the chosen views only
+        defer_trajectories = solver_type != "IP_time"
+        provided = {id(v) for v in views}
+        self._pending_scan_paths = {k: p for k, p in self._pending_scan_paths.items() if k in provided}
         deadline = math.inf if deadline_s is None else float(deadline_s)
         mechanics_before = self.timings_s.get("mechanics", 0.0)
         set_cover_time = 0.0
@@ -673,10 +830,15 @@ class TrajectoryManager:
             # a round's cover only decides what to verify next (its columns change after that): a short solve is
             # enough; the last cover gets the time left (below)
             remaining = deadline - time.perf_counter()
-            limit = min(time_limit_s, ROUND_IP_TIME_S)
+            columns = np.arange(len(views)) if pool is None or only_verified else pool
+            if only_verified:
+                # the unverified columns are empty here: leaving them out is the same programme, much smaller
+                executable = _executable_columns(views)
+                columns = executable if executable.size else columns
+            # a solve over all views names the pool the next rounds choose from: its reductions must finish
+            limit = min(time_limit_s, FULL_ROUND_IP_TIME_S if columns.size == len(views) else ROUND_IP_TIME_S)
             if math.isfinite(remaining):
                 limit = max(1.0, min(limit, 0.5 * remaining))
-            columns = np.arange(len(views)) if pool is None or only_verified else pool
             sub = matrix if columns.size == len(views) else matrix[:, columns]
             result = solve_set_cover(
                 sub,
@@ -719,6 +881,20 @@ class TrajectoryManager:
                 if full_solves < MAX_FULL_SOLVES and time.perf_counter() + 1.5 * full_solve_s < deadline:
                     pool = None
                     continue
+                # points that only unverified views outside the pool measure: verify their views (no solve) while
+                # time and rounds allow, then solve the pool again with them, so such points are settled
+                per_point = POINT_VIEWS_PER_ROUND * 2 ** min(round_index, 10)
+                open_columns = open_point_views(matrix, views, per_point)[:MAX_POINT_VIEWS_PER_ROUND]
+                if open_columns.size and time.perf_counter() < deadline and round_index + 1 < max_rounds:
+                    verified_count += self._screen_scan_lines([views[j] for j in open_columns.tolist()])
+                    for j in open_columns.tolist():
+                        if time.perf_counter() >= deadline:
+                            break
+                        if views[j].mechanics_verified is False:
+                            self._verify_mechanics(views[j], time_parameterize=not defer_trajectories)
+                            verified_count += 1
+                    pool = np.union1d(columns, open_columns)
+                    continue
                 message = (
                     f"set cover: the gap holds for a candidate pool of {columns.size} of {len(views)} views (no "
                     "more time or rounds to solve over all views again)"
@@ -728,8 +904,9 @@ class TrajectoryManager:
                 break
             batch = list(pending)
             greedy_pending = []
-            if solver_type != "greedy":
-                # the greedy cover of the same matrix costs little and names views the next solve may want
+            if solver_type != "greedy" and columns.size < len(views):
+                # the greedy cover of the pool costs little and names views the next solve may want (a solve over
+                # all views already started from its own greedy cover, and a greedy pass over all is not cheap)
                 extra = solve_set_cover(sub, "greedy", time_limit_s=limit)
                 set_cover_time += extra.solve_time_s
                 greedy_pending = [
@@ -749,15 +926,26 @@ class TrajectoryManager:
             per_point = POINT_VIEWS_PER_ROUND * 2 ** min(round_index, 10)
             batch = list(dict.fromkeys(batch))[:size]
             batch += [views[j] for j in open_point_views(matrix, views, per_point)][:MAX_POINT_VIEWS_PER_ROUND]
+            pending_columns = [v.coverage_column if v.coverage_column is not None else -1 for v in pending]
+            if all(views[j] is v for j, v in zip(pending_columns, pending, strict=True) if 0 <= j < len(views)):
+                picked_columns = np.array([j for j in pending_columns if 0 <= j < len(views)], dtype=np.int64)
+            else:
+                index_of = {id(v): j for j, v in enumerate(views)}
+                picked_columns = np.array([index_of[id(v)] for v in pending], dtype=np.int64)
+            batch += [views[j] for j in substitute_views(matrix, views, picked_columns, SUBSTITUTES_PER_VIEW)]
             batch = list(dict.fromkeys(batch))
             LOG.debug(
                 "set cover round %d: %d of %d columns, %d chosen, %d pending, %d to verify (%s)",
                 round_index + 1, columns.size, len(views), len(chosen), len(pending), len(batch), result.message,
             )  # fmt: skip
+            # views without a free start at either end of their line are settled for the whole batch at once
+            verified_count += self._screen_scan_lines(batch)
             for k, view in enumerate(batch):
+                if view.mechanics_verified is not False:
+                    continue
                 if k >= len(pending) and time.perf_counter() >= deadline:
                     break  # the picked views first; the likely ones only while there is time
-                self._verify_mechanics(view)
+                self._verify_mechanics(view, time_parameterize=not defer_trajectories)
                 verified_count += 1
                 if verified_count % 25 == 0 or k == len(batch) - 1:
                     self._report(
@@ -769,7 +957,9 @@ class TrajectoryManager:
             previous = np.zeros(0, dtype=np.int64) if pool is None else pool
             extra_columns = [result.selected, verified_columns, previous]
             if likely is not None:
-                extra_columns.append(likely)
+                # the most likely only: without a finished reduction (tilt full, a loaded machine) the list is
+                # every column, and a pool of all columns makes every round a full solve
+                extra_columns.append(likely[: max(POOL_LIKELY_COLUMNS, 4 * size)])
             pool = np.unique(np.concatenate([np.asarray(c, dtype=np.int64) for c in extra_columns]))
         self.timings_s["set_cover_full_problem_checked"] = bool(full_checked)
         if chosen and (result.gap is None or result.gap > mip_gap) and solver_type != "greedy":
@@ -780,13 +970,17 @@ class TrajectoryManager:
                 left = time_limit_s
             if left > 2.0:
                 matrix, durations = self._coverage_problem(views, n_points, only_verified=True)
+                executable = _executable_columns(views)
+                if executable.size == 0:
+                    executable = np.arange(len(views))
                 polished = solve_set_cover(
-                    matrix,
+                    matrix[:, executable],
                     solver_type,
-                    durations_s=durations if solver_type == "IP_time" else None,
+                    durations_s=durations[executable] if solver_type == "IP_time" else None,
                     time_limit_s=max(1.0, min(time_limit_s, 0.8 * left)),
                     mip_gap=mip_gap,
                 )
+                polished = dataclasses.replace(polished, selected=executable[polished.selected])
                 set_cover_time += polished.solve_time_s
                 polished_views = [views[j] for j in polished.selected.tolist()]
                 if (
@@ -799,6 +993,7 @@ class TrajectoryManager:
                     chosen = polished_views
         if not chosen:
             raise PlanningError("no viewpoint is executable: every candidate failed the mechanical checks")
+        self._finish_scan_trajectories(chosen)
         self.timings_s["set_cover_and_mechanics"] = time.perf_counter() - t0
         self.timings_s["set_cover"] = set_cover_time
         self.timings_s["set_cover_last_solve"] = result.solve_time_s
@@ -875,6 +1070,7 @@ class TrajectoryManager:
         ``unconnected_views``. Returns the ordered list."""
         views = [v for v in unordered_viewpoints]
         t0 = time.perf_counter()
+        self._finish_scan_trajectories(views)
         for view in views:
             if not view.mechanics_verified or view.get_trajectory_for_measurement() is None:
                 if not self._verify_mechanics(view):
@@ -1153,6 +1349,9 @@ class TrajectoryManager:
             seed=request.seed,
             start_state=start_state,
             work_budget=work_budget,
+            workers=request.workers,
+            scheduler=request.scheduler,
+            max_memory_bytes=request.max_memory_gb * 1e9 if request.max_memory_gb else None,
         )
 
     def plan_request(self, request: PlanRequest) -> list[ViewPoint]:

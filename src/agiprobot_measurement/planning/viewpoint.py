@@ -209,6 +209,12 @@ def reverse_trajectory(trajectory):
     return msg
 
 
+_NO_INDICES = np.zeros(0, dtype=np.int64)
+_NO_INDICES.flags.writeable = False
+_NO_VALUES = np.zeros(0)
+_NO_VALUES.flags.writeable = False
+
+
 class ViewPoint:
     """One viewpoint: the geometry of a straight measurement trajectory plus its metrological and
     kinematic results.
@@ -295,9 +301,10 @@ class ViewPoint:
         view.tilt_theta = float(tilt_theta)
         view.tilt_psi = float(tilt_psi)
         view._anchor_pose = anchor_pose
-        view._measurable_indices = np.zeros(0, dtype=np.int64)
-        view._uncertainties = np.zeros(0)
-        view._trajectory_distances = np.zeros(0)
+        # shared empty arrays (never written): a batch builds hundreds of thousands of views
+        view._measurable_indices = _NO_INDICES
+        view._uncertainties = _NO_VALUES
+        view._trajectory_distances = _NO_VALUES
         view._trajectory_for_measurement = None
         view._trajectory_to_view = None
         view.scan_line = None

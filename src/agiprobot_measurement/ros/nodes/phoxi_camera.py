@@ -20,13 +20,25 @@ Parameters: the driver's (scanner_id: "" starts disconnected, a listed id connec
   ~model, ~camera_xyz_m, ~camera_rpy_rad, ~parent_frame (override the config file), ~publish_tf (true: publish the
   configured pose on tf; false: take the sensor's pose from tf), ~render_configured_pose (false; true with
   publish_tf false: render at the configured pose, publish nothing on tf: a camera awaiting calibration),
-  ~scene (config/scene.yaml), ~robot_description
-  (name of the URDF parameter, "" for no robot), ~output_dir (where relative file names resolve; "" = the node's
-  working directory, as the driver's paths), ~allowed_save_dirs (list, or a string of paths separated by spaces or
-  colons: where absolute names may also point; default the working directory, ROS_HOME and /tmp), ~frame_buffer_size,
-  ~noise_seed, ~models (config/phoxi_models.yaml), ~devices (the scanners listed, default the models file's
-  ``devices``), ~free_run_rate_hz (1.0: frames per second in free run), ~tf_timeout_s (0.5, for the sensor's pose
-  when it comes from tf).
+  ~scene (config/scene.yaml), ~robot_description (name of the URDF parameter, "" for no robot), ~hidden_links
+  (robot links left out of the frames: a list, or names separated by spaces; default "auto": when the sensor frame
+  is a link of the robot description (a scanner on the arm, station tool:=phoxi), the link carrying it, i.e. the
+  scanner's own housing, which lens and projector sit on and cannot see; "" renders every link), ~output_dir
+  (where relative file names resolve; "" = the node's working directory, as the driver's paths),
+  ~allowed_save_dirs (list, or a string of paths separated by spaces or colons: where absolute names may also
+  point; default the working directory, ROS_HOME and /tmp), ~frame_buffer_size, ~noise_seed, ~models
+  (config/phoxi_models.yaml), ~devices (the scanners listed, default the models file's ``devices``), ~pixel_step
+  (1; n > 1: every n-th pixel in both directions, a low-resolution camera with the same field of view that renders
+  n^2 times faster, for tests), ~free_run_rate_hz (1.0: frames per second in free run), ~tf_timeout_s (0.5, for the
+  sensor's pose when it comes from tf).
+
+Poses at capture time: every new frame asks tf for the sensor's pose then (the newest transform tf has), and the
+robot's links are posed at that same tf time, so a scanner on a moving arm renders the scene and the robot as they
+were at one instant. That instant is the frame's stamp: every message of the frame carries it (a frame published
+again later keeps it), so a client looks the sensor's pose up on tf at the message's stamp and gets exactly the pose
+the frame was taken from. With the pose configured (publish_tf true in the scene frame, render_configured_pose) the
+stamp is the time of the trigger.
+
 Behaviour as the driver's (RosInterface.cpp, PhoXiInterface.cpp of release 1.8.0): trigger_image triggers and answers
 the id, publishing nothing; get_frame(id) publishes (id < 0: triggers first); triggering switches to the software
 trigger and starts acquisition; reconfiguring without a scanner is refused (values put back); free run takes frames
@@ -44,6 +56,7 @@ export does not hold up the other services.
 
 __all__ = ["PhoxiCameraNode", "main"]
 
+import dataclasses
 import os
 import threading
 
@@ -131,6 +144,14 @@ def _allowed_save_dirs(value) -> list[str]:
     return [os.path.expanduser(d) for d in value]
 
 
+def _subsampled(model, pixel_step: int):
+    """``model`` with every resolution divided by ``pixel_step`` (a camera of fewer, larger pixels)."""
+    if pixel_step == 1:
+        return model
+    sizes = {key: (max(8, w // pixel_step), max(8, h // pixel_step)) for key, (w, h) in model.resolutions.items()}
+    return dataclasses.replace(model, resolutions=sizes)
+
+
 def _matrix_from_tf(transform):
     """A requested transformation (geometry_msgs/Transform) as 4x4; refusals are the device's PhoxiError."""
     t, q = transform.translation, transform.rotation
@@ -155,8 +176,15 @@ class PhoxiCameraNode:
         config = load_camera_config(file_param("~camera_config"))
         model_name = rospy.get_param("~model", "") or config.model
         models_file = file_param("~models")
-        self.model = load_scanner_model(model_name, models_file)
-        scanners = load_simulated_scanners(model_name, models_file, rospy.get_param("~devices", None))
+        # the simulator's speed option: every n-th pixel of the image in both directions (the same field of view)
+        pixel_step = int(rospy.get_param("~pixel_step", 1))
+        if pixel_step < 1:
+            raise ConfigError(f"~pixel_step must be a positive integer, got {pixel_step}")
+        self.model = _subsampled(load_scanner_model(model_name, models_file), pixel_step)
+        scanners = [
+            dataclasses.replace(scanner, model=_subsampled(scanner.model, pixel_step))
+            for scanner in load_simulated_scanners(model_name, models_file, rospy.get_param("~devices", None))
+        ]
         self.parent_frame = rospy.get_param("~parent_frame", "") or config.parent_frame
         self.configured_pose = overridden_pose(
             config.pose, vector_param("~camera_xyz_m", 3), vector_param("~camera_rpy_rad", 3)
@@ -168,14 +196,16 @@ class PhoxiCameraNode:
 
         scene = load_scene(file_param("~scene"))
         self.scene_frame = scene.frame_id
-        robot = None
+        robot = urdf = None
         description_param = rospy.get_param("~robot_description", "robot_description")
         if description_param and rospy.has_param(description_param):
-            robot = RobotGeometry(UrdfModel(rospy.get_param(description_param)))
+            urdf = UrdfModel(rospy.get_param(description_param))
+            robot = RobotGeometry(urdf)
             for entry in robot.skipped:
                 rospy.logwarn("phoxi_camera: robot mesh not found, left out: %s", entry)
         elif description_param:
             rospy.logwarn("phoxi_camera: no robot description in '%s': frames show the scene only", description_param)
+        self.hidden_links = self._hide_links(robot, urdf, rospy.get_param("~hidden_links", "auto"))
         # the driver's paths are relative to the node's working directory (roslaunch: ROS_HOME unless cwd="node")
         output_dir = os.path.expanduser(rospy.get_param("~output_dir", "") or os.getcwd())
         self.device = PhoxiDevice(
@@ -193,6 +223,9 @@ class PhoxiCameraNode:
         self.config = {name: rospy.get_param(f"~{name}", default) for name, default in phoxi_config.defaults.items()}
         self.device.update_settings(seed=self.noise_seed, **{name: self.config[name] for name in SETTING_NAMES})
 
+        # frame index -> the ROS time its poses refer to (the stamp of its messages)
+        self.frame_stamps: dict[int, rospy.Time] = {}
+        self._capture_stamp = None
         self.tf_buffer = tf2_ros.Buffer()
         self.tf_listener = tf2_ros.TransformListener(self.tf_buffer)
         self.tf_broadcaster = tf2_ros.StaticTransformBroadcaster()
@@ -283,34 +316,68 @@ class PhoxiCameraNode:
             " or ".join(str(r) for r in self.device.files.roots),
         )
 
+    def _hide_links(self, robot, urdf, value) -> list[str]:
+        """``~hidden_links``: remove those links from the rendered robot; "auto" = the link carrying the sensor
+        frame when the robot description has it (the scanner's housing on the arm)."""
+        if robot is None:
+            return []
+        if value == "auto":
+            joint = urdf.joint_by_child.get(self.frame_id)
+            names = [joint.parent] if joint is not None else []
+        elif isinstance(value, str):
+            names = value.replace(",", " ").split()
+        elif isinstance(value, list) and all(isinstance(v, str) for v in value):
+            names = list(value)
+        else:
+            raise ConfigError(f"~hidden_links: expected a list of link names or 'auto', got {value!r}")
+        unknown = [name for name in names if name not in urdf.links]
+        if unknown:
+            raise ConfigError(f"~hidden_links: no such links in the robot description: {', '.join(unknown)}")
+        for name in names:
+            robot.links.pop(name, None)
+        if names:
+            rospy.loginfo("phoxi_camera: robot links left out of the frames: %s", ", ".join(names))
+        return names
+
     # ------------------------------------------------------------------------------------ tf, scene poses
     def _broadcast_pose(self):
         self.tf_broadcaster.sendTransform(
             transform_stamped(self.configured_pose, self.parent_frame, self.frame_id, rospy.Time.now())
         )
 
-    def _lookup(self, target, source, timeout):
-        return transform_to_matrix(self.tf_buffer.lookup_transform(target, source, rospy.Time(0), timeout))
+    def _lookup(self, target, source, timeout, stamp=None):
+        return transform_to_matrix(self.tf_buffer.lookup_transform(target, source, stamp or rospy.Time(0), timeout))
 
     def camera_pose(self):
-        """scene frame <- sensor frame."""
+        """scene frame <- sensor frame at capture time: the newest pose tf has, whose time becomes the frame's
+        stamp (see :meth:`link_poses`)."""
         if (self.publish_tf or self.render_configured_pose) and self.parent_frame == self.scene_frame:
+            self._capture_stamp = rospy.Time.now()
             return self.configured_pose
         try:
-            return self._lookup(self.scene_frame, self.frame_id, self.tf_timeout)
+            transform = self.tf_buffer.lookup_transform(self.scene_frame, self.frame_id, rospy.Time(0), self.tf_timeout)
         except tf2_ros.TransformException as exc:
             raise InternalError(f"no pose of {self.frame_id} in {self.scene_frame} on tf: {exc}") from exc
+        # a chain of static transforms only has no time (zero): the pose holds at any time, the trigger's included
+        stamp = transform.header.stamp
+        self._capture_stamp = stamp if not stamp.is_zero() else rospy.Time.now()
+        return transform_to_matrix(transform)
 
     def link_poses(self, link_names):
-        """Poses of the robot's links in the scene frame from tf; links tf does not know are left out."""
+        """Poses of the robot's links in the scene frame from tf at the sensor pose's time (the newest ones where
+        tf has none then); links tf does not know are left out."""
+        stamp = self._capture_stamp
         poses, missing = {}, []
         for link in link_names:
+            # no waiting: robot_state_publisher keeps tf current, and a robot that is not running must not
+            # cost a time-out per link and frame
             try:
-                # no waiting: robot_state_publisher keeps tf current, and a robot that is not running must not
-                # cost a time-out per link and frame
-                poses[link] = self._lookup(self.scene_frame, link, rospy.Duration(0))
+                poses[link] = self._lookup(self.scene_frame, link, rospy.Duration(0), stamp)
             except tf2_ros.TransformException:
-                missing.append(link)
+                try:
+                    poses[link] = self._lookup(self.scene_frame, link, rospy.Duration(0))
+                except tf2_ros.TransformException:
+                    missing.append(link)
         if missing:
             rospy.logwarn_throttle(30.0, "phoxi_camera: no tf for robot links %s: left out of the frame", missing)
         return poses
@@ -318,11 +385,23 @@ class PhoxiCameraNode:
     # ---------------------------------------------------------------------------------------- frames
     def capture(self, index=-1):
         with self.lock:
-            return self.device.capture(index, self)
+            self._capture_stamp = None
+            frame = self.device.capture(index, self)
+            self._remember_stamp(frame)
+            return frame
+
+    def _remember_stamp(self, frame) -> None:
+        """Keep the time of a newly taken frame's poses (``_capture_stamp``) for its messages; stamps of frames the
+        device no longer holds are dropped."""
+        if self._capture_stamp is not None:
+            self.frame_stamps[frame.index] = self._capture_stamp
+            self._capture_stamp = None
+        for index in [i for i in self.frame_stamps if i not in self.device.frames]:
+            del self.frame_stamps[index]
 
     def publish_frame(self, frame):
         with self.lock:
-            header = Header(stamp=rospy.Time.now(), frame_id=self.frame_id)
+            header = Header(stamp=self.frame_stamps.get(frame.index) or rospy.Time.now(), frame_id=self.frame_id)
             cfg = self.config
             points, normals = frame_output(frame)
             outputs = [("camera_info", lambda: phoxi_messages.camera_info(frame.intrinsics, header))]
@@ -376,7 +455,8 @@ class PhoxiCameraNode:
                 try:
                     with self.lock:
                         if self.device.free_running():  # the mode may have changed while waiting for the lock
-                            self.device.capture_free_run(self)
+                            self._capture_stamp = None
+                            self._remember_stamp(self.device.capture_free_run(self))
                 except REQUEST_ERRORS as exc:
                     rospy.logwarn_throttle(10.0, "phoxi_camera: free run: %s", exc)
                 rospy.sleep(max(0.0, period - (rospy.get_time() - started)))

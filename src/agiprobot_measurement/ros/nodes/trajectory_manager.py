@@ -12,7 +12,10 @@ Topics: ~surface_points (sampled points coloured by predicted uncertainty: red =
 blue = high), ~viewpoints (scan lines), ~planned_path (the scanner's path), ~part (the part's mesh),
 ~measured_samples (after execution: green = measured, red = missed), /currently_measured_points (the points the
 current measurement segment measures, during measurement segments only).
-Parameters: ~planning/* (defaults of every goal field, config/trajectory_manager.yaml), ~budget/* (the most
+Parameters: ~planning/* (defaults of every goal field, config/trajectory_manager.yaml; also ~planning/workers: a
+local Dask cluster of that many processes evaluates the candidates, ~planning/scheduler: the address of an
+existing Dask cluster to use instead, ~planning/max_memory_gb: the evaluation's memory budget, 0 = from the
+machine), ~budget/* (the most
 work one planning run may cause: max_samples, max_candidates, max_memory_gb), ~plan_directory (the root of plan
 files and figures), ~allowed_plan_dirs (where absolute plan and figure names may also point; default ROS_HOME and /tmp),
 ~controller_heartbeat_timeout_s (1.0: an execution aborts when /joint_states is older), ~measured_radius_mm, ~scene / ~scanner / ~robot_config / ~joint_limits / ~named_states (station files),

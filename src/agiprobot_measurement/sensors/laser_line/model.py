@@ -24,6 +24,7 @@ vector maths over (view x point) chunks, and only the surviving pairs are ray-ca
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 from collections.abc import Callable, Mapping, Sequence
@@ -39,6 +40,7 @@ from agiprobot_measurement.errors import InternalError
 from agiprobot_measurement.station import load_scanner_config
 
 __all__ = [
+    "CELL_CULL_POINTS",
     "DEFAULT_CHUNK_ELEMENTS",
     "PARAMETER_NAMES",
     "MeasurabilityResult",
@@ -63,6 +65,12 @@ PARAMETER_NAMES = {
 #: Default target size of one dense (views x points) work array in the batch evaluator (elements). Small
 #: enough to stay in the CPU cache, large enough that the Python overhead per chunk is negligible.
 DEFAULT_CHUNK_ELEMENTS = 1 << 18
+#: from this many samples on, a view's candidate points come from a grid of sample cells culled against its
+#: frustum instead of a dense (views x points) test: the same result, with work that grows with the pairs in
+#: reach rather than with every point (a door-sized panel has 30,000 samples; a view reaches a few thousand)
+CELL_CULL_POINTS = 4096
+#: samples per cell of that grid, on average
+CELL_POINTS = 48
 
 
 class ProcessingContextError(InternalError):
@@ -82,14 +90,20 @@ class MeasurabilityResult:
     Column ``j`` (viewpoint ``j``) holds the entries ``indptr[j]:indptr[j+1]`` of ``point_indices`` (sorted
     ascending), ``uncertainties`` (mm) and ``trajectory_distances`` (``t0`` in mm: where along the
     trajectory direction, from the anchor, the point is swept by the laser line).
+
+    ``extent_min`` / ``extent_max`` (optional, (V,) float64 mm): each column's exact smallest and largest ``t0``.
+    A :meth:`compact` result keeps them, so the scan lines derived from :attr:`t0_min` / :attr:`t0_max` do not
+    depend on the quantised per-entry values.
     """
 
     n_points: int
     n_views: int
     indptr: np.ndarray  # (V + 1,) int64
     point_indices: np.ndarray  # (nnz,) int32
-    uncertainties: np.ndarray  # (nnz,) float64, mm
+    uncertainties: np.ndarray  # (nnz,) float64 (float32 when compact), mm
     trajectory_distances: np.ndarray  # (nnz,) float64, mm
+    extent_min: np.ndarray | None = None  # (V,) float64 mm, exact
+    extent_max: np.ndarray | None = None  # (V,) float64 mm, exact
 
     @classmethod
     def concatenate(cls, results: Sequence[MeasurabilityResult]) -> MeasurabilityResult:
@@ -103,6 +117,12 @@ class MeasurabilityResult:
         for result in results:
             indptr.append(result.indptr[1:] + offset)
             offset += result.nnz
+        extents = {}
+        if all(r.extent_min is not None for r in results):
+            extents = dict(
+                extent_min=np.concatenate([r.extent_min for r in results]),
+                extent_max=np.concatenate([r.extent_max for r in results]),
+            )
         return cls(
             n_points,
             sum(r.n_views for r in results),
@@ -110,7 +130,36 @@ class MeasurabilityResult:
             np.concatenate([r.point_indices for r in results]),
             np.concatenate([r.uncertainties for r in results]),
             np.concatenate([r.trajectory_distances for r in results]),
+            **extents,
         )
+
+    def compact(self, t0_dtype=np.float64) -> MeasurabilityResult:
+        """The same measurability in compact types: point ids int32, uncertainties float32 (mm), ``t0`` as
+        ``t0_dtype``, with the exact float64 ``t0`` range of every column kept in ``extent_min`` / ``extent_max``.
+
+        float32 keeps 24 bits: an uncertainty (at most the threshold, ~0.1 mm) to ~6e-9 mm (relative 6e-8), a
+        ``t0`` (at most 500 mm) to 3e-5 mm. Both changed plans when the planner used them (measured): a shortened
+        scan line's intact end equals its extreme ``t0`` exactly and the partial acceptance compares at 1e-9 mm;
+        the set cover breaks ties by the uncertainties. The planner therefore keeps float64 by default
+        (:class:`~agiprobot_measurement.planning.streaming.EvaluationSettings`, ``compact=False``).
+        """
+        return MeasurabilityResult(
+            self.n_points,
+            self.n_views,
+            self.indptr,
+            self.point_indices.astype(np.int32, copy=False),
+            self.uncertainties.astype(np.float32, copy=False),
+            self.trajectory_distances.astype(t0_dtype, copy=False),
+            self.t0_min if self.extent_min is None else self.extent_min,
+            self.t0_max if self.extent_max is None else self.extent_max,
+        )
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held by the arrays."""
+        arrays = (self.indptr, self.point_indices, self.uncertainties, self.trajectory_distances)
+        extra = [a for a in (self.extent_min, self.extent_max) if a is not None]
+        return int(sum(a.nbytes for a in (*arrays, *extra)))
 
     @property
     def nnz(self) -> int:
@@ -146,11 +195,15 @@ class MeasurabilityResult:
     @property
     def t0_min(self) -> np.ndarray:
         """(V,) smallest ``t0`` in mm per viewpoint (NaN where nothing is measurable)."""
+        if self.extent_min is not None:
+            return self.extent_min
         return self._reduce(np.minimum, self.trajectory_distances)
 
     @property
     def t0_max(self) -> np.ndarray:
         """(V,) largest ``t0`` in mm per viewpoint (NaN where nothing is measurable)."""
+        if self.extent_max is not None:
+            return self.extent_max
         return self._reduce(np.maximum, self.trajectory_distances)
 
     @property
@@ -166,8 +219,8 @@ class MeasurabilityResult:
         lo, hi = self.indptr[j], self.indptr[j + 1]
         return (
             self.point_indices[lo:hi].astype(np.int64),
-            self.uncertainties[lo:hi].copy(),
-            self.trajectory_distances[lo:hi].copy(),
+            self.uncertainties[lo:hi].astype(float),
+            self.trajectory_distances[lo:hi].astype(float),
         )
 
 
@@ -218,6 +271,39 @@ class _RayCaster:
 
 
 @dataclass(frozen=True)
+class _Cells:
+    """Samples grouped by grid cell: ``order[start[c]:start[c+1]]`` are cell ``c``'s sample ids (ascending);
+    every one lies within ``radius[c]`` mm of ``center[c]``."""
+
+    order: np.ndarray  # (P,) int64
+    start: np.ndarray  # (C + 1,) int64
+    center: np.ndarray  # (C, 3) mm
+    radius: np.ndarray  # (C,) mm
+
+    @property
+    def sizes(self) -> np.ndarray:
+        return np.diff(self.start)
+
+
+def _build_cells(points: np.ndarray, area_mm2: float) -> _Cells:
+    """A grid of cubic cells holding :data:`CELL_POINTS` samples on average (edge from the surface density)."""
+    edge = math.sqrt(CELL_POINTS * max(float(area_mm2), 1e-9) / max(len(points), 1))
+    keys = np.floor((points - points.min(axis=0)) / edge).astype(np.int64)
+    _, cell = np.unique(keys, axis=0, return_inverse=True)
+    cell = cell.reshape(-1)
+    order = np.argsort(cell, kind="stable")
+    start = np.zeros(int(cell.max()) + 2, dtype=np.int64)
+    np.cumsum(np.bincount(cell, minlength=start.size - 1), out=start[1:])
+    sorted_points = points[order]
+    low = np.minimum.reduceat(sorted_points, start[:-1], axis=0)
+    high = np.maximum.reduceat(sorted_points, start[:-1], axis=0)
+    center = 0.5 * (low + high)
+    distance = np.linalg.norm(sorted_points - np.repeat(center, np.diff(start), axis=0), axis=1)
+    radius = np.maximum.reduceat(distance, start[:-1]) + 1e-6 * edge
+    return _Cells(order.astype(np.int64), start, center, radius)
+
+
+@dataclass(frozen=True)
 class _Context:
     mesh: trimesh.Trimesh
     points: np.ndarray  # (P, 3) mm
@@ -227,6 +313,7 @@ class _Context:
     caster: _RayCaster
     unoccludable: np.ndarray  # (P,) bool: the sample's face plane supports the whole mesh
     center: np.ndarray  # (3,)
+    cells: _Cells | None = None  # for CELL_CULL_POINTS samples or more
 
 
 def supporting_faces(mesh: trimesh.Trimesh, tolerance: float | None = None) -> np.ndarray:
@@ -422,7 +509,20 @@ class SensorModel:
             caster=_RayCaster(mesh),
             unoccludable=unoccludable,
             center=points.mean(axis=0) if len(points) else np.zeros(3),
+            cells=_build_cells(points, mesh.area) if len(points) >= CELL_CULL_POINTS else None,
         )
+
+    def __getstate__(self):
+        # the ray tracer's scene lives in native memory: a copy (e.g. on a Dask worker) builds its own
+        state = dict(self.__dict__)
+        if self._context is not None:
+            state["_context"] = dataclasses.replace(self._context, caster=None)
+        return state
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+        if self._context is not None and self._context.caster is None:
+            self._context = dataclasses.replace(self._context, caster=_RayCaster(self._context.mesh))
 
     @property
     def sampled_surface_points(self) -> np.ndarray:
@@ -464,6 +564,7 @@ class SensorModel:
         chunk_elements: int = DEFAULT_CHUNK_ELEMENTS,
         workers: int | None = None,
         progress: Callable[[int, int], None] | None = None,
+        spatial_cull: bool | None = None,
     ) -> MeasurabilityResult:
         """Metrological evaluation of many viewpoints against the processing context.
 
@@ -473,6 +574,8 @@ class SensorModel:
         (views per chunk = chunk_elements // points), so memory grows with the result, not with V x P.
         ``workers``: threads evaluating chunks concurrently (default: the CPU count, at most 4); the result
         does not depend on it. ``progress(done_views, total_views)`` is called after each chunk, in order.
+        ``spatial_cull``: take each view's candidate points from the sample cells its frustum reaches (default:
+        from :data:`CELL_CULL_POINTS` samples on); the result is the same either way.
         """
         if workers is None:
             workers = min(4, os.cpu_count() or 1)
@@ -516,15 +619,34 @@ class SensorModel:
         pos_margin = np.float32(1e-5 * span + 1e-3)
         ang_margin = np.float32(1e-5)
 
-        per_chunk = max(1, int(chunk_elements) // n_points)
+        cells = ctx.cells if spatial_cull is not False else None
+        if spatial_cull and cells is None:
+            cells = _build_cells(ctx.points, ctx.mesh.area)
+        per_chunk = max(1, int(chunk_elements) // (n_points if cells is None else len(cells.radius)))
 
         def process(start: int):
             chunk = poses[start : start + per_chunk]
-            vi, pi = self._prefilter(chunk, ctx, pts32, nrm32, deflection, pos_margin, ang_margin)
             view_data = np.concatenate([chunk[:, :3, :3].transpose(0, 2, 1).reshape(-1, 9), chunk[:, :3, 3]], 1)
-            keep, u, t0 = self._evaluate_pairs(np.ascontiguousarray(view_data.T), ctx, vi, pi, threshold, deflection)
-            counts = np.bincount(vi[keep], minlength=chunk.shape[0])
-            return counts, pi[keep].astype(np.int32), u, t0
+            view_data = np.ascontiguousarray(view_data.T)
+            if cells is None:
+                vi, pi = self._prefilter(chunk, ctx, pts32, nrm32, deflection, pos_margin, ang_margin)
+                keep, u, t0 = self._evaluate_pairs(view_data, ctx, vi, pi, threshold, deflection)
+                counts = np.bincount(vi[keep], minlength=chunk.shape[0])
+                return counts, pi[keep].astype(np.int32), u, t0
+            parts = [
+                (*self._evaluate_pairs(view_data, ctx, vi, pi, threshold, deflection), vi, pi)
+                for vi, pi in self._cell_pairs(chunk, view_data, ctx, cells, deflection, int(chunk_elements))
+            ]
+            if not parts:
+                return np.zeros(chunk.shape[0], dtype=np.int64), np.zeros(0, dtype=np.int32), np.zeros(0), np.zeros(0)
+            vi = np.concatenate([vi[keep] for keep, _, _, vi, _ in parts])
+            pi = np.concatenate([pi[keep] for keep, _, _, _, pi in parts])
+            u = np.concatenate([part[1] for part in parts])
+            t0 = np.concatenate([part[2] for part in parts])
+            # the cells interleave the points: back to view-major, points ascending (the dense test's order)
+            order = np.argsort(vi * np.int64(n_points) + pi, kind="stable")
+            counts = np.bincount(vi, minlength=chunk.shape[0])
+            return counts, pi[order].astype(np.int32), u[order], t0[order]
 
         starts = range(0, n_views, per_chunk)
         workers = max(1, min(int(workers), len(starts)))
@@ -574,6 +696,44 @@ class SensorModel:
         mask &= np.abs(qy) <= half_width
         mask &= np.abs(qx) <= np.float32(deflection) + pos_margin
         return np.divmod(np.flatnonzero(mask), n_points)
+
+    def _cell_pairs(self, poses, view_data, ctx, cells, deflection, max_pairs):
+        """Candidate (view, point) pairs of a chunk from the cells each view's frustum may reach, in groups of
+        at most about ``max_pairs``: a superset of the exact tests (conservative for a cell's bounding sphere,
+        then the frustum and psi limits per pair with small margins). Yields (view indices, point indices)."""
+        rot = poses[:, :3, :3]
+        local = np.einsum("vji,vcj->vci", rot, cells.center[None, :, :] - poses[:, None, :3, 3])
+        qx, qy, qz = local[..., 0], local[..., 1], local[..., 2]
+        r = cells.radius[None, :] + 1e-6 * (self.maximum_standoff + deflection) + 1e-3
+        tan_half = self._tan_half_fan
+        mask = np.abs(qx) <= deflection + r
+        mask &= qz > self.minimum_standoff - r
+        mask &= qz < self.maximum_standoff + r
+        mask &= np.abs(qy) <= qz * tan_half + r * (1.0 + tan_half)
+        vc, cc = np.nonzero(mask)
+        sizes = cells.sizes[cc]
+        bounds = np.searchsorted(np.cumsum(sizes), np.arange(max_pairs, int(sizes.sum()), max_pairs))
+        tan_psi = math.tan(self.psi_max)
+        for group in np.split(np.arange(vc.size), bounds):
+            if group.size == 0:
+                continue
+            lengths = sizes[group]
+            first = cells.start[cc[group]]
+            offsets = np.cumsum(lengths) - lengths
+            vi = np.repeat(vc[group], lengths)
+            pi = cells.order[np.repeat(first - offsets, lengths) + np.arange(int(lengths.sum()))]
+            tx, ty, tz, lx, ly, lz, sx, sy, sz, ax, ay, az = np.take(view_data, vi, axis=1)
+            px, py, pz, nx, ny, nz = np.take(ctx.point_data, pi, axis=1)
+            dx, dy, dz = px - ax, py - ay, pz - az
+            margin = 1e-6 * (self.maximum_standoff + deflection) + 1e-6
+            ns = nx * sx + ny * sy + nz * sz
+            keep = np.abs(nx * tx + ny * ty + nz * tz) < -ns * tan_psi + 1e-9
+            pz_local = dx * sx + dy * sy + dz * sz
+            keep &= pz_local > self.minimum_standoff - margin
+            keep &= pz_local < self.maximum_standoff + margin
+            keep &= np.abs(dx * lx + dy * ly + dz * lz) <= pz_local * tan_half + margin
+            keep &= np.abs(dx * tx + dy * ty + dz * tz) <= deflection + margin
+            yield vi[keep], pi[keep]
 
     def _evaluate_pairs(self, view_data, ctx, vi, pi, threshold, deflection):
         """Exact float64 tests and ray casts of candidate pairs. Returns (keep mask, u, t0) of the kept.

@@ -1,0 +1,316 @@
+#!/usr/bin/env python3
+"""Benchmark of the 3D next-best-view methods on the simulated station (issue 17, brief section 4.4).
+
+Per object (the shared parts scaled to a 100-250 mm largest extent, the procedural concave shapes, or any mesh
+path) it builds the observable ground truth once, then runs every method on the same station, candidate pool and
+filters with the scanner noise on: C(k) (coverage of the observable surface after k views), AUC over 10 views,
+views to 90 / 95 %, joint path, motion time, planning time per view (median, p95), Chamfer distance of the fused
+cloud, the termination reason. ``random`` runs over --random-seeds seeds (mean). ``oracle`` is the set cover of
+the observable truth over the ground truth's feasible poses (the project's set cover; a lower bound on views).
+
+examples:
+  bench_nbv.py --objects cube cup two_towers --methods ours random hemisphere12 oracle --json /tmp/nbv.json
+  bench_nbv.py --objects all --methods ours occlusion_aware unobserved_voxel rear_side_voxel rear_side_entropy \\
+      proximity_count average_entropy area_factor report3d random hemisphere6 hemisphere12 hemisphere24 oracle \\
+      --max-views 20 --json nbv_full.json
+
+Objects: cube, cylinder, featuretype, fandisk, angle_block, idler_riser, plate_holes (shared parts), u_channel,
+cup, two_towers, l_bracket, torus (procedural), or a mesh path (mm); "all" = every named one.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+try:
+    import agiprobot_measurement  # noqa: F401
+except ImportError:
+    sys.path.insert(0, str(ROOT / "src"))
+
+from agiprobot_measurement.errors import InputError  # noqa: E402
+
+SHARED = ROOT.parent / "shared" / "parts"
+#: name -> (file, unit, largest extent (m) on the fixture or None to keep it)
+PARTS = {
+    "cube": ("objectA_wuerfel.stl", "mm", None),
+    "cylinder": ("objectB_zylinder.stl", "mm", None),
+    "featuretype": ("featuretype.STL", "inch", 0.15),
+    "fandisk": ("fandisk.obj", "dm", 0.17),
+    "angle_block": ("angle_block.STL", "inch", 0.12),
+    "idler_riser": ("idler_riser.STL", "inch", 0.15),
+    "plate_holes": ("plate_holes.STL", "mm", 0.25),
+}
+SHAPE_NAMES = ("u_channel", "cup", "two_towers", "l_bracket", "torus")
+VOLUMETRIC = (
+    "occlusion_aware",
+    "unobserved_voxel",
+    "rear_side_voxel",
+    "rear_side_entropy",
+    "proximity_count",
+    "average_entropy",
+    "area_factor",
+)
+
+
+def resolve_object(name: str):
+    """(part argument, units, extent_m) of an object name or mesh path."""
+    if name in PARTS:
+        file, units, extent = PARTS[name]
+        path = SHARED / file
+        if not path.is_file():
+            raise InputError(f"object {name}: {path} not found")
+        return str(path), units, extent
+    if name in SHAPE_NAMES:
+        return name, "mm", None
+    path = Path(name)
+    if path.is_file():
+        return str(path), "mm", None
+    raise InputError(f"unknown object {name!r}: one of {', '.join([*PARTS, *SHAPE_NAMES])} or a mesh path")
+
+
+def percentile(values, q):
+    return float(np.percentile(values, q)) if len(values) else math.nan
+
+
+def aggregate(runs: list[dict], max_views: int) -> dict:
+    """Mean over seeds of one method on one object."""
+    curves = [r.get("coverage_curve", []) for r in runs]
+    padded = [(c + [c[-1] if c else 0.0] * max_views)[:max_views] for c in curves]
+    mean_curve = np.mean(padded, axis=0).tolist() if padded else []
+    planning = [p for r in runs for p in r["planning_s_per_view"]]
+
+    def mean_of(key):
+        values = [r[key] for r in runs if r.get(key) is not None and np.isfinite(r[key])]
+        return float(np.mean(values)) if values else None
+
+    def n_to(key):
+        values = [r.get(key) for r in runs]
+        if any(v is None for v in values):
+            return None
+        return float(np.mean(values))
+
+    return {
+        "runs": len(runs),
+        "coverage_curve_mean": mean_curve,
+        "c4": mean_curve[3] if len(mean_curve) >= 4 else None,
+        "final_coverage": mean_of("coverage"),
+        "final_coverage_full_surface": mean_of("coverage_full_surface"),
+        "motion_failures": mean_of("motion_failures"),
+        "surprises": mean_of("surprises"),
+        "auc10": mean_of("auc10"),
+        "n90": n_to("n90"),
+        "n95": n_to("n95"),
+        "views": float(np.mean([r["views"] for r in runs])),
+        "joint_path_rad": mean_of("joint_path_rad"),
+        "motion_time_s": mean_of("motion_time_s"),
+        "planning_median_s": percentile(planning, 50),
+        "planning_p95_s": percentile(planning, 95),
+        "chamfer_mm": mean_of("chamfer_mm"),
+        "accuracy_mm": mean_of("accuracy_mm"),
+        "termination": [r["termination_reason"] for r in runs],
+        "self_terminated": float(
+            np.mean([r["termination_reason"] in ("gain_below_threshold", "frontier_exhausted") for r in runs])
+        ),
+        "true_collisions": int(sum(r["true_collisions"] for r in runs)),
+        "wall_time_s": float(np.sum([r["wall_time_s"] for r in runs])),
+    }
+
+
+def fmt(v, spec=".3f"):
+    return "-" if v is None or (isinstance(v, float) and not np.isfinite(v)) else format(v, spec)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], epilog=__doc__.split("\n\n", 1)[1],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
+    parser.add_argument("--objects", nargs="+", default=["cube", "cup"])
+    parser.add_argument("--methods", nargs="+", default=["ours", "random", "hemisphere12"])
+    parser.add_argument("--max-views", type=int, default=20)
+    parser.add_argument("--random-seeds", type=int, default=5)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--pixel-step", type=int, default=2)
+    parser.add_argument("--gt-spacing", type=float, default=0.002, help="ground-truth point spacing (m)")
+    parser.add_argument("--gt-directions", type=int, default=200)
+    parser.add_argument("--json", default=None, help="write the results here")
+    parser.add_argument("--no-chamfer", action="store_true")
+    parser.add_argument("--merge", nargs="+", default=None, help="only merge earlier --json files and print")
+    args = parser.parse_args(argv)
+    try:
+        if args.merge:
+            return merge(args)
+        return run(args)
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+
+
+def run(args) -> int:
+    from agiprobot_measurement.nbv.ground_truth import GroundTruth, oracle_views, simulate
+    from agiprobot_measurement.nbv.reconstruction import METHODS, ReconstructionRequest
+    from agiprobot_measurement.nbv.station3d import SimulatedNBVStation
+
+    objects = [*PARTS, *SHAPE_NAMES] if args.objects == ["all"] else args.objects
+    for m in args.methods:
+        if m != "oracle" and m not in METHODS:
+            raise InputError(f"unknown method {m!r}; known: {', '.join([*METHODS, 'oracle'])}")
+    if args.json and not Path(args.json).expanduser().parent.is_dir():
+        raise InputError(f"--json: folder {Path(args.json).parent} does not exist")
+    specs = [resolve_object(o) for o in objects]
+    results = {"max_views": args.max_views, "pixel_step": args.pixel_step, "objects": {}}
+    for name, (part, units, extent) in zip(objects, specs, strict=True):
+        t = time.perf_counter()
+        station = SimulatedNBVStation(part, units, extent, seed=args.seed, pixel_step=args.pixel_step)
+        truth = GroundTruth(station, spacing_m=args.gt_spacing, directions=args.gt_directions)
+        entry = {
+            "extent_mm": float(station.part_mesh.extents.max() * 1000),
+            "observable_points": truth.n_observable,
+            "surface_points": len(truth.points_m),
+            "gt_poses": int(truth.visibility.matrix.shape[1]),
+            "methods": {},
+        }
+        print(f"[{name}] {entry['extent_mm']:.0f} mm, observable {truth.n_observable}/{len(truth.points_m)} "
+              f"from {entry['gt_poses']} poses ({time.perf_counter() - t:.1f} s)", file=sys.stderr)  # fmt: skip
+        for method in args.methods:
+            if method == "oracle":
+                oracle = oracle_views(truth)
+                entry["methods"]["oracle"] = oracle
+                print(f"[{name}] oracle: set cover {oracle.get('set_cover_views')} views, n95 {oracle['n95']}",
+                      file=sys.stderr)  # fmt: skip
+                continue
+            seeds = range(args.random_seeds) if method == "random" else [args.seed]
+            runs = []
+            for seed in seeds:
+                overrides = {"gain": method, "max_views": args.max_views, "seed": seed}
+                if method in VOLUMETRIC:
+                    overrides["cost_weight"] = 0.0  # rpg's default
+                request = ReconstructionRequest.with_config_defaults(**overrides)
+                summary = simulate(station, request, truth, chamfer=not args.no_chamfer)
+                runs.append(summary)
+                print(f"[{name}] {method} seed {seed}: {summary['views']} views, coverage "
+                      f"{fmt(summary.get('coverage'))}, {summary['termination_reason']}, "
+                      f"{summary['wall_time_s']:.0f} s", file=sys.stderr)  # fmt: skip
+            entry["methods"][method] = {"summary": aggregate(runs, args.max_views), "runs": runs}
+        results["objects"][name] = entry
+        if args.json:  # after every object, so that a long run cut short keeps what it measured
+            from agiprobot_measurement.common.files import atomic_write_text
+
+            results["targets"] = targets(results)
+            atomic_write_text(Path(args.json).expanduser(), json.dumps(results, indent=1, default=float))
+    results["targets"] = targets(results)
+    print_table(results)
+    if args.json:
+        from agiprobot_measurement.common.files import atomic_write_text
+
+        atomic_write_text(Path(args.json).expanduser(), json.dumps(results, indent=1, default=float))
+    return 0
+
+
+def merge(args) -> int:
+    """Merge result files (same objects: methods united) and print the table and the targets."""
+    results = None
+    for name in args.merge:
+        path = Path(name).expanduser()
+        if not path.is_file():
+            raise InputError(f"--merge: {path} not found")
+        data = json.loads(path.read_text())
+        if results is None:
+            results = data
+            continue
+        for obj, entry in data["objects"].items():
+            results["objects"].setdefault(obj, entry)["methods"].update(entry["methods"])
+    results["targets"] = targets(results)
+    print_table(results)
+    if args.json:
+        from agiprobot_measurement.common.files import atomic_write_text
+
+        atomic_write_text(Path(args.json).expanduser(), json.dumps(results, indent=1, default=float))
+    return 0
+
+
+def targets(results: dict) -> dict:
+    """The issue's targets, per object and as the median over objects (where the methods were run)."""
+    per = {}
+    for obj, entry in results["objects"].items():
+        m = entry["methods"]
+        if "ours" not in m:
+            continue
+        ours = m["ours"]["summary"]
+        row = {
+            "ours_c4": ours["c4"],
+            "ours_auc10": ours["auc10"],
+            "ours_n95": ours["n95"],
+            "ours_planning_median_s": ours["planning_median_s"],
+            "ours_self_terminated": ours["self_terminated"],
+            "ours_views": ours["views"],
+            "ours_chamfer_mm": ours["chamfer_mm"],
+            "ours_accuracy_mm": ours["accuracy_mm"],
+            "ours_joint_path_rad": ours["joint_path_rad"],
+            "ours_final": ours["final_coverage"],
+        }
+        vol = {k: v["summary"] for k, v in m.items() if k in VOLUMETRIC}
+        if vol:
+            best_c4 = max(vol, key=lambda k: vol[k]["c4"] or 0.0)
+            best_auc = max(vol, key=lambda k: vol[k]["auc10"] or 0.0)
+            row.update({
+                "best_volumetric_c4": vol[best_c4]["c4"], "best_volumetric_c4_metric": best_c4,
+                "best_volumetric_auc10": vol[best_auc]["auc10"], "best_volumetric_auc10_metric": best_auc,
+                "best_volumetric_joint_path_rad": vol[best_auc]["joint_path_rad"],
+                "best_volumetric_final": vol[best_auc]["final_coverage"],
+            })  # fmt: skip
+        if "random" in m:
+            rnd = m["random"]["summary"]
+            row.update({"random_c4": rnd["c4"], "random_auc10": rnd["auc10"], "random_n95": rnd["n95"]})
+        if "oracle" in m:
+            row["oracle_n95"] = m["oracle"].get("n95")
+            row["oracle_set_cover"] = m["oracle"].get("set_cover_views")
+        per[obj] = row
+
+    def median(key):
+        values = [r[key] for r in per.values() if r.get(key) is not None]
+        return float(np.median(values)) if values else None
+
+    keys = sorted({k for r in per.values() for k, v in r.items() if isinstance(v, (int, float)) and v is not None})
+    return {"per_object": per, "median": {k: median(k) for k in keys}}
+
+
+def print_table(results: dict) -> None:
+    head = (
+        f"{'object':<12} {'method':<18} {'C(1)':>5} {'C(4)':>5} {'C(8)':>5} {'final':>5} {'AUC10':>5} {'N90':>4} "
+        f"{'N95':>4} {'views':>5} {'path':>6} {'motion':>6} {'plan50':>6} {'plan95':>6} {'cham':>5} term"
+    )
+    print(head)
+    for name, entry in results["objects"].items():
+        for method, data in entry["methods"].items():
+            if method == "oracle":
+                print(f"{name:<12} {'oracle':<18} set cover {data.get('set_cover_views')} views, greedy N90 "
+                      f"{data.get('n90')} N95 {data.get('n95')}")  # fmt: skip
+                continue
+            s = data["summary"]
+            c = s["coverage_curve_mean"]
+
+            def at(k, c=c):
+                return fmt(c[k - 1], ".2f") if len(c) >= k else "-"
+
+            terms = sorted(set(s["termination"]))
+            print(
+                f"{name:<12} {method:<18} {at(1):>5} {at(4):>5} {at(8):>5} {fmt(s['final_coverage'], '.2f'):>5} "
+                f"{fmt(s['auc10'], '.3f'):>5} {fmt(s['n90'], '.1f'):>4} {fmt(s['n95'], '.1f'):>4} "
+                f"{s['views']:>5.1f} {fmt(s['joint_path_rad'], '.1f'):>6} {fmt(s['motion_time_s'], '.1f'):>6} "
+                f"{fmt(s['planning_median_s'], '.2f'):>6} {fmt(s['planning_p95_s'], '.2f'):>6} "
+                f"{fmt(s['chamfer_mm'], '.2f'):>5} {','.join(terms)}"
+            )
+    medians = results.get("targets", {}).get("median", {})
+    if medians:
+        print("median over objects: " + ", ".join(f"{k} {v:.3f}" for k, v in medians.items() if v is not None))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,292 @@
+#!/usr/bin/env python3
+"""Scale benchmark: candidate evaluation of door-sized panels, streamed, in process and on local Dask clusters.
+
+Generated panels of 0.05, 0.2, 0.5 and 1 m^2 (footprint 1.4 : 1, curved in both directions, a grid of pockets
+with steep walls and ribs between them, like a car door's inner panel), placed on the fixture, sampled at 0.03
+points/mm^2 with 12 orientations, tilt none and full. Every configuration (in process, 1 and 2 local workers) runs
+in its own process, so its peak memory is its own. Printed per panel and tilt: samples, candidates, kept views and
+pairs, time per stage (sampling, anchor reachability, evaluation, view objects, greedy cover), peak memory of the
+client and of every worker, a digest of the measurability store (equal digests = the same store, so the same
+plan), the speed-up of 2 local workers over 1, and a projection of the evaluation time for N workers.
+
+The projection is a model, not a measurement: the serial parts (pilot, merge) and the scatter of the sensor model
+(counted once per worker), measured in the 1-worker run, plus that run's measured chunk work, split into at least
+4 chunks per worker as the evaluation does, each chunk with the measured per-chunk overhead (the 1-worker run's
+wall time not spent in pilot, scatter, merge or chunks, per chunk). Efficiency = T(1) / (N T(N)) within the
+model. Its 2-worker value is printed next to the measured one. ``--reproject FILE`` recomputes it from a JSON.
+
+Examples::
+
+    scripts/bench_scale.py --areas 0.05 --tilts none          # quick
+    nice -n 10 scripts/bench_scale.py --json scale.json        # everything (the 1 m^2 panel at tilt full: long)
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+DENSITY = 0.03
+ORIENTATIONS = 12
+THRESHOLD_MM = 0.1
+AREAS_M2 = (0.05, 0.2, 0.5, 1.0)
+#: grid step of the generated panel's height field (mm)
+GRID_MM = 4.0
+
+
+def door_panel(area_m2: float):
+    """A closed panel mesh (mm) with a top surface of about ``area_m2``: curved (radii 2.5 m across, 4 m along),
+    pockets 25 mm deep with steep walls in a grid of ~300 mm cells, ribs 12 mm high and 10 mm wide between them,
+    a bottom 28 mm below the curved surface (a shell). Deterministic."""
+    import trimesh
+
+    width = math.sqrt(area_m2 * 1.4) * 1000.0
+    height = width / 1.4
+    nx, ny = max(8, round(width / GRID_MM)) + 1, max(8, round(height / GRID_MM)) + 1
+    x = np.linspace(-width / 2, width / 2, nx)
+    y = np.linspace(-height / 2, height / 2, ny)
+    gx, gy = np.meshgrid(x, y, indexing="ij")
+    curve = -(gx**2) / (2 * 2500.0) - (gy**2) / (2 * 4000.0)
+    z = curve.copy()
+
+    def band(u, lo, hi, ramp):
+        # 1 inside [lo, hi], 0 outside, smooth steps of width ramp at both ends
+        a = np.clip((u - lo) / ramp, 0, 1)
+        b = np.clip((hi - u) / ramp, 0, 1)
+        return (a * a * (3 - 2 * a)) * (b * b * (3 - 2 * b))
+
+    cells_x, cells_y = max(1, round(width / 300.0)), max(1, round(height / 300.0))
+    pitch_x, pitch_y = width / cells_x, height / cells_y
+    pocket = np.zeros_like(z)
+    for i in range(cells_x):
+        for j in range(cells_y):
+            x0, y0 = -width / 2 + i * pitch_x, -height / 2 + j * pitch_y
+            pocket = np.maximum(
+                pocket,
+                band(gx, x0 + 30, x0 + pitch_x - 30, 8.0) * band(gy, y0 + 30, y0 + pitch_y - 30, 8.0),
+            )
+    z -= 25.0 * pocket
+    # ribs across the pockets' middles, one per cell row and column (stiffeners)
+    rib = np.zeros_like(z)
+    for i in range(cells_x):
+        xc = -width / 2 + (i + 0.5) * pitch_x
+        rib = np.maximum(rib, band(gx, xc - 5, xc + 5, 5.0))
+    for j in range(cells_y):
+        yc = -height / 2 + (j + 0.5) * pitch_y
+        rib = np.maximum(rib, band(gy, yc - 5, yc + 5, 5.0))
+    z += 12.0 * rib * pocket
+    bottom = curve - 28.0  # a shell: the bottom follows the curvature, 3 mm below the pockets' floors
+
+    top = np.stack([gx, gy, z], axis=-1).reshape(-1, 3)
+    base = np.stack([gx, gy, bottom], axis=-1).reshape(-1, 3)
+    vertices = np.concatenate([top, base])
+    index = np.arange(nx * ny).reshape(nx, ny)
+    a, b, c, d = index[:-1, :-1], index[1:, :-1], index[1:, 1:], index[:-1, 1:]
+    top_faces = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+    base_faces = top_faces[:, ::-1] + nx * ny
+    ring = np.concatenate([index[:, 0], index[-1, 1:], index[::-1, -1][1:], index[0, ::-1][1:-1]])
+    nxt = np.roll(ring, -1)
+    off = nx * ny
+    sides = np.concatenate([np.stack([ring, ring + off, nxt], -1), np.stack([nxt, ring + off, nxt + off], -1)])
+    mesh = trimesh.Trimesh(vertices, np.concatenate([top_faces, base_faces, sides]), process=True)
+    trimesh.repair.fix_normals(mesh)
+    mesh.apply_translation([0, 0, -mesh.bounds[0, 2]])
+    return mesh
+
+
+def digest(store) -> str:
+    h = hashlib.sha256()
+    for array in (store.indptr, store.point_indices, store.uncertainties, store.trajectory_distances):
+        h.update(np.ascontiguousarray(array).tobytes())
+    return h.hexdigest()[:12]
+
+
+def child(args) -> dict:
+    """One configuration in this process; returns its figures."""
+    import logging
+
+    logging.disable(logging.WARNING)
+    from agiprobot_measurement.planning.distributed import peak_rss_bytes
+    from agiprobot_measurement.planning.set_cover import solve_set_cover
+    from agiprobot_measurement.planning.trajectory_manager import TrajectoryManager
+
+    mesh_file = Path(args.mesh_dir) / f"panel_{args.area:g}.stl"
+    manager = TrajectoryManager(workers=args.workers, max_memory_bytes=args.max_memory * 1e9 or None)
+    out = {"area_m2": args.area, "tilt": args.tilt, "workers": args.workers}
+    try:
+        manager.load_target_mesh(str(mesh_file), placement="fixture", add_wbk_mirrors=args.mirrors)
+        if manager.evaluator() is not None:
+            manager.evaluator().client  # noqa: B018 (start the cluster before the clock)
+        started = time.perf_counter()
+        manager.generate_samples_and_viewpoints(DENSITY, THRESHOLD_MM, ORIENTATIONS, args.tilt)
+        out["generate_s"] = time.perf_counter() - started
+        stats = manager.last_stream_stats
+        store = manager.measurability
+        out.update(
+            samples=len(manager.samples),
+            candidates=len(manager.candidates.poses),
+            evaluated=stats.candidates,
+            kept_views=stats.kept_views,
+            kept_pairs=stats.kept_pairs,
+            projected_pairs=stats.projected_pairs,
+            chunks=stats.chunks,
+            chunk_views=stats.chunk_views,
+            chunk_seconds=stats.chunk_seconds,
+            pilot_s=stats.pilot_s,
+            scatter_s=stats.scatter_s,
+            merge_s=stats.merge_s,
+            evaluation_s=stats.wall_s,
+            store_mb=stats.store_bytes / 1e6,
+            times={k: manager.timings_s.get(k, 0.0) for k in ("sampling", "anchor_reachability", "viewpoint_objects")},
+            digest=digest(store),
+            reachable_share=manager.reachable_share,
+        )
+        started = time.perf_counter()
+        cover = solve_set_cover(store.measurability, "greedy")
+        out["greedy_s"] = time.perf_counter() - started
+        out["greedy_views"] = len(cover.selected)
+        out["covered"] = int(cover.covered.sum())
+        evaluator = manager.evaluator()
+        out["worker_peak_mb"] = (
+            sorted(v / 1e6 for v in evaluator.worker_peak_rss_bytes().values()) if evaluator is not None else []
+        )
+    except Exception as exc:  # reported in the table
+        out["error"] = f"{type(exc).__name__}: {exc}"
+    finally:
+        manager.close()
+    out["client_peak_mb"] = peak_rss_bytes() / 1e6
+    return out
+
+
+def projection(one: dict, n_workers: int) -> float:
+    """Projected evaluation time (s) on ``n_workers`` from the 1-worker run: its serial parts (pilot, merge), the
+    scatter of the sensor model once per worker, and its measured chunk work split as the evaluation splits it for
+    ``n_workers`` (at least 4 chunks per worker), each chunk with the measured per-chunk overhead."""
+    chunks = np.asarray(one["chunk_seconds"], dtype=float)
+    serial = one["pilot_s"] + one["merge_s"]
+    overhead = max(0.0, one["evaluation_s"] - serial - one["scatter_s"] - chunks.sum()) / max(len(chunks), 1)
+    count = max(len(chunks), 4 * n_workers)
+    per_chunk = chunks.sum() / count + overhead
+    return serial + one["scatter_s"] * n_workers + math.ceil(count / n_workers) * per_chunk
+
+
+def run_child(area, tilt, workers, mesh_dir, args) -> dict:
+    command = [
+        sys.executable, __file__, "--child", "--area", str(area), "--tilt", tilt, "--workers", str(workers),
+        "--mesh-dir", mesh_dir, "--max-memory", str(args.max_memory),
+    ]  # fmt: skip
+    if args.mirrors:
+        command.append("--mirrors")
+    done = subprocess.run(command, capture_output=True, text=True, check=False)
+    lines = [line for line in done.stdout.splitlines() if line.startswith("{")]
+    if not lines:
+        return {"area_m2": area, "tilt": tilt, "workers": workers, "error": done.stderr.strip()[-500:]}
+    return json.loads(lines[-1])
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--areas", type=float, nargs="+", default=list(AREAS_M2), help="panel areas in m^2")
+    parser.add_argument("--tilts", nargs="+", default=["none", "full"], help="tilt modes")
+    parser.add_argument(
+        "--configs", type=int, nargs="+", default=[0, 1, 2], help="0 = in process, N = N local Dask workers"
+    )
+    parser.add_argument("--max-memory", type=float, default=0.0, help="memory budget in GB (0 = from the machine)")
+    parser.add_argument("--mirrors", action="store_true", help="keep the scene's mirrors (they may block a panel)")
+    parser.add_argument("--json", help="write all figures here")
+    parser.add_argument("--project", type=int, nargs="+", default=[2, 4, 8, 16], help="worker counts to project")
+    parser.add_argument("--reproject", help="print the projections of a --json file again and exit")
+    parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--area", type=float, help=argparse.SUPPRESS)
+    parser.add_argument("--tilt", help=argparse.SUPPRESS)
+    parser.add_argument("--workers", type=int, default=0, help=argparse.SUPPRESS)
+    parser.add_argument("--mesh-dir", help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.child:
+        print(json.dumps(child(args)), flush=True)
+        return 0
+    if args.reproject:
+        runs = {}
+        for r in json.loads(Path(args.reproject).read_text()):
+            runs.setdefault((r["area_m2"], r["tilt"]), {})[r["workers"]] = r
+        for (area, tilt), group in runs.items():
+            print(f"{area:g} m^2 tilt {tilt}:")
+            report_panel(group, args.project)
+        return 0
+
+    print(f"load before the run: {os.getloadavg()[0]:.2f} {os.getloadavg()[1]:.2f} (2 cores: {os.cpu_count()})")
+    results = []
+    with tempfile.TemporaryDirectory(prefix="bench_scale_") as mesh_dir:
+        for area in args.areas:
+            door_panel(area).export(Path(mesh_dir) / f"panel_{area:g}.stl")
+            for tilt in args.tilts:
+                runs = {}
+                for workers in args.configs:
+                    result = run_child(area, tilt, workers, mesh_dir, args)
+                    result["load_1min"] = os.getloadavg()[0]
+                    runs[workers] = result
+                    results.append(result)
+                    report_run(result)
+                    if args.json:  # after every run: a long benchmark cut short keeps what it measured
+                        Path(args.json).write_text(json.dumps(results, indent=1))
+                report_panel(runs, args.project)
+    print("identical stores across configurations:", same_digests(results))
+    if args.json:
+        Path(args.json).write_text(json.dumps(results, indent=1))
+    return 0
+
+
+def report_run(r: dict) -> None:
+    where = "in-process" if r["workers"] == 0 else f"{r['workers']} local worker(s)"
+    if "error" in r:
+        print(f"{r['area_m2']:5g} m^2 tilt {r['tilt']:<5} {where:<18} ERROR {r['error']}", flush=True)
+        return
+    t = r["times"]
+    workers = " ".join(f"{m:.0f}" for m in r["worker_peak_mb"]) or "-"
+    print(
+        f"{r['area_m2']:5g} m^2 tilt {r['tilt']:<5} {where:<18} samples {r['samples']:>6} candidates "
+        f"{r['candidates']:>8} evaluated {r['evaluated']:>8} kept views {r['kept_views']:>8} pairs {r['kept_pairs']:>11,} "
+        f"| sampling {t['sampling']:.1f} s, reach {t['anchor_reachability']:.1f} s, evaluation {r['evaluation_s']:.1f} s "
+        f"({r['chunks']} chunks of {r['chunk_views']}, pilot {r['pilot_s']:.1f} s), views {t['viewpoint_objects']:.1f} s, "
+        f"greedy {r['greedy_s']:.1f} s ({r['greedy_views']} views, {r['covered']} covered) | peak MB client "
+        f"{r['client_peak_mb']:.0f}, workers {workers} | store {r['store_mb']:.0f} MB digest {r['digest']} "
+        f"| load {r['load_1min']:.1f}",
+        flush=True,
+    )
+
+
+def report_panel(runs: dict, counts) -> None:
+    one, two = runs.get(1), runs.get(2)
+    if not one or not two or "error" in one or "error" in two:
+        return
+    speedup = one["evaluation_s"] / two["evaluation_s"]
+    text = [f"  speed-up of the evaluation, 2 local workers over 1: {speedup:.2f}x (measured)"]
+    base = projection(one, 1)
+    text.append(f"  measured 1 worker {one['evaluation_s']:.1f} s; the model gives {base:.1f} s for 1")
+    for n in counts:
+        t = projection(one, n)
+        measured = f", measured {two['evaluation_s']:.1f} s" if n == 2 else ""
+        text.append(f"  PROJECTION for {n} workers: {t:.1f} s, efficiency {100 * base / (n * t):.0f} %{measured}")
+    print("\n".join(text), flush=True)
+
+
+def same_digests(results) -> str:
+    groups = {}
+    for r in results:
+        if "digest" in r:
+            groups.setdefault((r["area_m2"], r["tilt"]), set()).add(r["digest"])
+    return "yes" if all(len(d) == 1 for d in groups.values()) else f"NO: {groups}"
+
+
+if __name__ == "__main__":
+    sys.exit(main())

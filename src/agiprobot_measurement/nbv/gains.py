@@ -1,0 +1,372 @@
+"""Information gain of candidate PhoXi views on a :class:`~.voxel_map.VoxelMap`: the seven volumetric metrics of
+Isler et al. / Delmerico et al. (``uzh-rpg/rpg_ig_active_reconstruction``) and the report's own, all PhoXi-aware.
+
+Every candidate pose casts a ray bundle (``rays_h x rays_v`` rays over the camera's field of view); all poses are
+evaluated in one compiled, parallel call (:func:`.raycast3d.evaluate_bundle`). A ray starts at the camera, is
+clipped to the ROI and ends at the first full voxel (its end voxel) or at the maximum scanning depth. A voxel
+**counts** only when the structured-light scanner could measure it from that pose: its depth lies in the scanning
+range, the projector lights it (it is not behind the projector's shadow map, a second bundle cast from the
+projector centre, which is the 3D form of the report's two-ray visibility), and, where the voxel has a normal (fused
+or predicted), the incidence at camera and projector is below ``max_incidence_rad``. Voxels are counted once per
+view in the sum metrics.
+
+Metrics (``p`` occupancy probability, ``H(p) = -p ln p - (1 - p) ln(1 - p)``, ``v`` visibility: the product of
+``1 - p`` over the ray's voxels before this one, as in the paper; ``rpg_compat=True`` uses the rpg code's
+``v *= p`` instead, see its issue #9):
+
+- ``occlusion_aware``: sum of ``v H(p)`` over every counted voxel;
+- ``unobserved_voxel``: sum of ``v H(p)`` over counted unknown voxels;
+- ``rear_side_voxel``: count of counted full voxels reached directly after an unknown voxel;
+- ``rear_side_entropy``: per ray ending in a full voxel, ``v H`` of the unknown run right before it plus its end;
+- ``proximity_count``: over counted never-observed voxels, ``max_dist - d`` where ``d`` is the distance to the
+  nearest full voxel (``0 < d < max_dist``; ``max_dist`` defaults to 10 grid voxels);
+- ``average_entropy``: total entropy / voxel count over the rays that end in a full voxel;
+- ``area_factor``: Vasquez-Gomez's area factor of the fractions of rays whose first registered voxel is full
+  (desired 0.2) and occlusion plane (desired 0.8);
+- ``report``: the report's gain in 3D: growth-neighbour / candidate voxels seen, each weighted by Kolmost
+  ``w cos(a) + 1 - w`` (``a`` the angle between the predicted surface normal and the view ray, ``w = 0.5``).
+
+Not reproduced: rpg's "void ray" term (a ray hitting nothing adds the geometric series of unknown entropy); the ROI
+bounds the object, so space outside it carries no information here. ``new_surface_area_m2`` is the counted
+growth-neighbour voxels (unknown voxels next to the seen surface's open border, where it continues unseen) x
+resolution^2: the expected newly seen surface the stopping rule compares with the "maximum size of an ignored
+detail". Evaluate on the coarse planning grid (:meth:`VoxelMap.coarse`) for speed.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import numba
+import numpy as np
+from scipy import ndimage
+
+from agiprobot_measurement.errors import InputError
+from agiprobot_measurement.nbv import raycast3d as rc
+from agiprobot_measurement.nbv.voxel_map import EMPTY, FULL, UNKNOWN, VoxelMap
+
+__all__ = [
+    "GAIN_NAMES",
+    "UTILITY_METHODS",
+    "ViewGains",
+    "ViewModel",
+    "camera_ray_directions",
+    "evaluate_views",
+    "utility",
+]
+
+GAIN_NAMES = (
+    "occlusion_aware",
+    "unobserved_voxel",
+    "rear_side_voxel",
+    "rear_side_entropy",
+    "proximity_count",
+    "average_entropy",
+    "area_factor",
+    "report",
+)
+UTILITY_METHODS = ("rpg", "exp")
+#: Vasquez-Gomez's desired fractions of occupied and occlusion-plane voxels (rpg's defaults)
+AREA_FACTOR_OCCUPIED_DESIRED = 0.2
+AREA_FACTOR_OCCPLANE_DESIRED = 0.8
+#: most rays of one bundle (a full low-resolution PhoXi frame)
+MAX_BUNDLE_RAYS = 1032 * 772
+
+
+def _check_positive(value, name: str, upper: float | None = None) -> float:
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{name} must be a number, got {value!r}") from None
+    if not math.isfinite(value) or value <= 0 or (upper is not None and value >= upper):
+        bound = f" and below {upper:g}" if upper is not None else ""
+        raise InputError(f"{name} must be positive{bound}, got {value!r}")
+    return value
+
+
+@dataclass(frozen=True, eq=False)
+class ViewModel:
+    """What a view sees: camera field of view (rad, full angles), scanning range (m, depth along the optical axis),
+    projector origin in the camera frame (m) and the ray bundle (rays_h x rays_v); incidence limit (rad).
+
+    ``projector_rotation`` (3x3, camera <- projector; default identity), ``projector_fov_h/v_rad`` (default the
+    camera's) and ``projector_rays_h/v`` (default the camera bundle's) describe the projector's shadow map.
+    """
+
+    fov_h_rad: float
+    fov_v_rad: float
+    range_min_m: float
+    range_max_m: float
+    projector_offset_m: np.ndarray
+    rays_h: int = 64
+    rays_v: int = 48
+    max_incidence_rad: float = math.radians(75)
+    projector_rotation: np.ndarray | None = None
+    projector_fov_h_rad: float | None = None
+    projector_fov_v_rad: float | None = None
+    projector_rays_h: int | None = None
+    projector_rays_v: int | None = None
+
+    def __post_init__(self):
+        _check_positive(self.fov_h_rad, "fov_h_rad", math.pi)
+        _check_positive(self.fov_v_rad, "fov_v_rad", math.pi)
+        _check_positive(self.range_min_m, "range_min_m")
+        _check_positive(self.range_max_m, "range_max_m")
+        if not self.range_min_m < self.range_max_m:
+            raise InputError(f"range_min_m {self.range_min_m} must be below range_max_m {self.range_max_m}")
+        _check_positive(self.max_incidence_rad, "max_incidence_rad", math.pi / 2 + 1e-12)
+        offset = np.asarray(self.projector_offset_m, dtype=float).reshape(-1)
+        if offset.shape != (3,) or not np.all(np.isfinite(offset)):
+            raise InputError(f"projector_offset_m must be three finite numbers (m), got {self.projector_offset_m!r}")
+        object.__setattr__(self, "projector_offset_m", offset)
+        rot = np.eye(3) if self.projector_rotation is None else np.asarray(self.projector_rotation, dtype=float)
+        if rot.shape != (3, 3) or not np.allclose(rot @ rot.T, np.eye(3), atol=1e-6):
+            raise InputError("projector_rotation must be a 3x3 rotation matrix")
+        object.__setattr__(self, "projector_rotation", rot)
+        for name, default in (("projector_fov_h_rad", self.fov_h_rad), ("projector_fov_v_rad", self.fov_v_rad)):
+            value = default if getattr(self, name) is None else getattr(self, name)
+            object.__setattr__(self, name, _check_positive(value, name, math.pi))
+        for name, default in (("projector_rays_h", self.rays_h), ("projector_rays_v", self.rays_v)):
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, default)
+        for name in ("rays_h", "rays_v", "projector_rays_h", "projector_rays_v"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, np.integer)) or value < 1:
+                raise InputError(f"{name} must be a positive integer, got {value!r}")
+        if (
+            self.rays_h * self.rays_v > MAX_BUNDLE_RAYS
+            or self.projector_rays_h * self.projector_rays_v > MAX_BUNDLE_RAYS
+        ):
+            raise InputError(f"a ray bundle may have at most {MAX_BUNDLE_RAYS} rays")
+
+    @classmethod
+    def from_scanner_model(cls, model, rays_h: int = 64, rays_v: int = 48, **overrides) -> ViewModel:
+        """The view of a PhoXi :class:`~agiprobot_measurement.sensors.phoxi.models.ScannerModel`: field of view of
+        its pinhole intrinsics, scanning range, projector pose (baseline along +x, turned to the sweet spot) and
+        projection angles."""
+        from agiprobot_measurement.sensors.phoxi.models import RESOLUTION_LOW
+
+        intr = model.intrinsics(RESOLUTION_LOW)
+        proj = model.projector_pose()
+        values = {
+            "fov_h_rad": 2.0 * math.atan(0.5 * intr.width / intr.fx),
+            "fov_v_rad": 2.0 * math.atan(0.5 * intr.height / intr.fy),
+            "range_min_m": model.scanning_range_mm[0] / 1000.0,
+            "range_max_m": model.scanning_range_mm[1] / 1000.0,
+            "projector_offset_m": proj[:3, 3].copy(),
+            "rays_h": int(rays_h),
+            "rays_v": int(rays_v),
+            "projector_rotation": proj[:3, :3].copy(),
+            "projector_fov_h_rad": math.radians(model.projector_fov_deg[0]),
+            "projector_fov_v_rad": math.radians(model.projector_fov_deg[1]),
+        }
+        values.update(overrides)
+        return cls(**values)
+
+
+@lru_cache(maxsize=16)
+def _pinhole_dirs(fov_h_rad: float, fov_v_rad: float, n_h: int, n_v: int) -> np.ndarray:
+    th = math.tan(0.5 * fov_h_rad)
+    tv = math.tan(0.5 * fov_v_rad)
+    u = ((np.arange(n_h) + 0.5) / n_h * 2.0 - 1.0) * th
+    v = ((np.arange(n_v) + 0.5) / n_v * 2.0 - 1.0) * tv
+    dirs = np.empty((n_v, n_h, 3))
+    dirs[:, :, 0] = u[None, :]
+    dirs[:, :, 1] = v[:, None]
+    dirs[:, :, 2] = 1.0
+    dirs = dirs.reshape(-1, 3)
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    dirs.setflags(write=False)
+    return dirs
+
+
+def camera_ray_directions(view: ViewModel) -> np.ndarray:
+    """(rays_v * rays_h, 3) unit ray directions in the camera frame (row-major pinhole grid over the fov)."""
+    return _pinhole_dirs(view.fov_h_rad, view.fov_v_rad, view.rays_h, view.rays_v)
+
+
+@dataclass
+class ViewGains:
+    """Gains of V views: ``gain`` (V,) the chosen metric, ``new_surface_area_m2`` (V,) expected newly seen surface
+    (m^2), ``visible_voxels`` (V,) counted voxels; ``all_gains`` every metric by name; ``seconds`` wall time."""
+
+    gain: np.ndarray
+    new_surface_area_m2: np.ndarray
+    visible_voxels: np.ndarray
+    all_gains: dict = field(default_factory=dict)
+    seconds: float = 0.0
+
+
+def _gain_fields(grid: VoxelMap, max_dist_m: float):
+    """Flat per-voxel inputs of the bundle kernel (cached on the map until it changes)."""
+
+    def compute():
+        labels = grid.labels()
+        state = np.full(grid.shape, rc.S_UNKNOWN, dtype=np.int8)
+        state[labels == EMPTY] = rc.S_EMPTY
+        state[(labels == UNKNOWN) & ~grid.observed] = rc.S_UNOBSERVED
+        state[labels == FULL] = rc.S_FULL
+        blocked = (state == rc.S_FULL).astype(np.uint8)
+        flags = np.zeros(grid.shape, dtype=np.uint8)
+        flags[grid.occlusion_plane_mask()] |= rc.F_OCCPLANE
+        flags[grid.growth_neighbour_mask()] |= rc.F_GROWTH_NEIGHBOUR
+        flags[grid.candidate_mask()] |= rc.F_CANDIDATE
+        growth = grid.growth_mask()
+        flags[growth] |= rc.F_GROWTH
+        # normals: fused (sensor-facing) on full voxels, the PCA plane on growth voxels, and on growth neighbours the
+        # mean predicted normal of the adjacent growth voxels (where the surface is expected to continue)
+        nsum = grid.normal_sum.astype(np.float64)
+        length = np.linalg.norm(nsum, axis=-1, keepdims=True)
+        normals = np.where(length > 1e-9, nsum / np.maximum(length, 1e-12), 0.0)
+        normals[~grid.full_mask()] = 0.0
+        gidx = np.argwhere(growth)
+        if len(gidx):
+            _, gnormals = grid.predicted_surface(gidx)
+            field_g = np.zeros((*grid.shape, 3))
+            field_g[gidx[:, 0], gidx[:, 1], gidx[:, 2]] = gnormals
+            normals[gidx[:, 0], gidx[:, 1], gidx[:, 2]] = gnormals
+            spread = np.stack(
+                [ndimage.uniform_filter(field_g[..., a], size=3, mode="constant") for a in range(3)], axis=-1
+            )
+            nb = grid.growth_neighbour_mask()
+            slen = np.linalg.norm(spread, axis=-1, keepdims=True)
+            spread = np.where(slen > 1e-12, spread / np.maximum(slen, 1e-12), 0.0)
+            normals[nb] = spread[nb]
+        full = grid.full_mask()
+        pc_value = np.zeros(grid.shape, dtype=np.float64)
+        if full.any():
+            dist = ndimage.distance_transform_edt(~full) * grid.resolution_m
+            ok = (state == rc.S_UNOBSERVED) & (dist > 0) & (dist < max_dist_m)
+            pc_value[ok] = max_dist_m - dist[ok]
+        prob = grid.probability().astype(np.float64).reshape(-1)
+        return (
+            state.reshape(-1),
+            blocked.reshape(-1),
+            prob,
+            rc.entropy(prob),
+            flags.reshape(-1),
+            np.ascontiguousarray(normals.reshape(-1, 3)),
+            pc_value.reshape(-1),
+        )
+
+    return grid._cached(("gain_fields", float(max_dist_m)), compute)
+
+
+def evaluate_views(
+    grid: VoxelMap,
+    camera_poses: np.ndarray,
+    view: ViewModel,
+    gain: str = "occlusion_aware",
+    rpg_compat: bool = False,
+    kolmost_weight: float = 0.5,
+    proximity_max_dist_m: float | None = None,
+) -> ViewGains:
+    """Gains of camera poses (V, 4, 4) world <- camera (z = optical axis, m) on ``grid`` (see the module docstring).
+
+    ``gain`` is one of :data:`GAIN_NAMES`; all metrics come back in ``all_gains`` anyway (one traversal computes
+    them all). ``kolmost_weight`` is the report's ``w`` in ``w cos(a) + 1 - w``.
+    """
+    start = time.perf_counter()
+    if gain not in GAIN_NAMES:
+        raise InputError(f"unknown gain {gain!r}; known: {', '.join(GAIN_NAMES)}")
+    if not isinstance(grid, VoxelMap):
+        raise InputError(f"grid must be a VoxelMap, got {type(grid).__name__}")
+    if not isinstance(view, ViewModel):
+        raise InputError(f"view must be a ViewModel, got {type(view).__name__}")
+    try:
+        poses = np.asarray(camera_poses, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError("camera_poses must be a (V, 4, 4) array") from None
+    if poses.ndim == 2 and poses.shape == (4, 4):
+        poses = poses[None]
+    if poses.ndim != 3 or poses.shape[1:] != (4, 4):
+        raise InputError(f"camera_poses must be (V, 4, 4), got shape {poses.shape}")
+    if not np.all(np.isfinite(poses)):
+        raise InputError("camera_poses contain NaN or infinite values")
+    w = float(kolmost_weight)
+    if not 0.0 <= w <= 1.0:
+        raise InputError(f"kolmost_weight must be in [0, 1], got {kolmost_weight!r}")
+    max_dist = 10.0 * grid.resolution_m if proximity_max_dist_m is None else float(proximity_max_dist_m)
+    _check_positive(max_dist, "proximity_max_dist_m")
+    n_views = len(poses)
+    if n_views == 0:
+        empty = np.zeros(0)
+        return ViewGains(empty, empty.copy(), np.zeros(0, dtype=np.int64), {name: empty.copy() for name in GAIN_NAMES})
+    state, blocked, prob, ent, flags, normals, pc_value = _gain_fields(grid, max_dist)
+    proj_dirs = _pinhole_dirs(
+        view.projector_fov_h_rad, view.projector_fov_v_rad, view.projector_rays_h, view.projector_rays_v
+    )
+    nx, ny, nz = grid.shape
+    parallel = rc.parallel_allowed()
+    n_chunks = max(1, min(numba.get_num_threads(), n_views)) if parallel else 1
+    kernel = rc.evaluate_bundle if parallel else rc.evaluate_bundle_serial
+    gains, new_vox, visible = kernel(
+        np.ascontiguousarray(poses),
+        np.ascontiguousarray(camera_ray_directions(view)),
+        view.projector_offset_m,
+        np.ascontiguousarray(view.projector_rotation),
+        np.ascontiguousarray(proj_dirs),
+        int(view.projector_rays_h),
+        int(view.projector_rays_v),
+        math.tan(0.5 * view.projector_fov_h_rad),
+        math.tan(0.5 * view.projector_fov_v_rad),
+        state,
+        blocked,
+        prob,
+        ent,
+        flags,
+        normals,
+        pc_value,
+        grid.origin_m.astype(np.float64),
+        float(grid.resolution_m),
+        nx,
+        ny,
+        nz,
+        float(view.range_min_m),
+        float(view.range_max_m),
+        math.cos(view.max_incidence_rad),
+        bool(rpg_compat),
+        w,
+        AREA_FACTOR_OCCUPIED_DESIRED,
+        AREA_FACTOR_OCCPLANE_DESIRED,
+        n_chunks,
+    )
+    all_gains = {name: gains[:, i].copy() for i, name in enumerate(GAIN_NAMES)}
+    return ViewGains(
+        gain=all_gains[gain],
+        new_surface_area_m2=new_vox.astype(np.float64) * grid.resolution_m**2,
+        visible_voxels=visible,
+        all_gains=all_gains,
+        seconds=time.perf_counter() - start,
+    )
+
+
+def utility(gain, cost_s, method: str = "rpg", cost_weight: float = 0.0) -> np.ndarray:
+    """Utility of V views from gains (V,) and motion costs (V,) in s.
+
+    ``"rpg"``: ``G / sum(G) - w C / sum(C)`` (rpg's weighted linear utility; a zero sum makes its share 0);
+    ``"exp"``: ``G exp(-w C)`` (mav_active_3d_planning's exponential discount, ``w`` in 1/s).
+    """
+    if method not in UTILITY_METHODS:
+        raise InputError(f"unknown utility method {method!r}; known: {', '.join(UTILITY_METHODS)}")
+    g = np.asarray(gain, dtype=float).reshape(-1)
+    c = np.asarray(cost_s, dtype=float).reshape(-1)
+    if g.shape != c.shape:
+        raise InputError(f"gain ({g.shape[0]}) and cost_s ({c.shape[0]}) need one value per view")
+    if not (np.all(np.isfinite(g)) and np.all(np.isfinite(c))):
+        raise InputError("gain and cost_s must be finite")
+    if np.any(c < 0):
+        raise InputError("cost_s must be >= 0")
+    w = float(cost_weight)
+    if not math.isfinite(w) or w < 0:
+        raise InputError(f"cost_weight must be >= 0, got {cost_weight!r}")
+    if method == "exp":
+        return g * np.exp(-w * c)
+    g_sum = g.sum()
+    c_sum = c.sum()
+    share_g = g / g_sum if g_sum != 0 else np.zeros_like(g)
+    share_c = c / c_sum if c_sum != 0 else np.zeros_like(c)
+    return share_g - w * share_c

@@ -1,0 +1,246 @@
+"""The 3D next-best-view loop's robot and camera (``nbv.interfaces``) over ROS.
+
+:class:`RosNBVRobot` is the station's controller: ``/joint_states`` and its ExecuteJointTrajectory action (robot_sim,
+or a real controller with that action), as the other nodes drive it. :class:`RosNBVCamera` is the PhoXi driver
+(the simulated phoxi_camera node or the real one): ``trigger_image`` answers the new frame's id, ``get_frame(id)``
+publishes it, and the frame's ``pointcloud`` (organised, camera space), ``confidence_map`` and ``camera_info``
+messages are matched by their header's seq (the frame id, as the driver numbers them). The sensor's pose is the
+tf transform world <- the cloud's frame at the cloud's stamp: with the scanner on the arm the phoxi_camera node
+stamps a frame with the tf time it was rendered at, so this is exactly the pose the frame was taken from.
+
+:func:`~agiprobot_measurement.ros.nbv_messages.captured_view` turns those messages into the loop's :class:`~agiprobot_measurement.nbv.interfaces.CapturedView`
+(world frame, valid pixels only, unit normals, sigma = the confidence map in mm, the organised depth for the TSDF).
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import OrderedDict
+
+import numpy as np
+import rospy
+import tf2_ros
+from actionlib_msgs.msg import GoalStatus
+from phoxi_camera.srv import GetFrame, TriggerImage
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+
+from agiprobot_measurement.motion.trajectory import JointTrajectory
+from agiprobot_measurement.msg import ExecuteJointTrajectoryAction, ExecuteJointTrajectoryGoal
+from agiprobot_measurement.nbv.interfaces import CapturedView, CaptureError, MotionError
+from agiprobot_measurement.ros.action_client import ActionClient
+from agiprobot_measurement.ros.conversions import joint_trajectory_to_msg, transform_to_matrix
+from agiprobot_measurement.ros.executor import ControllerWatch
+from agiprobot_measurement.ros.joint_states import JointStateCache
+from agiprobot_measurement.ros.nbv_messages import captured_view
+
+__all__ = ["MotionCancelled", "RosNBVCamera", "RosNBVRobot"]
+
+#: the PhoXi coordinate space whose clouds are in the sensor frame (the driver's coordinate_space 1)
+CAMERA_SPACE = 1
+
+
+class MotionCancelled(MotionError):
+    """The motion was stopped because the caller cancelled (the robot stands where it stopped)."""
+
+
+class RosNBVRobot:
+    """The robot over ``/joint_states`` and the controller's ExecuteJointTrajectory action ``controller_action``.
+
+    ``execute`` blocks until the controller reports the trajectory done, then waits ``settle_s`` (ROS time) for a
+    joint state stamped after that, so that tf (robot_state_publisher) shows the final pose before the next frame.
+    ``cancel_requested()`` is polled while the robot moves: when it answers true the goal is cancelled (the robot
+    stops where it is) and :class:`MotionCancelled` raised. A controller whose ``/joint_states`` stop for
+    ``heartbeat_timeout_s`` is lost: the goal is cancelled and MotionError raised.
+    """
+
+    def __init__(
+        self,
+        joint_names,
+        controller_action: str = "/robot_sim/execute_trajectory",
+        state_timeout_s: float = 5.0,
+        settle_s: float = 0.1,
+        cancel_requested=None,
+        heartbeat_timeout_s: float = 1.0,
+        poll_s: float = 0.05,
+    ):
+        self.joint_names = list(joint_names)
+        self.joints = JointStateCache(self.joint_names)
+        self.controller_action = controller_action
+        self.state_timeout_s = float(state_timeout_s)
+        self.settle_s = float(settle_s)
+        self.cancel_requested = cancel_requested or (lambda: False)
+        self.poll_s = float(poll_s)
+        self.client = ActionClient(controller_action, ExecuteJointTrajectoryAction)
+        self.watch = ControllerWatch(self.joints, self.client, heartbeat_timeout_s)
+
+    def current_joints(self) -> np.ndarray:
+        joints = self.joints.wait(self.state_timeout_s)
+        if joints is None:
+            raise MotionError(
+                f"no {self.joints.topic} for {self.state_timeout_s:.0f} s: is the robot (robot_sim) running?"
+            )
+        return joints
+
+    def execute(self, trajectory: JointTrajectory) -> None:
+        if not self.client.wait_for_server(rospy.Duration(10.0)):
+            raise MotionError(f"the robot controller's action {self.controller_action} is not available")
+        self.client.send_goal(ExecuteJointTrajectoryGoal(trajectory=joint_trajectory_to_msg(trajectory)))
+        while not self.client.wait_for_result(rospy.Duration(self.poll_s)):
+            if self.cancel_requested() or rospy.is_shutdown():
+                self.client.cancel_goal()
+                self.client.wait_for_result(rospy.Duration(2.0))
+                raise MotionCancelled("cancelled; robot stopped")
+            problem = self.watch.problem()
+            if problem:
+                self.client.cancel_goal()  # a controller that only stalled must not go on moving
+                raise MotionError(f"robot controller lost: {problem}")
+        state, result = self.client.get_state(), self.client.get_result()
+        if state != GoalStatus.SUCCEEDED or result is None or not result.success:
+            reason = result.error if result is not None and result.error else GoalStatus.to_string(state)
+            raise MotionError(f"robot motion failed: {reason}")
+        self._settle()
+
+    def _settle(self) -> None:
+        done = rospy.Time.now()
+        deadline = done + rospy.Duration(self.settle_s + 2.0)
+        target = done + rospy.Duration(self.settle_s)
+        while not rospy.is_shutdown():
+            stamp = self.joints.latest_stamp()
+            if stamp is not None and stamp >= target:
+                return
+            if rospy.Time.now() > deadline:
+                raise MotionError(f"no {self.joints.topic} after the motion: is the robot (robot_sim) running?")
+            rospy.sleep(0.01)
+
+
+class RosNBVCamera:
+    """The PhoXi driver under ``camera_ns``: ``capture()`` takes a new frame (trigger_image, then get_frame(id)),
+    waits up to ``frame_timeout_s`` for its cloud, confidence map and camera info, and looks the sensor's pose up on
+    tf (``world_frame`` <- the cloud's frame at its stamp, waiting up to ``tf_timeout_s``). Needs the driver's
+    ``organized_cloud`` true and coordinate space 1 (camera), the driver's defaults.
+    """
+
+    TOPICS = (("pointcloud", PointCloud2), ("confidence_map", Image), ("camera_info", CameraInfo))
+    #: frames kept while waiting (the driver numbers frames; older ones are dropped)
+    KEEP = 4
+    #: tf history (s) a new camera gathers before its first frame
+    TF_HISTORY_S = 0.3
+
+    def __init__(
+        self,
+        camera_ns: str = "/phoxi_camera",
+        world_frame: str = "world",
+        frame_timeout_s: float = 30.0,
+        tf_timeout_s: float = 2.0,
+        tf_buffer: tf2_ros.Buffer | None = None,
+    ):
+        self.camera_ns = camera_ns.rstrip("/")
+        self.world_frame = world_frame
+        self.frame_timeout_s = float(frame_timeout_s)
+        self.tf_timeout = rospy.Duration(float(tf_timeout_s))
+        if tf_buffer is None:
+            tf_buffer = tf2_ros.Buffer()
+            self._tf_listener = tf2_ros.TransformListener(tf_buffer)
+        self.tf_buffer = tf_buffer
+        self._tf_ready = False
+        self.lock = threading.Condition()
+        self.frames: OrderedDict[int, dict] = OrderedDict()
+        self.subscribers = [
+            rospy.Subscriber(
+                f"{self.camera_ns}/{name}", kind, self._on_message, callback_args=name, queue_size=2, buff_size=2**28
+            )
+            for name, kind in self.TOPICS
+        ]
+        self.trigger = rospy.ServiceProxy(f"{self.camera_ns}/trigger_image", TriggerImage)
+        self.get_frame = rospy.ServiceProxy(f"{self.camera_ns}/get_frame", GetFrame)
+
+    def _on_message(self, msg, name: str) -> None:
+        with self.lock:
+            self.frames.setdefault(int(msg.header.seq), {})[name] = msg
+            while len(self.frames) > self.KEEP:
+                self.frames.popitem(last=False)
+            self.lock.notify_all()
+
+    def _check_driver(self) -> None:
+        """The settings the conversion relies on (refused before a frame is taken)."""
+        space = rospy.get_param(f"{self.camera_ns}/coordinate_space", CAMERA_SPACE)
+        if int(space) != CAMERA_SPACE:
+            raise CaptureError(
+                f"{self.camera_ns}: coordinate_space is {space}; the map needs camera space (1): its points in the "
+                "sensor frame, placed by tf"
+            )
+        if not rospy.get_param(f"{self.camera_ns}/organized_cloud", True):
+            raise CaptureError(f"{self.camera_ns}: organized_cloud is false; the map needs the organised cloud")
+        if not rospy.get_param(f"{self.camera_ns}/send_point_cloud", True) or not rospy.get_param(
+            f"{self.camera_ns}/send_confidence_map", True
+        ):
+            raise CaptureError(f"{self.camera_ns}: send_point_cloud and send_confidence_map must be true")
+
+    def _wait_subscribed(self, timeout_s: float = 5.0) -> None:
+        # the driver builds a frame's messages only for connected subscribers
+        deadline = rospy.Time.now() + rospy.Duration(timeout_s)
+        while any(s.get_num_connections() == 0 for s in self.subscribers) and rospy.Time.now() < deadline:
+            rospy.sleep(0.05)
+
+    def _wait_for_tf(self) -> None:
+        """Before the first frame: tf must know the sensor, and hold some history, because the frame's stamp is the
+        driver's newest tf time, which may lie a little before this listener's first message."""
+        if self._tf_ready:
+            return
+        frame = str(rospy.get_param(f"{self.camera_ns}/frame_id", "PhoXi3Dscanner_sensor"))
+        if not self.tf_buffer.can_transform(self.world_frame, frame, rospy.Time(0), rospy.Duration(10.0)):
+            raise CaptureError(
+                f"no pose of {frame} in {self.world_frame} on tf: is the robot (robot_state_publisher) up?"
+            )
+        rospy.sleep(self.TF_HISTORY_S)
+        self._tf_ready = True
+
+    def capture(self) -> CapturedView:
+        self._check_driver()
+        try:
+            self.trigger.wait_for_service(10.0)
+            self._wait_subscribed()
+            self._wait_for_tf()
+            triggered = self.trigger()
+        except (rospy.ServiceException, rospy.ROSException) as exc:
+            raise CaptureError(f"camera {self.camera_ns}: {exc}") from exc
+        if not triggered.success:
+            hint = ""
+            if "No scanner connected" in triggered.message:
+                hint = f" (give the driver a scanner_id, or call {self.camera_ns}/connect_camera)"
+            raise CaptureError(f"camera {self.camera_ns}: {triggered.message}{hint}")
+        try:
+            published = self.get_frame(in_=int(triggered.id))
+        except (rospy.ServiceException, rospy.ROSException) as exc:
+            raise CaptureError(f"camera {self.camera_ns}: {exc}") from exc
+        if not published.success:
+            raise CaptureError(f"camera {self.camera_ns}: frame {triggered.id}: {published.message}")
+        messages = self._wait_frame(int(triggered.id))
+        cloud = messages["pointcloud"]
+        try:
+            transform = self.tf_buffer.lookup_transform(
+                self.world_frame, cloud.header.frame_id, cloud.header.stamp, self.tf_timeout
+            )
+        except tf2_ros.TransformException as exc:
+            raise CaptureError(
+                f"no pose of {cloud.header.frame_id} in {self.world_frame} on tf at the frame's stamp "
+                f"{cloud.header.stamp.to_sec():.3f}: {exc}"
+            ) from exc
+        return captured_view(cloud, messages["confidence_map"], messages["camera_info"], transform_to_matrix(transform))
+
+    def _wait_frame(self, index: int) -> dict:
+        names = [name for name, _ in self.TOPICS]
+        deadline = rospy.Time.now() + rospy.Duration(self.frame_timeout_s)
+        with self.lock:
+            while not rospy.is_shutdown():
+                found = self.frames.get(index, {})
+                if all(name in found for name in names):
+                    return dict(found)
+                if rospy.Time.now() > deadline:
+                    missing = [name for name in names if name not in found]
+                    raise CaptureError(
+                        f"camera {self.camera_ns}: frame {index}: no {', '.join(missing)} within "
+                        f"{self.frame_timeout_s:.0f} s"
+                    )
+                self.lock.wait(0.05)
+        raise CaptureError("shutting down")

@@ -1,0 +1,168 @@
+"""The 3D NBV loop: request validation, the stopping rules and budgets, plan-only, outputs, the simulated station."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import yaml
+
+from agiprobot_measurement.errors import InputError
+from agiprobot_measurement.nbv.reconstruction import (
+    TERMINATION_REASONS,
+    ReconstructionRequest,
+    Reconstructor,
+    motion_time_s,
+)
+
+
+@pytest.fixture(scope="module")
+def station():
+    from agiprobot_measurement.nbv.station3d import SimulatedNBVStation
+
+    return SimulatedNBVStation(pixel_step=8)  # the 100 mm cube of config/scene.yaml
+
+
+def make(station, **fields):
+    from agiprobot_measurement.nbv.station3d import SimulatedPhoXiCamera, SimulatedRobot
+
+    robot = SimulatedRobot(station, strict=True)
+    camera = SimulatedPhoXiCamera(station, robot)
+    request = ReconstructionRequest.with_config_defaults(**fields)
+    return Reconstructor(robot, camera, request, station=station), robot
+
+
+# --------------------------------------------------------------------------------------------- requests
+@pytest.mark.parametrize(
+    ("fields", "name"),
+    [
+        ({"roi_size_m": [0.2, 0.0, 0.2]}, "roi_size_m"),
+        ({"roi_size_m": [5.0, 5.0, 5.0]}, "roi_size_m"),
+        ({"roi_center_m": [0.4, math.nan, 1.0]}, "roi_center_m"),
+        ({"resolution_m": 0.0}, "resolution_m"),
+        ({"resolution_m": math.nan}, "resolution_m"),
+        ({"planning_resolution_m": 0.001}, "planning_resolution_m"),
+        ({"gain": "magic"}, "gain"),
+        ({"candidates": "everywhere"}, "candidates"),
+        ({"max_views": 0}, "max_views"),
+        ({"max_views": 2.5}, "max_views"),
+        ({"cost_weight": -1.0}, "cost_weight"),
+        ({"min_gain_area_mm2": math.inf}, "min_gain_area_mm2"),
+        ({"min_relative_gain": 2.0}, "min_relative_gain"),
+        ({"max_time_s": 0.0}, "max_time_s"),
+    ],
+)
+def test_bad_requests_name_the_field(fields, name):
+    with pytest.raises(InputError, match=name):
+        ReconstructionRequest(**fields)
+
+
+def test_from_mapping_takes_defaults_for_zero_and_empty_fields():
+    request = ReconstructionRequest.from_mapping(
+        {"roi_center_m": [0, 0, 0], "roi_size_m": [], "resolution_m": 0.0, "gain": "", "max_views": 0,
+         "max_joint_path_rad": 0.0, "execute": False}
+    )  # fmt: skip
+    assert request.roi_center_m is None and request.roi_size_m is None
+    assert request.resolution_m == 0.002 and request.gain == "ours" and request.max_views == 20
+    assert request.max_joint_path_rad == math.inf and request.execute is False
+    with pytest.raises(InputError, match="bogus"):
+        ReconstructionRequest.from_mapping({"bogus": 1})
+    with pytest.raises(InputError, match="roi_size_m"):
+        ReconstructionRequest.from_mapping({"roi_size_m": [0.1, -0.1, 0.1]})
+
+
+def test_motion_time_is_the_slowest_joints_trapezoid(station):
+    limits = station.limits
+    q0 = np.zeros(6)
+    far = np.zeros((1, 6))
+    far[0, 0] = 4.0  # v 1.8 rad/s, a 1.0 rad/s^2: cruise (4 > 1.8^2 / 1)
+    np.testing.assert_allclose(motion_time_s(q0, far, limits), 4.0 / 1.8 + 1.8)
+    near = np.zeros((1, 6))
+    near[0, 1] = 0.25
+    np.testing.assert_allclose(motion_time_s(q0, near, limits), 2.0 * math.sqrt(0.25))
+    assert motion_time_s(q0, np.zeros((1, 6)), limits)[0] == 0.0
+
+
+# --------------------------------------------------------------------------------------------- loop
+def test_view_budget_stops_the_loop_and_the_outputs_are_written(station, tmp_path):
+    recon, robot = make(station, max_views=2, output_dir=str(tmp_path / "out"))
+    phases = []
+    result = recon.run(on_progress=lambda p: phases.append(p.phase))
+    assert result.termination_reason == "max_views"
+    assert len(result.views) == 2 and len(robot.trajectories) >= 2
+    assert robot.true_collisions == 0
+    assert {"search", "capture", "integrate", "candidates", "plan_motion", "move", "finish"} <= set(phases)
+    assert result.views[1].candidates_feasible > 0 and result.views[1].rejections
+    assert result.observed_surface_area_m2 > 0.005  # two faces of the cube at least
+    assert result.joint_path_rad > 0 and result.tcp_path_m > 0
+    for name in ("cloud_file", "mesh_file", "map_file", "log_file"):
+        assert getattr(result, name), name
+    log = yaml.safe_load(open(result.log_file))
+    assert log["termination_reason"] == "max_views" and len(log["views"]) == 2
+    assert np.asarray(log["views"][1]["camera_pose"]).shape == (4, 4)
+    from agiprobot_measurement.nbv.voxel_map import VoxelMap
+
+    assert VoxelMap.load_npz(result.map_file).shape == recon.map.shape
+
+
+def test_gain_threshold_and_cancel_and_budgets(station):
+    recon, _ = make(station, max_views=5, min_gain_area_mm2=1e9)
+    assert recon.run().termination_reason == "gain_below_threshold"
+    assert len(recon.views) == 2  # below the threshold for two iterations: one more view, then the stop
+
+    recon, _ = make(station, max_views=5)
+    calls = []
+    result = recon.run(should_cancel=lambda: len(calls.append(1) or calls) > 1)
+    assert result.termination_reason == "cancelled" and len(result.views) == 1
+
+    recon, _ = make(station, max_views=5, max_joint_path_rad=0.01)
+    assert recon.run().termination_reason == "max_path"
+
+    recon, _ = make(station, max_views=5, max_time_s=1e-6)
+    assert recon.run().termination_reason == "max_time"
+    assert set(TERMINATION_REASONS) >= {"gain_below_threshold", "cancelled", "max_path", "max_time", "max_views"}
+
+
+def test_empty_roi_ends_with_nothing_found_after_the_search(station):
+    center, _ = station.default_roi()
+    beside = center + np.array([0.0, 0.3, 0.0])  # over the bare table next to the fixture
+    recon, _ = make(station, max_views=10, roi_center_m=beside, roi_size_m=[0.2, 0.2, 0.2])
+    result = recon.run()
+    assert result.termination_reason == "nothing_found"
+    assert 1 < len(result.views) <= 1 + recon.search_views
+    assert {v.source for v in result.views[1:]} == {"search"}
+
+
+def test_plan_only_returns_the_next_view_without_moving(station):
+    recon, robot = make(station, execute=False)
+    result = recon.run()
+    assert result.termination_reason == "plan_only" and not robot.trajectories
+    pose, joints = result.next_view_pose, result.next_view_joints
+    assert pose.shape == (4, 4) and joints.shape == (6,)
+    np.testing.assert_allclose(station.sensor_pose(joints), pose, atol=1e-6)
+
+
+def test_integrate_refuses_what_is_not_a_frame(station):
+    recon, _ = make(station)
+    with pytest.raises(InputError):
+        recon.integrate({"points": []})
+
+
+def test_reconstruct_cli_refuses_bad_input_before_any_work(tmp_path, capsys):
+    import importlib.util
+
+    from agiprobot_measurement._paths import PACKAGE_ROOT
+
+    spec = importlib.util.spec_from_file_location("reconstruct_cli", PACKAGE_ROOT / "scripts" / "reconstruct.py")
+    cli = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(cli)
+    busy = tmp_path / "busy"
+    busy.mkdir()
+    (busy / "old.txt").write_text("x")
+    assert cli.main(["cup", "--out", str(busy)]) == 2
+    assert "not empty" in capsys.readouterr().err
+    assert cli.main(["no_such_part.stl", "--out", str(tmp_path / "new")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+    assert cli.main(["cup", "--resolution", "0", "--out", str(tmp_path / "new2")]) == 2
+    assert "resolution_m" in capsys.readouterr().err
