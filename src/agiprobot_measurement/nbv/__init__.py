@@ -26,7 +26,8 @@ Modules (imported on demand; this file stays light so that ``import agiprobot_me
 
 - :mod:`.voxel_map` the log-odds voxel map (OctoMap sensor model), its labels, growth voxels, candidates, occlusion
   plane, predicted surface and exports; :mod:`.raycast3d` its numba kernels;
-- :mod:`.gains` the seven volumetric information gains and the report's, PhoXi-aware, and the utilities;
+- :mod:`.gains` the seven volumetric information gains and the report's, PhoXi-aware, and the utilities (their names in
+  :mod:`.gain_names`, light to import);
 - :mod:`.meshing` projective TSDF and marching cubes;
 - :mod:`.interfaces` the robot and camera the loop needs (implemented by :mod:`.station3d` without ROS and by
   ``agiprobot_measurement.ros.nbv_interfaces`` on the station);

@@ -46,6 +46,7 @@ from scipy import ndimage
 
 from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.nbv import raycast3d as rc
+from agiprobot_measurement.nbv.gain_names import GAIN_NAMES
 from agiprobot_measurement.nbv.voxel_map import EMPTY, FULL, UNKNOWN, VoxelMap
 
 __all__ = [
@@ -58,16 +59,6 @@ __all__ = [
     "utility",
 ]
 
-GAIN_NAMES = (
-    "occlusion_aware",
-    "unobserved_voxel",
-    "rear_side_voxel",
-    "rear_side_entropy",
-    "proximity_count",
-    "average_entropy",
-    "area_factor",
-    "report",
-)
 UTILITY_METHODS = ("rpg", "exp")
 #: Vasquez-Gomez's desired fractions of occupied and occlusion-plane voxels (rpg's defaults)
 AREA_FACTOR_OCCUPIED_DESIRED = 0.2

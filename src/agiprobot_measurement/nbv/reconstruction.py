@@ -41,6 +41,7 @@ import numpy as np
 from agiprobot_measurement.errors import InputError, InternalError
 from agiprobot_measurement.nbv.baselines import ViewChoice as _Choice
 from agiprobot_measurement.nbv.baselines import motion_time_s
+from agiprobot_measurement.nbv.gain_names import GAIN_NAMES
 from agiprobot_measurement.nbv.interfaces import CapturedView, NBVCamera, NBVRobot
 
 __all__ = [
@@ -68,17 +69,7 @@ TERMINATION_REASONS = (
     "error",
     "plan_only",  # execute=False: the result carries the next best view, nothing moved
 )
-_GAIN_NAMES = (
-    "occlusion_aware",
-    "unobserved_voxel",
-    "rear_side_voxel",
-    "rear_side_entropy",
-    "proximity_count",
-    "average_entropy",
-    "area_factor",
-    "report",
-)
-METHODS = ("ours", *_GAIN_NAMES, "random", "hemisphere", "hemisphere6", "hemisphere12", "hemisphere24", "report3d")
+METHODS = ("ours", *GAIN_NAMES, "random", "hemisphere", "hemisphere6", "hemisphere12", "hemisphere24", "report3d")
 #: candidate sources; "random" and "hemisphere_fixed" (the action's names) select those baselines
 CANDIDATE_SOURCES = ("frontier+sphere", "frontier", "sphere", "random", "hemisphere_fixed")
 #: the largest ROI edge the loop accepts (m): the UR10e's reach around a part on the fixture
