@@ -36,6 +36,7 @@ except ImportError:
     sys.path.insert(0, str(ROOT / "src"))
 
 from agiprobot_measurement.errors import InputError  # noqa: E402
+from agiprobot_measurement.nbv.gain_names import GAIN_NAMES  # noqa: E402
 
 SHARED = ROOT.parent / "shared" / "parts"
 #: name -> (file, unit, largest extent (m) on the fixture or None to keep it)
@@ -49,15 +50,8 @@ PARTS = {
     "plate_holes": ("plate_holes.STL", "mm", 0.25),
 }
 SHAPE_NAMES = ("u_channel", "cup", "two_towers", "l_bracket", "torus")
-VOLUMETRIC = (
-    "occlusion_aware",
-    "unobserved_voxel",
-    "rear_side_voxel",
-    "rear_side_entropy",
-    "proximity_count",
-    "average_entropy",
-    "area_factor",
-)
+#: the seven volumetric metrics of Isler / Delmerico (every gain but the report's own)
+VOLUMETRIC = tuple(name for name in GAIN_NAMES if name != "report")
 
 
 def resolve_object(name: str):
