@@ -118,6 +118,45 @@ def aggregate(runs: list[dict], max_views: int) -> dict:
     }
 
 
+def self_terminated(summary: dict) -> dict:
+    """The run as it would have ended at its stopping rule: the prefix of a budget run up to the view where the rule
+    fired (the loop is deterministic up to there), with the metrics of that prefix. A run whose rule never fired is
+    returned as it is."""
+    from agiprobot_measurement.nbv.ground_truth import auc, views_to
+
+    stop = summary.get("stop") or {}
+    if "view" not in stop:
+        return summary
+    k = int(stop["view"])
+    out = {key: value for key, value in summary.items() if key != "stop"}
+    log = summary["view_log"][:k]
+    curve = summary.get("coverage_curve", [])[:k]
+    out.update({
+        "termination_reason": stop["reason"], "views": k, "view_log": log, "coverage_curve": curve,
+        "planning_s_per_view": summary["planning_s_per_view"][: max(k - 1, 0)],
+        "joint_path_rad": float(sum(v["joint_path_rad"] for v in log)),
+        "motion_time_s": float(sum(v["motion_s"] for v in log)),
+        "coverage": stop.get("coverage", curve[-1] if curve else None),
+        "coverage_full_surface": stop.get("coverage_full_surface"),
+        "auc10": auc(curve, 10), "n90": views_to(curve, 0.90), "n95": views_to(curve, 0.95),
+    })  # fmt: skip
+    for key in ("chamfer_mm", "accuracy_mm", "completeness_mm"):
+        if key in stop:
+            out[key] = stop[key]
+    out["budget_final_coverage"] = summary.get("coverage")
+    return out
+
+
+def path_to(run: dict, level: float) -> tuple[float, bool]:
+    """Joint path (rad) of a run until its coverage first reaches ``level``, and whether it did."""
+    total = 0.0
+    for v in run.get("view_log", []):
+        total += float(v["joint_path_rad"])
+        if v.get("coverage") is not None and v["coverage"] >= level - 1e-9:
+            return total, True
+    return total, False
+
+
 def fmt(v, spec=".3f"):
     return "-" if v is None or (isinstance(v, float) and not np.isfinite(v)) else format(v, spec)
 
@@ -129,7 +168,12 @@ def main(argv=None) -> int:
     parser.add_argument("--methods", nargs="+", default=["ours", "random", "hemisphere12"])
     parser.add_argument("--max-views", type=int, default=20)
     parser.add_argument("--random-seeds", type=int, default=5)
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=int, default=0, help="scene noise seed, and the first run seed")
+    parser.add_argument("--seeds", type=int, default=1, help="run seeds of every method but random (seed, seed+1, ...)")
+    parser.add_argument("--no-budget-run", action="store_true",
+                        help="ours stops at its stopping rule (default: it goes on to the budget, the rule's view is "
+                             "noted, and the self-terminated run is the prefix: 'ours' = that prefix, "
+                             "'ours@budget' = the whole run)")  # fmt: skip
     parser.add_argument("--pixel-step", type=int, default=2)
     parser.add_argument("--gt-spacing", type=float, default=0.002, help="ground-truth point spacing (m)")
     parser.add_argument("--gt-directions", type=int, default=200)
@@ -179,19 +223,28 @@ def run(args) -> int:
                 print(f"[{name}] oracle: set cover {oracle.get('set_cover_views')} views, n95 {oracle['n95']}",
                       file=sys.stderr)  # fmt: skip
                 continue
-            seeds = range(args.random_seeds) if method == "random" else [args.seed]
-            runs = []
+            seeds = range(args.random_seeds) if method == "random" else range(args.seed, args.seed + args.seeds)
+            runs, budget_runs = [], []
+            budget = method == "ours" and not args.no_budget_run
             for seed in seeds:
                 overrides = {"gain": method, "max_views": args.max_views, "seed": seed}
                 if method in VOLUMETRIC:
                     overrides["cost_weight"] = 0.0  # rpg's default
                 request = ReconstructionRequest.with_config_defaults(**overrides)
-                summary = simulate(station, request, truth, chamfer=not args.no_chamfer)
+                summary = simulate(station, request, truth, chamfer=not args.no_chamfer, budget_run=budget)
+                if budget:
+                    budget_runs.append(summary)
+                    summary = self_terminated(summary)
                 runs.append(summary)
                 print(f"[{name}] {method} seed {seed}: {summary['views']} views, coverage "
                       f"{fmt(summary.get('coverage'))}, {summary['termination_reason']}, "
                       f"{summary['wall_time_s']:.0f} s", file=sys.stderr)  # fmt: skip
             entry["methods"][method] = {"summary": aggregate(runs, args.max_views), "runs": runs}
+            if budget_runs:
+                entry["methods"][method + "@budget"] = {
+                    "summary": aggregate(budget_runs, args.max_views),
+                    "runs": budget_runs,
+                }
         results["objects"][name] = entry
         if args.json:  # after every object, so that a long run cut short keeps what it measured
             from agiprobot_measurement.common.files import atomic_write_text
@@ -230,12 +283,27 @@ def merge(args) -> int:
 
 
 def targets(results: dict) -> dict:
-    """The issue's targets, per object and as the median over objects (where the methods were run)."""
+    """The issue's targets, per object and as the median over objects (where the methods were run).
+
+    "The best volumetric metric" is the one of the seven with the best median over the objects (of C(4), resp.
+    AUC(10)), so one metric for all objects as a user would pick it; ``*_per_object_max`` is the stricter bound
+    of the best metric picked per object afterwards. The joint path is compared at equal coverage: per object and
+    run pair, the path each needed to first reach the lower of the two final coverages."""
+    objects = {obj: e["methods"] for obj, e in results["objects"].items() if "ours" in e["methods"]}
+
+    def med(values):
+        values = [v for v in values if v is not None]
+        return float(np.median(values)) if values else None
+
+    metrics = [k for k in VOLUMETRIC if objects and all(k in m for m in objects.values())]
+    by_metric = {
+        k: {key: med([m[k]["summary"][key] for m in objects.values()]) for key in ("c4", "auc10", "joint_path_rad")}
+        for k in metrics
+    }
+    best_c4 = max(metrics, key=lambda k: by_metric[k]["c4"] or 0.0) if metrics else None
+    best_auc = max(metrics, key=lambda k: by_metric[k]["auc10"] or 0.0) if metrics else None
     per = {}
-    for obj, entry in results["objects"].items():
-        m = entry["methods"]
-        if "ours" not in m:
-            continue
+    for obj, m in objects.items():
         ours = m["ours"]["summary"]
         row = {
             "ours_c4": ours["c4"],
@@ -249,16 +317,36 @@ def targets(results: dict) -> dict:
             "ours_joint_path_rad": ours["joint_path_rad"],
             "ours_final": ours["final_coverage"],
         }
+        if "ours@budget" in m:
+            losses = [(r.get("budget_final_coverage") or 0.0) - (r.get("coverage") or 0.0) for r in m["ours"]["runs"]]
+            row["ours_budget_final"] = m["ours@budget"]["summary"]["final_coverage"]
+            row["ours_stop_loss_max"] = float(max(losses))
+            row["ours_stopped_before_budget"] = float(
+                np.mean([r["views"] < results["max_views"] and r["termination_reason"] != "max_views"
+                         for r in m["ours"]["runs"]])
+            )  # fmt: skip
         vol = {k: v["summary"] for k, v in m.items() if k in VOLUMETRIC}
         if vol:
-            best_c4 = max(vol, key=lambda k: vol[k]["c4"] or 0.0)
-            best_auc = max(vol, key=lambda k: vol[k]["auc10"] or 0.0)
-            row.update({
-                "best_volumetric_c4": vol[best_c4]["c4"], "best_volumetric_c4_metric": best_c4,
-                "best_volumetric_auc10": vol[best_auc]["auc10"], "best_volumetric_auc10_metric": best_auc,
-                "best_volumetric_joint_path_rad": vol[best_auc]["joint_path_rad"],
-                "best_volumetric_final": vol[best_auc]["final_coverage"],
-            })  # fmt: skip
+            k4 = max(vol, key=lambda k: vol[k]["c4"] or 0.0)
+            ka = max(vol, key=lambda k: vol[k]["auc10"] or 0.0)
+            row.update({"best_volumetric_c4_per_object_max": vol[k4]["c4"], "best_volumetric_c4_per_object": k4,
+                        "best_volumetric_auc10_per_object_max": vol[ka]["auc10"], "best_volumetric_auc10_per_object": ka})  # fmt: skip
+        if best_auc in m:
+            row["best_volumetric_c4"] = m[best_c4]["summary"]["c4"]
+            row["best_volumetric_auc10"] = m[best_auc]["summary"]["auc10"]
+            row["best_volumetric_joint_path_rad"] = m[best_auc]["summary"]["joint_path_rad"]
+            row["best_volumetric_final"] = m[best_auc]["summary"]["final_coverage"]
+            ratios, ours_paths, vol_paths = [], [], []
+            for a, b in zip(m["ours"]["runs"], m[best_auc]["runs"] * len(m["ours"]["runs"]), strict=False):
+                level = min(a.get("coverage") or 0.0, b.get("coverage") or 0.0)
+                pa, _ = path_to(a, level)
+                pb, _ = path_to(b, level)
+                ours_paths.append(pa)
+                vol_paths.append(pb)
+                ratios.append(pa / pb if pb > 0 else math.inf)
+            row["ours_path_at_equal_coverage_rad"] = float(np.mean(ours_paths))
+            row["best_volumetric_path_at_equal_coverage_rad"] = float(np.mean(vol_paths))
+            row["path_ratio_at_equal_coverage"] = float(np.mean(ratios))
         if "random" in m:
             rnd = m["random"]["summary"]
             row.update({"random_c4": rnd["c4"], "random_auc10": rnd["auc10"], "random_n95": rnd["n95"]})
@@ -272,7 +360,19 @@ def targets(results: dict) -> dict:
         return float(np.median(values)) if values else None
 
     keys = sorted({k for r in per.values() for k, v in r.items() if isinstance(v, (int, float)) and v is not None})
-    return {"per_object": per, "median": {k: median(k) for k in keys}}
+    all_runs = [r for m in objects.values() for r in m["ours"]["runs"]]
+    summary = {k: median(k) for k in keys}
+    if all_runs:
+        summary["ours_runs_stopped_before_budget"] = float(
+            np.mean([r["views"] < results["max_views"] and r["termination_reason"] != "max_views" for r in all_runs])
+        )
+    return {
+        "per_object": per,
+        "median": summary,
+        "volumetric_medians": by_metric,
+        "best_volumetric_c4_metric": best_c4,
+        "best_volumetric_auc10_metric": best_auc,
+    }
 
 
 def print_table(results: dict) -> None:
@@ -301,7 +401,18 @@ def print_table(results: dict) -> None:
                 f"{fmt(s['planning_median_s'], '.2f'):>6} {fmt(s['planning_p95_s'], '.2f'):>6} "
                 f"{fmt(s['chamfer_mm'], '.2f'):>5} {','.join(terms)}"
             )
-    medians = results.get("targets", {}).get("median", {})
+    tg = results.get("targets", {})
+    if tg.get("volumetric_medians"):
+        print(
+            "volumetric metrics, median over the objects: "
+            + ", ".join(
+                f"{k} C4 {fmt(v['c4'], '.3f')} AUC10 {fmt(v['auc10'], '.3f')}"
+                for k, v in tg["volumetric_medians"].items()
+            )
+        )
+        print(f"best volumetric metric (median): C(4) {tg['best_volumetric_c4_metric']}, "
+              f"AUC(10) {tg['best_volumetric_auc10_metric']}")  # fmt: skip
+    medians = tg.get("median", {})
     if medians:
         print("median over objects: " + ", ".join(f"{k} {v:.3f}" for k, v in medians.items() if v is not None))
 

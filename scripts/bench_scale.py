@@ -24,6 +24,7 @@ Examples::
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import hashlib
 import json
 import math
@@ -111,6 +112,72 @@ def digest(store) -> str:
     return h.hexdigest()[:12]
 
 
+def evaluation_only(args, manager, out: dict) -> None:
+    """The evaluation stage alone (``--evaluation-only``): sampling, candidates, anchor reachability, then the
+    streamed evaluation with a store headroom of 1 (no later stage holds copies); ``--share`` evaluates a
+    contiguous middle share of the reachable candidates (whole samples' groups of orientations and tilts)."""
+    from agiprobot_measurement.planning.mechanics import reachable_anchors
+    from agiprobot_measurement.planning.streaming import StreamStats, evaluate_streaming
+    from agiprobot_measurement.planning.viewpoint import generate_viewpoint_poses
+
+    part = manager.part
+    started = time.perf_counter()
+    samples = part.sample(DENSITY, seed=manager.seed)
+    manager.sensor_model.set_processing_context(part.mesh, samples.points, samples.face_ids)
+    candidates = generate_viewpoint_poses(
+        samples.points, samples.normals, ORIENTATIONS, args.tilt, manager.sensor_model
+    )
+    sampling_s = time.perf_counter() - started
+    started = time.perf_counter()
+    reachable = np.flatnonzero(reachable_anchors(manager.ik, candidates.poses))
+    reach_s = time.perf_counter() - started
+    if args.share < 1.0:
+        count = max(1, round(args.share * reachable.size))
+        first = (reachable.size - count) // 2
+        reachable = reachable[first : first + count]
+    settings = dataclasses.replace(manager.evaluation, store_headroom=1.0, redundancy=args.redundancy)
+    if args.drop != "auto":
+        settings = dataclasses.replace(settings, drop_dominated=args.drop == "always")
+    stats = StreamStats()
+    cpu_started = time.process_time()
+    store, _ = evaluate_streaming(
+        manager.sensor_model, candidates.poses[reachable], THRESHOLD_MM, 500.0, settings=settings,
+        executor=manager.evaluator(), stats=stats,
+    )  # fmt: skip
+    out["client_cpu_s"] = time.process_time() - cpu_started
+    out.update(samples=len(samples), candidates=len(candidates.poses), reachable=int(reachable.size))
+    out["times"] = {"sampling": sampling_s, "anchor_reachability": reach_s, "viewpoint_objects": 0.0}
+    out["digest"] = digest(store)
+    out["reachable_share"] = float(np.unique(candidates.sample_index[reachable]).size / len(samples))
+    fill_stats(out, stats)
+
+
+def fill_stats(out: dict, stats) -> None:
+    out.update(
+        evaluated=stats.candidates,
+        kept_views=stats.kept_views,
+        kept_pairs=stats.kept_pairs,
+        projected_pairs=stats.projected_pairs,
+        projected_gb=stats.projected_bytes / 1e9,
+        budget_gb=stats.budget_bytes / 1e9,
+        compact=stats.compact,
+        drop_dominated=stats.drop_dominated,
+        redundancy=stats.redundancy,
+        dominance_kept_share=stats.dominance_kept_share,
+        dropped_views=stats.dropped_views,
+        dropped_pairs=stats.dropped_pairs,
+        chunks=stats.chunks,
+        chunk_views=stats.chunk_views,
+        chunk_seconds=stats.chunk_seconds,
+        chunk_cpu_seconds=stats.chunk_cpu_seconds,
+        pilot_s=stats.pilot_s,
+        scatter_s=stats.scatter_s,
+        merge_s=stats.merge_s,
+        evaluation_s=stats.wall_s,
+        store_mb=stats.store_bytes / 1e6,
+    )
+
+
 def child(args) -> dict:
     """One configuration in this process; returns its figures."""
     import logging
@@ -122,31 +189,33 @@ def child(args) -> dict:
 
     mesh_file = Path(args.mesh_dir) / f"panel_{args.area:g}.stl"
     manager = TrajectoryManager(workers=args.workers, max_memory_bytes=args.max_memory * 1e9 or None)
+    if args.redundancy is not None:
+        manager.evaluation = dataclasses.replace(manager.evaluation, redundancy=args.redundancy)
     out = {"area_m2": args.area, "tilt": args.tilt, "workers": args.workers}
     try:
         manager.load_target_mesh(str(mesh_file), placement="fixture", add_wbk_mirrors=args.mirrors)
         if manager.evaluator() is not None:
             manager.evaluator().client  # noqa: B018 (start the cluster before the clock)
+        if args.evaluation_only:
+            evaluation_only(args, manager, out)
+            evaluator = manager.evaluator()
+            out["worker_peak_mb"] = (
+                sorted(v / 1e6 for v in evaluator.worker_peak_rss_bytes().values()) if evaluator is not None else []
+            )
+            out["worker_cpu_s"] = (
+                sorted(evaluator.client.run(time.process_time).values()) if evaluator is not None else []
+            )
+            return out
         started = time.perf_counter()
         manager.generate_samples_and_viewpoints(DENSITY, THRESHOLD_MM, ORIENTATIONS, args.tilt)
         out["generate_s"] = time.perf_counter() - started
         stats = manager.last_stream_stats
         store = manager.measurability
+        fill_stats(out, stats)
+        out["generate_peak_mb"] = peak_rss_bytes() / 1e6
         out.update(
             samples=len(manager.samples),
             candidates=len(manager.candidates.poses),
-            evaluated=stats.candidates,
-            kept_views=stats.kept_views,
-            kept_pairs=stats.kept_pairs,
-            projected_pairs=stats.projected_pairs,
-            chunks=stats.chunks,
-            chunk_views=stats.chunk_views,
-            chunk_seconds=stats.chunk_seconds,
-            pilot_s=stats.pilot_s,
-            scatter_s=stats.scatter_s,
-            merge_s=stats.merge_s,
-            evaluation_s=stats.wall_s,
-            store_mb=stats.store_bytes / 1e6,
             times={k: manager.timings_s.get(k, 0.0) for k in ("sampling", "anchor_reachability", "viewpoint_objects")},
             digest=digest(store),
             reachable_share=manager.reachable_share,
@@ -163,21 +232,26 @@ def child(args) -> dict:
     except Exception as exc:  # reported in the table
         out["error"] = f"{type(exc).__name__}: {exc}"
     finally:
+        out["client_peak_mb"] = peak_rss_bytes() / 1e6
         manager.close()
-    out["client_peak_mb"] = peak_rss_bytes() / 1e6
     return out
 
 
-def projection(one: dict, n_workers: int) -> float:
-    """Projected evaluation time (s) on ``n_workers`` from the 1-worker run: its serial parts (pilot, merge), the
-    scatter of the sensor model once per worker, and its measured chunk work split as the evaluation splits it for
-    ``n_workers`` (at least 4 chunks per worker), each chunk with the measured per-chunk overhead."""
-    chunks = np.asarray(one["chunk_seconds"], dtype=float)
-    serial = one["pilot_s"] + one["merge_s"]
-    overhead = max(0.0, one["evaluation_s"] - serial - one["scatter_s"] - chunks.sum()) / max(len(chunks), 1)
+def projection(run: dict, n_workers: int) -> float:
+    """Projected evaluation time (s) on ``n_workers`` from a measured run on W workers (W = run["workers"]): its
+    serial parts (pilot, merge), the scatter of the sensor model (the measured broadcast's time per worker, counted
+    once per worker at the client, as if none overlapped), and its measured chunk work split as the evaluation
+    splits it for ``n_workers`` (at least 4 chunks per worker), each chunk with the measured per-chunk overhead: the
+    workers' time in the run not spent computing a chunk, per chunk (W x (wall - serial - scatter) - sum of the
+    chunks' times)."""
+    workers = max(int(run["workers"]), 1)
+    chunks = np.asarray(run["chunk_seconds"], dtype=float)
+    serial = run["pilot_s"] + run["merge_s"]
+    busy = workers * (run["evaluation_s"] - serial - run["scatter_s"])
+    overhead = max(0.0, busy - chunks.sum()) / max(len(chunks), 1)
     count = max(len(chunks), 4 * n_workers)
-    per_chunk = chunks.sum() / count + overhead
-    return serial + one["scatter_s"] * n_workers + math.ceil(count / n_workers) * per_chunk
+    per_chunk = chunks.sum() / count + overhead * len(chunks) / count
+    return serial + run["scatter_s"] / workers * n_workers + math.ceil(count / n_workers) * per_chunk
 
 
 def run_child(area, tilt, workers, mesh_dir, args) -> dict:
@@ -187,6 +261,10 @@ def run_child(area, tilt, workers, mesh_dir, args) -> dict:
     ]  # fmt: skip
     if args.mirrors:
         command.append("--mirrors")
+    if args.evaluation_only:
+        command += ["--evaluation-only", "--share", str(args.share), "--drop", args.drop]
+    if args.redundancy is not None:
+        command += ["--redundancy", str(args.redundancy)]
     done = subprocess.run(command, capture_output=True, text=True, check=False)
     lines = [line for line in done.stdout.splitlines() if line.startswith("{")]
     if not lines:
@@ -203,6 +281,16 @@ def main(argv=None) -> int:
     )
     parser.add_argument("--max-memory", type=float, default=0.0, help="memory budget in GB (0 = from the machine)")
     parser.add_argument("--mirrors", action="store_true", help="keep the scene's mirrors (they may block a panel)")
+    parser.add_argument(
+        "--evaluation-only", action="store_true", help="run the evaluation stage alone (no view objects, no cover)"
+    )
+    parser.add_argument(
+        "--share", type=float, default=1.0, help="with --evaluation-only: evaluate this middle share of the candidates"
+    )
+    parser.add_argument(
+        "--drop", choices=("auto", "always", "never"), default="auto", help="with --evaluation-only: dominated dropping"
+    )
+    parser.add_argument("--redundancy", type=int, help="force the per-chunk redundancy-fold cover (0 = off)")
     parser.add_argument("--json", help="write all figures here")
     parser.add_argument("--project", type=int, nargs="+", default=[2, 4, 8, 16], help="worker counts to project")
     parser.add_argument("--reproject", help="print the projections of a --json file again and exit")
@@ -250,33 +338,58 @@ def report_run(r: dict) -> None:
     where = "in-process" if r["workers"] == 0 else f"{r['workers']} local worker(s)"
     if "error" in r:
         print(f"{r['area_m2']:5g} m^2 tilt {r['tilt']:<5} {where:<18} ERROR {r['error']}", flush=True)
-        return
-    t = r["times"]
-    workers = " ".join(f"{m:.0f}" for m in r["worker_peak_mb"]) or "-"
+        if "kept_pairs" not in r:
+            return
+    t = r.get("times", {})
+    workers = " ".join(f"{m:.0f}" for m in r.get("worker_peak_mb", [])) or "-"
+    store = "compact (int32, float32, float32)" if r.get("compact") else "float64"
+    dropping = (
+        f"dominated dropped {r['dropped_views']:,} views / {r['dropped_pairs']:,} pairs"
+        + (f", {r['redundancy']}-fold cover per chunk" if r.get("redundancy") else "")
+        if r.get("drop_dominated")
+        else "nothing dropped"
+    )
+    greedy = (
+        f", greedy {r['greedy_s']:.1f} s ({r['greedy_views']} views, {r['covered']} covered)" if "greedy_s" in r else ""
+    )
+    cpu = sum(r.get("chunk_cpu_seconds") or [])
     print(
-        f"{r['area_m2']:5g} m^2 tilt {r['tilt']:<5} {where:<18} samples {r['samples']:>6} candidates "
-        f"{r['candidates']:>8} evaluated {r['evaluated']:>8} kept views {r['kept_views']:>8} pairs {r['kept_pairs']:>11,} "
-        f"| sampling {t['sampling']:.1f} s, reach {t['anchor_reachability']:.1f} s, evaluation {r['evaluation_s']:.1f} s "
-        f"({r['chunks']} chunks of {r['chunk_views']}, pilot {r['pilot_s']:.1f} s), views {t['viewpoint_objects']:.1f} s, "
-        f"greedy {r['greedy_s']:.1f} s ({r['greedy_views']} views, {r['covered']} covered) | peak MB client "
-        f"{r['client_peak_mb']:.0f}, workers {workers} | store {r['store_mb']:.0f} MB digest {r['digest']} "
-        f"| load {r['load_1min']:.1f}",
+        f"{r['area_m2']:5g} m^2 tilt {r['tilt']:<5} {where:<18} samples {r.get('samples', 0):>6} candidates "
+        f"{r.get('candidates', 0):>8} evaluated {r['evaluated']:>8} kept views {r['kept_views']:>8} pairs "
+        f"{r['kept_pairs']:>13,} (projected {r['projected_pairs']:,.0f} before dropping) | store {store}, {dropping} "
+        f"| sampling {t.get('sampling', 0):.1f} s, reach {t.get('anchor_reachability', 0):.1f} s, evaluation "
+        f"{r['evaluation_s']:.1f} s ({r['chunks']} chunks of {r['chunk_views']}, pilot {r['pilot_s']:.1f} s, chunks "
+        f"{sum(r['chunk_seconds']):.1f} s wall / {cpu:.1f} s CPU on the workers), views "
+        f"{t.get('viewpoint_objects', 0):.1f} s{greedy} | peak MB client {r['client_peak_mb']:.0f}, workers {workers} "
+        f"| store {r['store_mb']:.0f} MB digest {r.get('digest', '-')} | load {r['load_1min']:.1f}",
         flush=True,
     )
 
 
 def report_panel(runs: dict, counts) -> None:
     one, two = runs.get(1), runs.get(2)
-    if not one or not two or "error" in one or "error" in two:
+    measured = [r for r in (one, two) if r and "chunk_seconds" in r and r.get("chunk_seconds")]
+    if not measured:
         return
-    speedup = one["evaluation_s"] / two["evaluation_s"]
-    text = [f"  speed-up of the evaluation, 2 local workers over 1: {speedup:.2f}x (measured)"]
-    base = projection(one, 1)
-    text.append(f"  measured 1 worker {one['evaluation_s']:.1f} s; the model gives {base:.1f} s for 1")
+    text = []
+    if one and two and "evaluation_s" in one and "evaluation_s" in two:
+        speedup = one["evaluation_s"] / two["evaluation_s"]
+        cpu = [sum(r.get("chunk_cpu_seconds") or []) for r in (one, two)]
+        text.append(
+            f"  speed-up of the evaluation, 2 local workers over 1: {speedup:.2f}x (measured; chunk CPU "
+            f"{cpu[0]:.1f} s vs {cpu[1]:.1f} s)"
+        )
+    base_run = measured[0]
+    base = projection(base_run, 1)
+    text.append(
+        f"  PROJECTION (a model, not a measurement) from the {base_run['workers']}-worker run: "
+        f"{base_run['evaluation_s']:.1f} s measured; the model gives {projection(base_run, base_run['workers']):.1f} s "
+        f"for {base_run['workers']}, {base:.1f} s for 1"
+    )
     for n in counts:
-        t = projection(one, n)
-        measured = f", measured {two['evaluation_s']:.1f} s" if n == 2 else ""
-        text.append(f"  PROJECTION for {n} workers: {t:.1f} s, efficiency {100 * base / (n * t):.0f} %{measured}")
+        t = projection(base_run, n)
+        note = f", measured {two['evaluation_s']:.1f} s" if n == 2 and two and "evaluation_s" in two else ""
+        text.append(f"  PROJECTION for {n} workers: {t:.1f} s, efficiency {100 * base / (n * t):.0f} %{note}")
     print("\n".join(text), flush=True)
 
 

@@ -47,7 +47,7 @@ def _parse(argv):
 def main(argv=None) -> int:
     args = _parse(argv)
     try:
-        from agiprobot_measurement.nbv.evaluation import measurable_boundary, summarize
+        from agiprobot_measurement.nbv.evaluation import coverage, measurable_boundary, plannable_boundary, summarize
         from agiprobot_measurement.nbv.loop import RunConfig, run
         from agiprobot_measurement.nbv.objects import OBJECT_NAMES, load_object_file, make_object
         from agiprobot_measurement.nbv.painting import paint_rf
@@ -80,8 +80,10 @@ def main(argv=None) -> int:
         summaries = []
         for name, truth in bodies:
             result = run(truth, rf, cfg)
-            measurable = measurable_boundary(truth, rf)
+            # coverage of the cells a view planned onto them (with this aim) can see; the any-ray figure beside it
+            measurable = plannable_boundary(truth, rf, cfg.aim)
             summary = summarize(result, measurable, name)
+            summary["coverage_any_ray"] = coverage(result.model, measurable_boundary(truth, rf))
             stem = f"{name}_{cfg.script}_{cfg.aim}_L{rf.rf_length_cells:.0f}_n{cfg.noise_sigma_cells:g}_s{cfg.seed}"
             title = (
                 f"{name} / {cfg.script} / aim {cfg.aim} / RFlength {rf.rf_length_cells:.0f} / noise "

@@ -68,6 +68,10 @@ class ViewChoice:
     order: np.ndarray  # fallbacks: indices into the feasible candidates, best first
     index: int
     target_m: np.ndarray | None = None  # the frontier target it aims at (None: sphere, hemisphere, search)
+    #: what the stopping rule compares (None: this view's gain / new area): the best expected new surface (m^2)
+    #: and gain over all evaluated candidates, i.e. the predicted surface still to be seen from anywhere
+    remaining_area_m2: float | None = None
+    remaining_gain: float | None = None
 
 
 def _choice(recon, cands, i: int, gain: float, utility: float, new_area: float):
@@ -118,41 +122,58 @@ class Policy:
 
 
 class OursPolicy(Policy):
+    """The report's method in 3D: frontier targets (growth / candidate voxels with the PCA predicted surface),
+    candidate views perpendicular to it filtered by the sphere of visibility, scored by the expected newly seen
+    surface of the predicted-surface model (:func:`~.gains.expected_surface`: Viditelnost = camera and projector
+    rays clear and in range, Kolmost = perpendicularity), times the motion factor Pohyb ``exp(-lambda C)``."""
+
     name = "ours"
-    #: the score: each metric normalised by its best candidate (config/nbv.yaml planning.ours_weights)
-    default_weights = (("report", 1.0), ("rear_side_voxel", 1.0), ("proximity_count", 0.5))
+    #: the score: each term normalised by its best candidate (config/nbv.yaml planning.ours_weights); the name
+    #: ``expected_surface`` is the predicted-surface gain, the others are :data:`~.gains.GAIN_NAMES`
+    default_weights = (("expected_surface", 1.0),)
 
     def __init__(self, recon):
         super().__init__(recon)
-        self.weights = dict(recon.station.config.get("planning", {}).get("ours_weights", dict(self.default_weights)))
-        from agiprobot_measurement.nbv.gains import GAIN_NAMES
+        from agiprobot_measurement.nbv.gains import GAIN_NAMES, ExpectedSurfaceModel
 
-        unknown = sorted(set(self.weights) - set(GAIN_NAMES))
+        planning = recon.station.config.get("planning", {})
+        self.weights = dict(planning.get("ours_weights", dict(self.default_weights)))
+        unknown = sorted(set(self.weights) - {*GAIN_NAMES, "expected_surface"})
         if unknown:
-            raise InputError(f"planning.ours_weights: unknown gain(s) {unknown}; known: {', '.join(GAIN_NAMES)}")
+            raise InputError(
+                f"planning.ours_weights: unknown gain(s) {unknown}; known: expected_surface, {', '.join(GAIN_NAMES)}"
+            )
+        self.model = ExpectedSurfaceModel.from_config(planning.get("expected_surface"))
 
     def choose(self, q):
+        from agiprobot_measurement.nbv.gains import expected_surface
+
         r = self.recon
-        cands, targets = self.pool(q)
+        cands, _ = self.pool(q)
         stats = self.stats(cands)
-        if len(targets) == 0 and r.object_seen():
-            self.remember(cands, None)
-            return None, "frontier_exhausted", stats
         if not cands.feasible.any():
             self.remember(cands, None)
             return None, "frontier_exhausted", stats
-        g, idx = r.evaluate(cands, "report")
-        report = g.all_gains["report"]
+        idx = np.nonzero(cands.feasible)[0]
+        exp_gain, exp_area = expected_surface(r.planning_map, cands.poses[idx], r.view_model, self.model)
+        terms = {"expected_surface": exp_gain}
+        if set(self.weights) - {"expected_surface"}:
+            g, _ = r.evaluate(cands, "report")
+            terms.update(g.all_gains)
         score = np.zeros(len(idx))
         for name, weight in self.weights.items():
-            values = g.all_gains[name]
+            values = terms[name]
             score += float(weight) * values / max(float(values.max()), 1e-12)
         cost = _motion_cost(r, q, cands.joints[idx])
         utilities = score * np.exp(-r.request.cost_weight * cost)
         self.remember(cands, utilities)
-        if not np.any(report > 0):
+        if not np.any(exp_area > 0):
             return None, "frontier_exhausted", stats
-        choice, fallbacks = self.ranked(cands, idx, report, utilities, g.new_surface_area_m2)
+        choice, fallbacks = self.ranked(cands, idx, exp_gain, utilities, exp_area)
+        # the stopping rule looks at the predicted surface left for any candidate, not at the chosen view only
+        for c in (choice, *fallbacks):
+            c.remaining_area_m2 = float(exp_area.max())
+            c.remaining_gain = float(exp_gain.max())
         stats["fallbacks"] = fallbacks
         return choice, "", stats
 

@@ -7,6 +7,20 @@ sits on the camera's central line; the sources form a ring at the standoff aroun
 either side, whose return path touches no other full cell. Coverage is the fraction of measurable cells that the
 model holds as full: the planner is judged only on what the sensor could see at all.
 
+The *plannable* boundary (:func:`plannable_boundary`, the benchmark's denominator since issue 16's third round) is
+the part of it that a view *planned onto the cell* can see, the way the report plans: the laser through one of the
+cell's aim points (its centre, or the four edge midpoints with the section 7.1 remedy), the source at the standoff
+from that point in one of the 360 sector directions, the camera on either side, both sectors free in the circle of
+visibility built at the aim point from the ground truth, and the real measurement (:func:`.range_finder.scan`:
+first hit the cell, in the camera's field, return free) returning the cell. The report says of its own planner
+(section 7.1) that "views are planned onto cell centres" and that beyond some laser-camera angle some points "can
+no longer be reached by any planned view": the measurable set above counts those points, which the centre-aiming
+planner can only ever hit as a side effect of a view planned onto another cell (U-shape, RFlength 40: 134 of the
+692 measurable cells; RFlength 250: the slot's two 14-cell walls, whose 41 deg free window at the centres is
+narrower than the 54 deg laser-camera angle). Every view counted is one the planner can take: the truth's full
+cells include the model's, so a sector free in the truth's circle is free in the model's circle too. Both figures
+are reported (``coverage`` on the plannable set, ``coverage_any_ray`` on the measurable set).
+
 A *transfer* is a sensor move (source displacement between consecutive measurements) longer than three times the
 median move; moves of zero length (re-measuring from the same place) are left out of the median.
 """
@@ -19,9 +33,11 @@ import numba
 import numpy as np
 
 from .grid import EMPTY, FULL, dilate4
+from .scoring import aim_points
 from .traversal import _segment_box_entry, _supercover_first
+from .visibility import N_SECTORS, _block, cell_sector_spans, sector_of
 
-__all__ = ["boundary_cells", "coverage", "measurable_boundary", "path_metrics", "summarize"]
+__all__ = ["boundary_cells", "coverage", "measurable_boundary", "path_metrics", "plannable_boundary", "summarize"]
 
 
 def boundary_cells(truth: np.ndarray) -> np.ndarray:
@@ -91,6 +107,71 @@ def measurable_boundary(truth: np.ndarray, rf, n_directions: int = 720, n_offset
     )
     mask = np.zeros(t.shape, dtype=bool)
     mask[cells[out, 0], cells[out, 1]] = True
+    return mask
+
+
+@numba.njit(cache=True)
+def _any_pose_returns(full, poses, ci, cj, standoff, half_gamma):
+    """True when one of ``poses`` (n x 3 x 2) measures cell (ci, cj) on ``full``: the rules of ``scan``."""
+    nx, ny = full.shape
+    for q in range(poses.shape[0]):
+        sx, sy = poses[q, 0, 0], poses[q, 0, 1]
+        cx, cy = poses[q, 1, 0], poses[q, 1, 1]
+        ax, ay = poses[q, 2, 0], poses[q, 2, 1]
+        n = math.hypot(ax - sx, ay - sy)
+        dx, dy = (ax - sx) / n, (ay - sy) / n
+        reach = math.hypot(sx, sy) + nx + ny + 2.0
+        fx, fy = sx + reach * dx, sy + reach * dy
+        hi, hj = _supercover_first(full, sx, sy, fx, fy, -1, -1)
+        if hi != ci or hj != cj:
+            continue
+        t = _segment_box_entry(sx, sy, fx, fy, ci, cj)
+        if t < 0:
+            continue
+        hx, hy = sx + t * (fx - sx), sy + t * (fy - sy)
+        vx, vy = hx - cx, hy - cy
+        wx, wy = sx + standoff * dx - cx, sy + standoff * dy - cy
+        c = (vx * wx + vy * wy) / (math.hypot(vx, vy) * math.hypot(wx, wy) + 1e-300)
+        if math.acos(max(-1.0, min(1.0, c))) > half_gamma:
+            continue
+        if _supercover_first(full, hx, hy, cx, cy, ci, cj)[0] < 0:
+            return True
+    return False
+
+
+def plannable_boundary(truth: np.ndarray, rf, aim: str = "centre") -> np.ndarray:
+    """Boolean grid of the boundary cells that a view planned onto the cell sees (see the module docstring).
+
+    ``aim`` is the planner's aim (``"centre"`` or ``"edge_midpoints"``). Only boundary cells are opaque in the
+    circles: a wedge cannot reach an interior cell without touching a boundary cell first.
+    """
+    t = np.asarray(truth)
+    full = np.ascontiguousarray(t == FULL)
+    cells = boundary_cells(t)
+    phi = np.radians(np.arange(N_SECTORS) + 0.5)
+    phis = np.repeat(phi, 2)
+    sides = np.tile(np.array([1.0, -1.0]), N_SECTORS)
+    mask = np.zeros(t.shape, dtype=bool)
+    others = np.ones(len(cells), dtype=bool)
+    for q, cell in enumerate(cells):
+        others[q] = False
+        opaque = cells[others]
+        others[q] = True
+        for xs in aim_points(cell, aim):
+            circ = np.ones(N_SECTORS, dtype=np.uint8)
+            _block(circ, *cell_sector_spans(xs, opaque))
+            free = circ > 0
+            if not free.any():
+                continue
+            poses = rf.poses(xs, phis, sides)
+            cam_dir = np.arctan2(poses[:, 1, 1] - xs[1], poses[:, 1, 0] - xs[0])
+            ok = free[np.arange(2 * N_SECTORS) // 2] & free[sector_of(cam_dir)]
+            if ok.any() and _any_pose_returns(
+                full, np.ascontiguousarray(poses[ok]), int(cell[0]), int(cell[1]), float(rf.standoff_cells),
+                float(rf.fr_gamma_rad) / 2,
+            ):  # fmt: skip
+                mask[cell[0], cell[1]] = True
+                break
     return mask
 
 

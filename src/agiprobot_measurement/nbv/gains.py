@@ -52,10 +52,13 @@ from agiprobot_measurement.nbv.voxel_map import EMPTY, FULL, UNKNOWN, VoxelMap
 __all__ = [
     "GAIN_NAMES",
     "UTILITY_METHODS",
+    "ExpectedSurfaceModel",
     "ViewGains",
     "ViewModel",
     "camera_ray_directions",
     "evaluate_views",
+    "expected_surface",
+    "expected_surface_fields",
     "utility",
 ]
 
@@ -361,3 +364,226 @@ def utility(gain, cost_s, method: str = "rpg", cost_weight: float = 0.0) -> np.n
     share_g = g / g_sum if g_sum != 0 else np.zeros_like(g)
     share_c = c / c_sum if c_sum != 0 else np.zeros_like(c)
     return share_g - w * share_c
+
+
+@dataclass(frozen=True)
+class ExpectedSurfaceModel:
+    """Where the unseen surface is expected (the predicted-surface model of :func:`expected_surface`).
+
+    ``plane_radius_vox``: how far (grid voxels, Chebyshev) the PCA plane of a growth voxel is extrapolated into
+    unknown space; ``occlusion_max_dist_m``: occlusion-plane voxels (unknown next to observed-free space) within this
+    distance of the observed surface are expected surface too, with a weight falling linearly from
+    ``occlusion_weight`` at the surface to 0 at that distance; ``kolmost_weight``: the report's ``w``; voxels with a
+    measured point within ``seen_radius_fraction`` x resolution of their centre expect nothing (already seen).
+    """
+
+    plane_radius_vox: int = 2
+    occlusion_max_dist_m: float = 0.03
+    occlusion_weight: float = 0.5
+    kolmost_weight: float = 0.5
+    seen_radius_fraction: float = 0.6
+
+    def __post_init__(self):
+        if not isinstance(self.plane_radius_vox, (int, np.integer)) or not 0 <= self.plane_radius_vox <= 5:
+            raise InputError(f"plane_radius_vox must be an integer in [0, 5], got {self.plane_radius_vox!r}")
+        if not math.isfinite(float(self.occlusion_max_dist_m)) or self.occlusion_max_dist_m < 0:
+            raise InputError(f"occlusion_max_dist_m must be >= 0 (m), got {self.occlusion_max_dist_m!r}")
+        if not 0.0 <= float(self.occlusion_weight) <= 1.0:
+            raise InputError(f"occlusion_weight must be in [0, 1], got {self.occlusion_weight!r}")
+        if not 0.0 <= float(self.kolmost_weight) <= 1.0:
+            raise InputError(f"kolmost_weight must be in [0, 1], got {self.kolmost_weight!r}")
+        if not 0.0 <= float(self.seen_radius_fraction) <= 2.0:
+            raise InputError(f"seen_radius_fraction must be in [0, 2], got {self.seen_radius_fraction!r}")
+
+    @classmethod
+    def from_config(cls, values: dict | None) -> ExpectedSurfaceModel:
+        values = dict(values or {})
+        known = {
+            "plane_radius_vox",
+            "occlusion_max_dist_m",
+            "occlusion_weight",
+            "kolmost_weight",
+            "seen_radius_fraction",
+        }
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise InputError(f"expected_surface: unknown key(s) {unknown}; known: {sorted(known)}")
+        if "plane_radius_vox" in values:
+            values["plane_radius_vox"] = int(values["plane_radius_vox"])
+        return cls(**values)
+
+
+def _dilate_static(static: np.ndarray) -> np.ndarray:
+    return ndimage.binary_dilation(static, np.ones((3, 3, 3), dtype=bool)) if static.any() else static
+
+
+def _seen_near(grid: VoxelMap, mask: np.ndarray, radius_m: float) -> np.ndarray:
+    """Voxels of ``mask`` with a raw point within ``radius_m`` of their centre."""
+    from scipy.spatial import cKDTree
+
+    out = np.zeros(grid.shape, dtype=bool)
+    xyz = grid.raw.xyz_m
+    if radius_m <= 0 or not len(xyz) or not mask.any():
+        return out
+    # one point per 1 mm cell is enough for a radius of millimetres
+    cells = np.unique(np.floor(xyz / 0.001).astype(np.int64), axis=0)
+    tree = cKDTree((cells + 0.5) * 0.001)
+    idx = np.argwhere(mask)
+    dist, _ = tree.query(grid.index_to_world(idx), k=1, distance_upper_bound=radius_m + 0.001)
+    seen = idx[np.isfinite(dist) & (dist <= radius_m)]
+    out[tuple(seen.T)] = True
+    return out
+
+
+def expected_surface_fields(grid: VoxelMap, model: ExpectedSurfaceModel = ExpectedSurfaceModel()):
+    """Per-voxel expected-surface weight (flat float64, 0 = none) and predicted outward normal (flat, 3).
+
+    The unseen surface is expected where the seen one continues, never in the unknown interior behind it:
+
+    - frontier (candidate) voxels -- unknown, next to observed-free space and to a growth voxel -- weight 1, normal
+      the mean PCA normal of the adjacent growth voxels;
+    - unknown voxels the PCA plane of a growth voxel crosses within ``plane_radius_vox`` of it (the predicted
+      surface extrapolated over the open border), weight 1, that plane's normal;
+    - occlusion-plane voxels (unknown next to observed-free space) within ``occlusion_max_dist_m`` of the observed
+      surface, weight ``occlusion_weight x (1 - d / max)``, normal towards the free space (the gradient of the
+      smoothed free-space indicator).
+
+    Unknown voxels with no free neighbour and off every predicted plane (a part's inside) weigh 0.
+    """
+
+    def compute():
+        shape = grid.shape
+        unknown = grid.unknown_mask()
+        empty = grid.empty_mask()
+        full = grid.full_mask()
+        weight = np.zeros(shape, dtype=np.float64)
+        normals = np.zeros((*shape, 3), dtype=np.float64)
+        occplane = grid.occlusion_plane_mask()
+        # next to the static scene (the fixture's top) nothing is expected: its points are masked out of the map,
+        # so the air right above it stays unknown however often it is seen
+        near_static = _dilate_static(grid.static)
+        # occlusion plane near the observed surface: the surface is likely behind the free space's border
+        free_grad = np.stack(np.gradient(ndimage.gaussian_filter(empty.astype(np.float64), 1.0)), axis=-1)
+        glen = np.linalg.norm(free_grad, axis=-1, keepdims=True)
+        free_normal = np.where(glen > 1e-9, free_grad / np.maximum(glen, 1e-12), 0.0)
+        if full.any() and model.occlusion_max_dist_m > 0 and model.occlusion_weight > 0:
+            occ = occplane
+            dist = ndimage.distance_transform_edt(~full) * grid.resolution_m
+            near = occ & (dist < model.occlusion_max_dist_m)
+            weight[near] = model.occlusion_weight * (1.0 - dist[near] / model.occlusion_max_dist_m)
+            normals[near] = free_normal[near]
+        gidx = grid.growth_voxels()
+        if len(gidx):
+            centroids, gnormals = grid.predicted_surface(gidx)
+            # frontier voxels: the mean predicted normal of the adjacent growth voxels
+            field_g = np.zeros((*shape, 3))
+            field_g[tuple(gidx.T)] = gnormals
+            spread = np.stack(
+                [ndimage.uniform_filter(field_g[..., a], size=3, mode="constant") for a in range(3)], axis=-1
+            )
+            slen = np.linalg.norm(spread, axis=-1, keepdims=True)
+            spread = np.where(slen > 1e-12, spread / np.maximum(slen, 1e-12), free_normal)
+            cand = grid.candidate_mask()
+            weight[cand] = 1.0
+            normals[cand] = spread[cand]
+            # the PCA planes extrapolated over the open border into unknown space
+            r = int(model.plane_radius_vox)
+            ok_n = np.linalg.norm(gnormals, axis=1) > 0.5
+            if r > 0 and ok_n.any():
+                g, c, n = gidx[ok_n], centroids[ok_n], gnormals[ok_n]
+                ax = np.arange(-r, r + 1)
+                offsets = np.stack(np.meshgrid(ax, ax, ax, indexing="ij"), axis=-1).reshape(-1, 3)
+                vox = g[:, None, :] + offsets[None, :, :]  # (K, O, 3)
+                inside = np.all((vox >= 0) & (vox < np.asarray(shape)), axis=-1)
+                vox_c = np.where(inside[..., None], vox, 0)
+                is_unknown = unknown[vox_c[..., 0], vox_c[..., 1], vox_c[..., 2]] & inside
+                centres = grid.origin_m + (vox_c + 0.5) * grid.resolution_m
+                off_plane = np.abs(np.einsum("koj,kj->ko", centres - c[:, None, :], n))
+                half = 0.5 * grid.resolution_m * np.abs(n).sum(axis=1)
+                hit = is_unknown & (off_plane <= half[:, None])
+                # only on the free space's border: a plane through a voxel layer's boundary also crosses the layer
+                # behind the seen face (the part's inside), which no view can measure
+                hit &= occplane[vox_c[..., 0], vox_c[..., 1], vox_c[..., 2]]
+                k, o = np.nonzero(hit)
+                if len(k):
+                    cells = vox[k, o]
+                    flat = np.ravel_multi_index(tuple(cells.T), shape)
+                    acc = np.zeros((int(np.prod(shape)), 3))
+                    np.add.at(acc, flat, n[k])
+                    uniq = np.unique(flat)
+                    acc_u = acc[uniq]
+                    alen = np.linalg.norm(acc_u, axis=1, keepdims=True)
+                    good = alen[:, 0] > 1e-9
+                    uniq, acc_u = uniq[good], acc_u[good] / alen[good]
+                    wflat = weight.reshape(-1)
+                    nflat = normals.reshape(-1, 3)
+                    plane_only = wflat[uniq] < 1.0
+                    wflat[uniq] = 1.0
+                    nflat[uniq[plane_only]] = acc_u[plane_only]
+        weight[near_static] = 0.0
+        # where points were already measured the surface is seen, whatever the voxel's label says (a hit followed
+        # by a grazing miss leaves a surface voxel unknown, and a face on a voxel-layer boundary leaves holes of
+        # unknown voxels under free ones): nothing new is expected there
+        weight[_seen_near(grid, weight > 0, model.seen_radius_fraction * grid.resolution_m)] = 0.0
+        return weight.reshape(-1), np.ascontiguousarray(normals.reshape(-1, 3))
+
+    key = ("expected_fields", model)
+    return grid._cached(key, compute)
+
+
+def expected_surface(
+    grid: VoxelMap, camera_poses: np.ndarray, view: ViewModel, model: ExpectedSurfaceModel = ExpectedSurfaceModel()
+) -> tuple[np.ndarray, np.ndarray]:
+    """Expected newly seen surface of camera poses (V, 4, 4) world <- camera: ``(gain (V,), area_m2 (V,))``.
+
+    The predicted-surface model (:func:`expected_surface_fields`): each camera ray ends at the first full or
+    expected-surface voxel; an expected-surface voxel counts once per view when the structured-light scanner could
+    measure it there (depth in range, camera and projector on its front side within ``max_incidence_rad``, lit by
+    the projector). ``area_m2`` is the sum of the weights of the counted voxels x resolution^2; ``gain`` weighs each
+    by Kolmost ``w cos a + 1 - w`` as well.
+    """
+    if not isinstance(grid, VoxelMap):
+        raise InputError(f"grid must be a VoxelMap, got {type(grid).__name__}")
+    if not isinstance(view, ViewModel):
+        raise InputError(f"view must be a ViewModel, got {type(view).__name__}")
+    poses = np.asarray(camera_poses, dtype=np.float64)
+    if poses.shape == (4, 4):
+        poses = poses[None]
+    if poses.ndim != 3 or poses.shape[1:] != (4, 4) or not np.all(np.isfinite(poses)):
+        raise InputError(f"camera_poses must be a finite (V, 4, 4) array, got shape {poses.shape}")
+    if len(poses) == 0:
+        return np.zeros(0), np.zeros(0)
+    weight, normals = expected_surface_fields(grid, model)
+    blocked = (grid.labels() == FULL).reshape(-1).astype(np.uint8)
+    proj_dirs = _pinhole_dirs(
+        view.projector_fov_h_rad, view.projector_fov_v_rad, view.projector_rays_h, view.projector_rays_v
+    )
+    nx, ny, nz = grid.shape
+    parallel = rc.parallel_allowed()
+    n_chunks = max(1, min(numba.get_num_threads(), len(poses))) if parallel else 1
+    kernel = rc.expected_surface_bundle if parallel else rc.expected_surface_bundle_serial
+    gain, vox = kernel(
+        np.ascontiguousarray(poses),
+        np.ascontiguousarray(camera_ray_directions(view)),
+        view.projector_offset_m,
+        np.ascontiguousarray(view.projector_rotation),
+        np.ascontiguousarray(proj_dirs),
+        int(view.projector_rays_h),
+        int(view.projector_rays_v),
+        math.tan(0.5 * view.projector_fov_h_rad),
+        math.tan(0.5 * view.projector_fov_v_rad),
+        blocked,
+        weight,
+        normals,
+        grid.origin_m.astype(np.float64),
+        float(grid.resolution_m),
+        nx,
+        ny,
+        nz,
+        float(view.range_min_m),
+        float(view.range_max_m),
+        math.cos(view.max_incidence_rad),
+        float(model.kolmost_weight),
+        n_chunks,
+    )
+    return gain, vox * grid.resolution_m**2

@@ -275,6 +275,7 @@ def simulate(
     on_progress=None,
     should_cancel=None,
     chamfer: bool = True,
+    budget_run: bool = False,
 ) -> dict:
     """One reconstruction on the simulated station (a fresh robot at the home pose and camera; the ground truth's
     coverage is reset): the result plus the benchmark's metrics as a JSON-ready summary."""
@@ -286,6 +287,18 @@ def simulate(
     if ground_truth is not None:
         ground_truth.reset()
     recon = Reconstructor(robot, camera, request, station=station, ground_truth=ground_truth)
+    stop = {}
+    if budget_run:
+        # the stopping rule only notes where it fired (the self-terminated run is the prefix up to there)
+        def on_stop(rec, reason):
+            stop.update({"view": len(rec.views), "reason": reason})
+            if ground_truth is not None:
+                stop["coverage"] = float(ground_truth.coverage())
+                stop["coverage_full_surface"] = float(ground_truth.coverage_full())
+                if chamfer:
+                    stop.update(ground_truth.chamfer_mm(rec.map.raw.xyz_m))
+
+        recon.on_stop = on_stop
     result = recon.run(on_progress=on_progress, should_cancel=should_cancel)
     summary = result.summary()
     summary["method"] = request.method
@@ -295,6 +308,8 @@ def simulate(
     summary["true_collisions"] = int(robot.true_collisions)
     summary["surprises"] = int(recon.surprises)
     summary["render_s"] = [round(float(s), 4) for s in camera.render_s]
+    if budget_run:
+        summary["stop"] = stop  # empty: the rule never fired before the budget (or another reason ended the run)
     if ground_truth is not None:
         curve = [float(v.coverage) for v in result.views]
         summary["coverage_curve"] = curve

@@ -21,6 +21,8 @@ __all__ = [
     "entropy",
     "evaluate_bundle",
     "evaluate_bundle_serial",
+    "expected_surface_bundle",
+    "expected_surface_bundle_serial",
     "fuse_frame",
     "fuse_frame_serial",
     "parallel_allowed",
@@ -823,3 +825,160 @@ def evaluate_bundle_serial(
             af_occplane_des,
         )
     return gains, new_surface, visible
+
+
+@numba.njit(cache=True)
+def _expected_chunk(
+    c,
+    n_chunks,
+    gain,
+    area,
+    poses,
+    cam_dirs,
+    proj_offset,
+    proj_rot,
+    proj_dirs,
+    proj_w,
+    proj_h,
+    proj_tan_h,
+    proj_tan_v,
+    blocked,
+    exp_weight,
+    exp_normals,
+    origin,
+    res,
+    nx,
+    ny,
+    nz,
+    range_min,
+    range_max,
+    cos_max_incidence,
+    kolmost_weight,
+):
+    """Views ``c, c + n_chunks, ...`` of :func:`expected_surface_bundle`."""
+    n_views = poses.shape[0]
+    n_rays = cam_dirs.shape[0]
+    n_vox = nx * ny * nz
+    cap = nx + ny + nz + 3
+    stamp = np.zeros(n_vox, dtype=np.int32)
+    buf_flat = np.empty(cap, dtype=np.int64)
+    buf_t = np.empty(cap, dtype=np.float64)
+    depth = np.empty(proj_dirs.shape[0], dtype=np.float64)
+    for v in range(c, n_views, n_chunks):
+        tag = v + 1
+        pose = poses[v]
+        ow, rw = _shadow_map(
+            pose, proj_offset, proj_rot, proj_dirs, blocked, origin, res, nx, ny, nz, 4.0 * range_max, buf_flat,
+            buf_t, depth,
+        )  # fmt: skip
+        cam = pose[:3, 3]
+        ogx = (cam[0] - origin[0]) / res
+        ogy = (cam[1] - origin[1]) / res
+        ogz = (cam[2] - origin[2]) / res
+        g = 0.0
+        a = 0.0
+        for i in range(n_rays):
+            d0 = cam_dirs[i, 0]
+            d1 = cam_dirs[i, 1]
+            d2 = cam_dirs[i, 2]
+            if d2 <= 1e-9:
+                continue
+            wx = pose[0, 0] * d0 + pose[0, 1] * d1 + pose[0, 2] * d2
+            wy = pose[1, 0] * d0 + pose[1, 1] * d1 + pose[1, 2] * d2
+            wz = pose[2, 0] * d0 + pose[2, 1] * d1 + pose[2, 2] * d2
+            t0, t1 = clip_to_box(ogx, ogy, ogz, wx / res, wy / res, wz / res, nx, ny, nz, 0.0, range_max / d2)
+            if t0 >= t1:
+                continue
+            m = traverse(
+                ogx, ogy, ogz, wx / res, wy / res, wz / res, t0, t1, nx, ny, nz, blocked, True, buf_flat, buf_t
+            )
+            for s in range(m):
+                f = buf_flat[s]
+                if blocked[f]:
+                    break
+                w = exp_weight[f]
+                if w <= 0.0:
+                    continue
+                # the first expected-surface voxel ends the ray: the predicted surface hides what lies behind it
+                if stamp[f] == tag:
+                    break
+                stamp[f] = tag
+                iz = f % nz
+                iy = (f // nz) % ny
+                ix = f // (ny * nz)
+                cx = origin[0] + (ix + 0.5) * res
+                cy = origin[1] + (iy + 0.5) * res
+                cz = origin[2] + (iz + 0.5) * res
+                ex = cam[0] - cx
+                ey = cam[1] - cy
+                ez = cam[2] - cz
+                dep = -(ex * pose[0, 2] + ey * pose[1, 2] + ez * pose[2, 2])
+                if dep < range_min or dep > range_max:
+                    break
+                nxv = exp_normals[f, 0]
+                nyv = exp_normals[f, 1]
+                nzv = exp_normals[f, 2]
+                nn = math.sqrt(nxv * nxv + nyv * nyv + nzv * nzv)
+                cos_cam = 1.0
+                if nn > 0.0:
+                    el = math.sqrt(ex * ex + ey * ey + ez * ez)
+                    # the predicted normal points to observed-free space: a view from behind it sees nothing
+                    cos_cam = (nxv * ex + nyv * ey + nzv * ez) / (el * nn)
+                    px = ow[0] - cx
+                    py = ow[1] - cy
+                    pz = ow[2] - cz
+                    pl = math.sqrt(px * px + py * py + pz * pz)
+                    cos_proj = (nxv * px + nyv * py + nzv * pz) / (pl * nn)
+                    if cos_cam < cos_max_incidence or cos_proj < cos_max_incidence:
+                        break
+                if not _lit(cx, cy, cz, ow, rw, depth, proj_w, proj_h, proj_tan_h, proj_tan_v, res):
+                    break
+                g += w * (kolmost_weight * cos_cam + 1.0 - kolmost_weight)
+                a += w
+                break
+        gain[v] = g
+        area[v] = a
+
+
+@numba.njit(cache=True, parallel=True)
+def expected_surface_bundle(
+    poses, cam_dirs, proj_offset, proj_rot, proj_dirs, proj_w, proj_h, proj_tan_h, proj_tan_v, blocked, exp_weight,
+    exp_normals, origin, res, nx, ny, nz, range_min, range_max, cos_max_incidence, kolmost_weight, n_chunks,
+):  # fmt: skip
+    """Expected newly seen surface of many camera poses (the predicted-surface model of ``gains.py``).
+
+    ``exp_weight`` (flat float64) is each voxel's expected-surface weight (0: none; the likelihood that the surface
+    passes there), ``exp_normals`` (flat, 3) its predicted outward normal. Each camera ray (clipped to the grid, up
+    to ``range_max`` depth) ends at the first full voxel or the first expected-surface voxel; that voxel counts
+    once per view when its depth is in range, both incidence cosines (camera and projector, signed: the front side
+    of the predicted surface) are at least ``cos_max_incidence`` and the projector lights it. Returns ``(gain (V,),
+    voxels (V,))``: the sum of ``weight x (w cos a + 1 - w)`` (Kolmost) and the sum of weights.
+    """
+    n_views = poses.shape[0]
+    gain = np.zeros(n_views)
+    area = np.zeros(n_views)
+    for c in numba.prange(n_chunks):
+        _expected_chunk(
+            c, n_chunks, gain, area, poses, cam_dirs, proj_offset, proj_rot, proj_dirs, proj_w, proj_h, proj_tan_h,
+            proj_tan_v, blocked, exp_weight, exp_normals, origin, res, nx, ny, nz, range_min, range_max,
+            cos_max_incidence, kolmost_weight,
+        )  # fmt: skip
+    return gain, area
+
+
+@numba.njit(cache=True)
+def expected_surface_bundle_serial(
+    poses, cam_dirs, proj_offset, proj_rot, proj_dirs, proj_w, proj_h, proj_tan_h, proj_tan_v, blocked, exp_weight,
+    exp_normals, origin, res, nx, ny, nz, range_min, range_max, cos_max_incidence, kolmost_weight, n_chunks,
+):  # fmt: skip
+    """:func:`expected_surface_bundle` without threads (for a forked child process)."""
+    n_views = poses.shape[0]
+    gain = np.zeros(n_views)
+    area = np.zeros(n_views)
+    for c in range(n_chunks):
+        _expected_chunk(
+            c, n_chunks, gain, area, poses, cam_dirs, proj_offset, proj_rot, proj_dirs, proj_w, proj_h, proj_tan_h,
+            proj_tan_v, blocked, exp_weight, exp_normals, origin, res, nx, ny, nz, range_min, range_max,
+            cos_max_incidence, kolmost_weight,
+        )  # fmt: skip
+    return gain, area

@@ -411,6 +411,11 @@ class Reconstructor:
         self._execution_s = 0.0
         self._motion_failures = 0
         self.termination_reason = ""
+        #: benchmark hook: when set, a stopping rule that fires calls ``on_stop(self, reason)`` once and the loop goes
+        #: on to the budget (so one run gives the self-terminated run as its prefix and the budget run); the view
+        #: count at that moment is ``stop_view``
+        self.on_stop: Callable | None = None
+        self.stop_view: int | None = None
 
     # ------------------------------------------------------------------------------------ fusion
     def integrate(self, view: CapturedView) -> None:
@@ -683,23 +688,29 @@ class Reconstructor:
             choice, reason, stats = self._choose(q)
             if choice is None:
                 return reason
-            new_area_mm2 = choice.new_area_m2 * 1e6
+            area = choice.new_area_m2 if choice.remaining_area_m2 is None else choice.remaining_area_m2
+            gain = choice.gain if choice.remaining_gain is None else choice.remaining_gain
+            new_area_mm2 = area * 1e6
             if self.policy.uses_stopping_rule:
                 if self._first_gain is None:
-                    self._first_gain = max(choice.gain, 1e-12)
-                relative = choice.gain / self._first_gain
+                    self._first_gain = max(gain, 1e-12)
+                relative = gain / self._first_gain
                 # the rule: the best view promises less than the ignored detail, two iterations running; and, since
                 # the prediction counts unknown space the scanner may not reach from there, also when the views taken
                 # brought less than that ``realised_streak`` times running (each of those bans its target)
                 threshold = self.request.min_gain_area_mm2
                 self._low_gain_streak = self._low_gain_streak + 1 if new_area_mm2 < threshold else 0
                 self._low_real_streak = self._low_real_streak + 1 if self._last_novel_m2 * 1e6 < threshold else 0
-                if (
+                if self.stop_view is None and (
                     self._low_gain_streak >= 2
                     or self._low_real_streak >= self.realised_streak
                     or relative < self.request.min_relative_gain
                 ):
-                    return "gain_below_threshold"
+                    if self.on_stop is None:
+                        return "gain_below_threshold"
+                    # the benchmark's budget run: note where the rule fired and go on to the budget
+                    self.stop_view = len(self.views)
+                    self.on_stop(self, "gain_below_threshold")
             if not self._visit(choice, stats.get("planning_s", 0.0), stats):
                 return "frontier_exhausted"
 

@@ -29,6 +29,8 @@ __all__ = [
 # Size and time cap of the quick programme over the LP's favourite columns that tightens the incumbent.
 SUPPORT_MIP_COLS = 400
 SUPPORT_MIP_TIME_S = 2.0
+# The integer programme is not started with less time than this (s) left: it could not improve the incumbent.
+MIN_MIP_TIME_S = 0.5
 
 
 @dataclass
@@ -216,6 +218,10 @@ def solve_reduced_ip(sub, costs, tie, integral, solve, deadline, mip_gap, warm_s
     if settled:
         stats["mip_shape"] = (0, 0)
         return np.asarray(incumbent, dtype=np.int64), lp_bound, "the LP bound meets the heuristic cover"
+    if deadline - time.perf_counter() < MIN_MIP_TIME_S:
+        # no time left: loading a programme of 100k columns into HiGHS alone takes seconds (tilt full)
+        stats["mip_shape"] = (0, 0)
+        return np.asarray(incumbent, dtype=np.int64), lp_bound, "no time left for the programme; heuristic cover"
     keep = np.ones(sub.n_cols, dtype=bool)
     if lp is not None:
         threshold = ub - 1.0 + 1e-6 if integral else ub + 1e-9 * max(ub, 1.0)

@@ -27,6 +27,8 @@ __all__ = [
 
 # Reductions run a few rounds at most: after two or three nothing changes on realistic data.
 MAX_REDUCTION_ROUNDS = 10
+# candidate row pairs checked between two looks at the deadline in :func:`implied_rows`
+IMPLIED_GROUP_PAIRS = 200_000
 
 
 def restrict(cols: ColumnSets, row_keep: np.ndarray, which: np.ndarray) -> ColumnSets:
@@ -264,14 +266,24 @@ def implied_rows(rows: ColumnSets, candidates: np.ndarray, deadline: float) -> t
     seg = np.repeat(np.arange(candidates.size), sizes)
     ordered = np.lexsort((degree[sub.indices], seg))
     rarest = sub.indices[ordered[sub.indptr[:-1]]]
+    if time.perf_counter() > deadline:
+        return implied, False  # the bitsets alone cost seconds at tilt full
     bits = column_bitsets(sub)
     work = degree[rarest]
     complete = True
-    for start in range(0, candidates.size, 256):
+    # groups of rows of about IMPLIED_GROUP_PAIRS candidate pairs: the deadline is checked between groups, and
+    # at tilt full one row's rarest view still holds thousands of rows
+    cum_work = np.cumsum(work)
+    start = 0
+    while start < candidates.size:
         if time.perf_counter() > deadline:
             complete = False
             break
-        group = np.arange(start, min(start + 256, candidates.size))
+        done = int(cum_work[start - 1]) if start else 0
+        stop = int(np.searchsorted(cum_work, done + IMPLIED_GROUP_PAIRS, side="right"))
+        stop = min(max(stop, start + 1), start + 256)
+        group = np.arange(start, stop)
+        start = stop
         counts = work[group]
         offsets = np.zeros(group.size, dtype=np.int64)
         np.cumsum(counts[:-1], out=offsets[1:])
@@ -359,6 +371,9 @@ def reduce_problem(cols: ColumnSets, costs: np.ndarray, tie: np.ndarray, deadlin
             drop_empty_columns()
             continue  # the rows changed: redo the column reductions first
         # Rows: identical rows, then rows implied by a row with fewer views.
+        if time.perf_counter() > deadline:
+            stats["reductions_complete"] = False
+            break
         drop = duplicate_columns(rows_t, np.arange(rows_t.n_cols))
         stats["duplicate_rows"] += int(np.count_nonzero(drop))
         implied, complete = implied_rows(rows_t, np.nonzero(~drop)[0], deadline)

@@ -68,13 +68,16 @@ def _tune_worker_heap() -> None:
         pass
 
 
-def _evaluate_task(sensor_model, poses, threshold_mm, deflection_mm, compact):
+def _evaluate_task(sensor_model, poses, threshold_mm, deflection_mm, compact, drop_dominated, redundancy):
     from agiprobot_measurement.planning.streaming import chunk_block
 
     _tune_worker_heap()
 
     # one thread per task: a worker process is one core's share of the cluster
-    return chunk_block(sensor_model, poses, threshold_mm, deflection_mm, threads=1, compact=compact)
+    return chunk_block(
+        sensor_model, poses, threshold_mm, deflection_mm, threads=1, compact=compact, drop_dominated=drop_dominated,
+        redundancy=redundancy,
+    )  # fmt: skip
 
 
 def _worker_pid():
@@ -175,11 +178,14 @@ class DaskEvaluator:
         chunks: list,
         threshold_mm: float,
         deflection_mm: float,
-        arrived: Callable[[int, object, object, float], None],
+        arrived: Callable[[int, object, object, dict], None],
         compact: bool = False,
+        drop_dominated: bool = False,
+        redundancy: int = 0,
     ) -> None:
-        """Evaluate every chunk of poses on the cluster; ``arrived(index, block, columns, wall_s)`` for each, in
-        the order they complete (the caller merges by index)."""
+        """Evaluate every chunk of poses on the cluster; ``arrived(index, block, columns, info)`` for each (see
+        :func:`~agiprobot_measurement.planning.streaming.chunk_block`), in the order they complete (the caller
+        merges by index)."""
         from distributed import as_completed
 
         client = self.client
@@ -192,8 +198,9 @@ class DaskEvaluator:
         def submit(index):
             attempts[index] += 1
             future = client.submit(
-                _evaluate_task, model, chunks[index], threshold_mm, deflection_mm, compact, pure=False, retries=1
-            )
+                _evaluate_task, model, chunks[index], threshold_mm, deflection_mm, compact, drop_dominated, redundancy,
+                pure=False, retries=1,
+            )  # fmt: skip
             index_of[future.key] = index
             return future
 
@@ -201,12 +208,12 @@ class DaskEvaluator:
         for future in running:
             index = index_of.pop(future.key)
             try:
-                block, columns, wall_s = future.result()
+                block, columns, info = future.result()
             except Exception as exc:  # the task's own error or the cluster's: sorted below
                 error = exc
             else:
                 future.release()
-                arrived(index, block, columns, wall_s)
+                arrived(index, block, columns, info)
                 error = None
             if error is not None:
                 future.release()

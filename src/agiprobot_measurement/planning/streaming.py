@@ -2,29 +2,53 @@
 
 The candidates' metrology is computed chunk by chunk (in this process, or on a Dask cluster through
 :mod:`~agiprobot_measurement.planning.distributed`) and only the sparse measurability of candidates that measure
-something is kept: point ids int32, uncertainties and ``t0`` float64 (20 bytes per measurable pair), plus the exact
-``t0`` range per view. Quantising uncertainty or ``t0`` to float32 changed plans (measured; see
-:data:`UNCERTAINTY_DTYPE` and :data:`T0_DTYPE`), so only ``EvaluationSettings(compact=True)`` stores float32
-uncertainties. The result does not depend on the chunking, the number of threads or workers:
-every (view, point) pair is evaluated with the same operations wherever it is evaluated, and chunks are merged in
-candidate order.
+something is kept. The result does not depend on the chunking, the number of threads or workers: every (view,
+point) pair is evaluated with the same operations wherever it is evaluated, each chunk is reduced on its own
+(types, dominated columns) and chunks are merged in candidate order.
 
-Before the work, a pilot (a fixed random 1 % of the candidates, at least 200) measures the pairs per candidate; the store's
-size is projected from it and work that cannot fit the budget is refused with the estimate
+Store types (:data:`COMPACT_ABOVE_PAIRS`): point ids are int32. A store projected above that many pairs keeps
+uncertainty and ``t0`` as float32 (12 bytes per pair instead of 20) and every column's ``t0`` range as the range of
+the stored float32 values, so the scan lines and the partial acceptance of a shortened scan line (which compares
+the stored ``t0`` with the scan line's intact end) see the same numbers. float32 keeps 24 bits: an uncertainty
+(at most the threshold, ~0.1 mm) to ~6e-9 mm, a ``t0`` (at most 500 mm) to 3e-5 mm. The rounding can change a plan
+against the float64 store (ties in the set cover, scan lines 1e-5 mm shorter), so the choice depends only on the
+pilot's projection, which is the same in every set-up (in process, 1 or N workers, a scheduler); smaller stores
+keep float64 exactly as before. ``EvaluationSettings(compact=True/False)`` forces it.
+
+Dominated candidates (:func:`dominated_columns`): a candidate whose measurable points are a subset of another
+candidate's in the same group of :data:`REDUCTION_GROUP_VIEWS` consecutive candidates (the tilts and orientations
+of some twenty neighbouring samples) adds nothing to the coverage. They are dropped (on the workers, per fixed
+group, so the result does not depend on the chunking) only when the budget requires it (the projected store does
+not fit otherwise), or with ``EvaluationSettings(drop_dominated=True)``. If that is not enough (measured: the 1 m^2
+panel at tilt full keeps ~80 % of its pairs), the client keeps a ``redundancy``-fold cover
+(:func:`redundant_columns_kept`, the largest of :data:`REDUNDANCY_STEPS` that fits): blocks are committed in
+candidate order, and a candidate is kept while one of its points is measured by fewer than ``redundancy`` kept
+candidates, so every coverable point stays coverable by min(redundancy, its candidates) candidates, the reserve
+for views the mechanics stage rejects. Each dropped candidate is listed in :attr:`StreamStats.reserve_index`,
+with a kept candidate measuring all its points in :attr:`StreamStats.reserve_dominator` (-1 for the cover's),
+so a later stage can evaluate it again. Both reductions can change the plan (fewer, different candidates); both
+are deterministic for a given budget (pass ``--max-memory`` for the same plan on machines with other free memory).
+
+Before the work, a pilot (a fixed random 1 % of the candidates, at least 200) measures the pairs per candidate; the
+store's size is projected from it (with dominated candidates dropped: from three contiguous chunk-sized slices)
+and work that cannot fit the budget is refused with the estimate
 (:class:`~agiprobot_measurement.planning.request.WorkTooLarge`). The chunk size follows from the pilot's time per
-candidate (about a second of work per chunk) and from the budget (chunks in flight take a small share of it).
+candidate (about :data:`CHUNK_TARGET_S` of work per chunk) and from the budget (chunks in flight take a small share
+of it).
 
 Sizes in bytes unless the name says otherwise.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from agiprobot_measurement.planning.request import WorkTooLarge
@@ -33,31 +57,46 @@ from agiprobot_measurement.sensors.laser_line.model import MeasurabilityResult
 __all__ = [
     "BYTES_PER_KEPT_ENTRY",
     "BYTES_PER_KEPT_VIEW",
+    "COMPACT_ABOVE_PAIRS",
     "EvaluationSettings",
     "StreamStats",
     "chunk_block",
     "default_max_memory_bytes",
+    "dominated_columns",
     "evaluate_in_chunks",
     "evaluate_streaming",
     "machine_memory_bytes",
 ]
 
-#: the stored uncertainty's type with ``compact``: float32 changed plans (measured on the cylinder at 0.01
-#: points/mm^2: the set cover breaks ties by the values), so the default keeps float64
+#: the compact store's uncertainty and t0 type (see the module's docstring for the precision and the effect)
 UNCERTAINTY_DTYPE = np.float32
-#: the stored t0's type: float64, because float32 t0s changed plans (measured: a shortened scan line's intact end
-#: equals its extreme t0 exactly, and the partial acceptance compares the t0s with it at 1e-9 mm)
-T0_DTYPE = np.float64
-#: a kept measurable pair: point id (int32), uncertainty (float64), t0 (float64); 4 less with ``compact``
-BYTES_PER_KEPT_ENTRY = 4 + 8 + np.dtype(T0_DTYPE).itemsize
+T0_DTYPE = np.float32
+#: a store projected above this many measurable pairs (about 1 GB in float64) is kept in the compact types; the
+#: parts of the benchmarks and tests today (the cube at tilt full: 38 million) stay float64 and keep their plans
+COMPACT_ABOVE_PAIRS = 60e6
+#: a kept measurable pair: point id (int32), uncertainty, t0 (float64; float32 when compact)
+BYTES_PER_KEPT_ENTRY = 4 + 8 + 8
+BYTES_PER_COMPACT_ENTRY = 4 + np.dtype(UNCERTAINTY_DTYPE).itemsize + np.dtype(T0_DTYPE).itemsize
 #: a kept candidate: its column pointer, exact t0 range, candidate index, and the ViewPoint built for it later
 #: (pose arrays and attributes, measured ~2.5 kB)
 BYTES_PER_KEPT_VIEW = 8 + 16 + 8 + 2500
 #: the share of the budget the default leaves to the rest of the machine
 DEFAULT_MEMORY_SHARE = 0.8
 #: the planning stages after the evaluation copy the kept pairs a few times (alive mask, cover matrix): the store
-#: must fit this many times its own size
+#: must fit this many times its own size (``EvaluationSettings.store_headroom``; 1 for the evaluation alone)
 STORE_HEADROOM = 2.0
+#: dominated candidates and the redundancy-fold cover are found within groups of this many consecutive candidates
+#: (about 19 samples' orientations and tilts at tilt full), aligned at its multiples: the result does not depend
+#: on the chunk size (measured on the 1 m^2 panel at tilt full: groups of 1,000 / 4,000 / 16,000 candidates keep
+#: 81 / 81 / 79 % of the pairs by dominance)
+REDUCTION_GROUP_VIEWS = 2048
+#: the dominance pilot: this many slices of two groups each, spread over the candidates
+DOMINANCE_PILOT_SLICES = 3
+#: the redundancies tried, largest first, when dropping dominated candidates does not fit the budget: each point
+#: stays measured by this many kept candidates (where it has them), a reserve for the scan lines the mechanics
+#: stage rejects. The cover runs in the client over the blocks in candidate order (so it does not depend on the
+#: workers); it keeps at most redundancy x points candidates, which bounds its projection
+REDUNDANCY_STEPS = (256, 128, 64, 32, 16, 8, 4, 2, 1)
 #: target wall time of one chunk (s): long against the per-task overhead of a cluster, short for the progress bar
 CHUNK_TARGET_S = 1.0
 #: the pilot evaluates this share of the candidates, at least PILOT_MIN_VIEWS of them
@@ -95,14 +134,21 @@ class EvaluationSettings:
 
     ``workers``: processes of a local Dask cluster (0 = in this process, as without Dask); ``scheduler``: address
     of an existing Dask scheduler (e.g. ``tcp://host:8786``; overrides ``workers``); ``max_memory_bytes``: the
-    budget of this process (None = :func:`default_max_memory_bytes`); ``compact``: keep uncertainties as float32
-    (4 bytes less per pair; off by default because it changed plans, see :data:`UNCERTAINTY_DTYPE`).
+    budget of this process (None = :func:`default_max_memory_bytes`); ``compact``: float32 uncertainties and t0
+    (None = above :data:`COMPACT_ABOVE_PAIRS` projected pairs); ``drop_dominated``: drop dominated candidates
+    (None = when the budget requires it); ``redundancy``: keep per chunk only a ``redundancy``-fold cover of its
+    points (:func:`redundant_columns_kept`; None = the largest of :data:`REDUNDANCY_STEPS` the budget allows when
+    dropping dominated candidates is not enough, 0 = never); ``store_headroom``: how many times the store must fit the budget
+    (:data:`STORE_HEADROOM`; 1 when nothing runs after the evaluation).
     """
 
     workers: int = 0
     scheduler: str = ""
     max_memory_bytes: float | None = None
-    compact: bool = False
+    compact: bool | None = None
+    drop_dominated: bool | None = None
+    redundancy: int | None = None
+    store_headroom: float = STORE_HEADROOM
 
     @property
     def distributed(self) -> bool:
@@ -115,7 +161,8 @@ class EvaluationSettings:
 @dataclass
 class StreamStats:
     """What a streaming evaluation did: candidates, kept columns and pairs, chunks, the pilot's projection, the
-    budget, per-chunk wall times on their worker (s) and the stage's wall time (s)."""
+    budget, the store's types, dominated candidates dropped (and their reserve), per-chunk wall and CPU times on
+    their worker (s) and the stage's wall time (s)."""
 
     candidates: int = 0
     kept_views: int = 0
@@ -126,36 +173,204 @@ class StreamStats:
     projected_bytes: float = 0.0
     budget_bytes: float = 0.0
     store_bytes: int = 0
+    compact: bool = False
+    drop_dominated: bool = False
+    #: share of the measurable pairs the dominance pilot kept (1 without dropping), and the redundancy chosen (0:
+    #: dominated candidates only)
+    dominance_kept_share: float = 1.0
+    redundancy: int = 0
+    dropped_views: int = 0
+    dropped_pairs: int = 0
+    #: dropped candidates (indices into the evaluated poses, ascending) and, for each, a kept candidate that
+    #: measures all its points
+    reserve_index: np.ndarray | None = None
+    reserve_dominator: np.ndarray | None = None
     pilot_s: float = 0.0
     scatter_s: float = 0.0
     merge_s: float = 0.0
     wall_s: float = 0.0
     chunk_seconds: list | None = None
+    chunk_cpu_seconds: list | None = None
     where: str = "in-process"
 
 
-def chunk_block(sensor_model, poses, threshold_mm, deflection_mm, threads=None, compact=False):
-    """Evaluate one chunk of candidate poses; returns (compact result of its non-empty columns, their indices in
-    the chunk, wall time s). Runs wherever the chunk is sent (this process or a Dask worker)."""
-    started = time.perf_counter()
+@numba.njit(cache=True)
+def _dominated(indptr, ids, n_points):  # pragma: no cover - compiled
+    n = indptr.size - 1
+    local = np.full(n_points, -1, np.int64)
+    m = 0
+    for k in range(ids.size):
+        if local[ids[k]] < 0:
+            local[ids[k]] = m
+            m += 1
+    words = (m + 63) // 64
+    bits = np.zeros((n, words), np.uint64)
+    freq = np.zeros(m, np.int64)
+    for j in range(n):
+        for k in range(indptr[j], indptr[j + 1]):
+            q = local[ids[k]]
+            bits[j, q >> 6] |= np.uint64(1) << np.uint64(q & 63)
+            freq[q] += 1
+    by = np.full(n, -1, np.int64)
+    for i in range(n):
+        size_i = indptr[i + 1] - indptr[i]
+        if size_i == 0:
+            continue
+        # a dominator contains i's rarest point: one word test rules most columns out
+        rare = local[ids[indptr[i]]]
+        for k in range(indptr[i] + 1, indptr[i + 1]):
+            q = local[ids[k]]
+            if freq[q] < freq[rare]:
+                rare = q
+        if freq[rare] < 2:
+            continue
+        word, mask = rare >> 6, np.uint64(1) << np.uint64(rare & 63)
+        for j in range(n):
+            size_j = indptr[j + 1] - indptr[j]
+            # equal sets: the first one stays
+            if j == i or size_j < size_i or (size_j == size_i and j > i) or (bits[j, word] & mask) == 0:
+                continue
+            subset = True
+            for t in range(words):
+                if bits[i, t] & ~bits[j, t]:
+                    subset = False
+                    break
+            if subset:
+                by[i] = j
+                break
+    # a dominator may be dominated itself: follow the chain to a kept one (sizes grow along it, so it ends)
+    for i in range(n):
+        j = by[i]
+        while j >= 0 and by[j] >= 0:
+            j = by[j]
+        by[i] = j
+    return by
+
+
+def dominated_columns(result: MeasurabilityResult) -> np.ndarray:
+    """For every column of ``result``: -1 if it is kept, else the index of a kept column whose measurable points
+    include all of its points (a strict superset, or an equal set earlier in the result). Exact (bit sets over
+    the result's points); the maximal columns stay, so dropping the others keeps the coverage."""
+    if result.n_views == 0:
+        return np.zeros(0, dtype=np.int64)
+    return _dominated(np.asarray(result.indptr, dtype=np.int64), np.asarray(result.point_indices), int(result.n_points))
+
+
+@numba.njit(cache=True)
+def _k_cover(indptr, ids, count, order, k):  # pragma: no cover - compiled
+    keep = np.zeros(indptr.size - 1, np.bool_)
+    for c in order:
+        needed = False
+        for e in range(indptr[c], indptr[c + 1]):
+            if count[ids[e]] < k:
+                needed = True
+                break
+        if needed:
+            keep[c] = True
+            for e in range(indptr[c], indptr[c + 1]):
+                count[ids[e]] += 1
+    return keep
+
+
+def redundant_columns_kept(result: MeasurabilityResult, redundancy: int, covered=None) -> np.ndarray:
+    """Which columns of ``result`` a ``redundancy``-fold cover keeps: the columns in order of size (largest first,
+    then by index), each kept while one of its points is measured by fewer than ``redundancy`` kept columns. Every
+    point of ``result`` stays measured by min(redundancy, its columns) kept columns; deterministic. ``covered``
+    ((n_points,) int32, updated in place): the kept columns per point so far, to continue a cover over blocks."""
+    counts = result.counts
+    order = np.argsort(-counts, kind="stable").astype(np.int64)
+    if covered is None:
+        covered = np.zeros(result.n_points, dtype=np.int32)
+    return _k_cover(
+        np.asarray(result.indptr, dtype=np.int64), np.asarray(result.point_indices), covered, order, int(redundancy)
+    )
+
+
+def _select(result: MeasurabilityResult, columns: np.ndarray) -> MeasurabilityResult:
+    """The columns ``columns`` (ascending) of ``result``."""
+    counts = result.counts[columns]
+    indptr = np.zeros(columns.size + 1, dtype=np.int64)
+    np.cumsum(counts, out=indptr[1:])
+    starts = result.indptr[columns]
+    entries = np.repeat(starts - indptr[:-1], counts) + np.arange(indptr[-1])
+    return MeasurabilityResult(
+        result.n_points,
+        columns.size,
+        indptr,
+        result.point_indices[entries],
+        result.uncertainties[entries],
+        result.trajectory_distances[entries],
+        result.extent_min[columns],
+        result.extent_max[columns],
+    )
+
+
+def chunk_block(
+    sensor_model, poses, threshold_mm, deflection_mm, threads=None, compact=False, drop_dominated=False, redundancy=0
+):
+    """Evaluate one chunk of candidate poses; returns (the result of its kept columns, their indices in the chunk,
+    info). Empty columns are dropped, and dominated ones with ``drop_dominated``; ``compact``: float32 uncertainty
+    and t0, the t0 range of a column that of its stored values. ``info``: ``wall_s`` and ``cpu_s`` (this process's
+    CPU time) of the chunk, the dropped columns ``dropped`` and a kept column measuring all their points,
+    ``dominator`` (indices in the chunk; -1 for a column dropped by the ``redundancy``-fold cover,
+    :func:`redundant_columns_kept`, which follows the dominance when ``redundancy`` > 0). Runs wherever the chunk is sent (this process or a Dask worker)."""
+    started, cpu_started = time.perf_counter(), time.process_time()
     result = sensor_model.evaluate_viewpoints_batch(poses, threshold_mm, deflection_mm, workers=threads)
     counts = result.counts
     columns = np.flatnonzero(counts > 0)
-    t0_min, t0_max = result.t0_min[columns], result.t0_max[columns]
     indptr = np.zeros(columns.size + 1, dtype=np.int64)
     np.cumsum(counts[columns], out=indptr[1:])
+    values = np.float32 if compact else np.float64
+    t0 = result.trajectory_distances.astype(T0_DTYPE if compact else np.float64, copy=False)
+    if compact:  # the range of the stored values: the later stages compare those with the scan line's ends
+        block = MeasurabilityResult(result.n_points, columns.size, indptr, result.point_indices, t0, t0)
+        t0_min, t0_max = block.t0_min.astype(np.float64), block.t0_max.astype(np.float64)
+    else:
+        t0_min, t0_max = result.t0_min[columns], result.t0_max[columns]
     # empty columns have no entries: dropping them leaves the entry arrays as they are
     block = MeasurabilityResult(
         result.n_points,
         columns.size,
         indptr,
         result.point_indices.astype(np.int32, copy=False),
-        result.uncertainties.astype(UNCERTAINTY_DTYPE if compact else np.float64, copy=False),
-        result.trajectory_distances.astype(T0_DTYPE if compact else np.float64, copy=False),
+        result.uncertainties.astype(values, copy=False),
+        t0,
         t0_min,
         t0_max,
     )
-    return block, columns.astype(np.int64), time.perf_counter() - started
+    del result
+    dropped = dominator = np.zeros(0, dtype=np.int64)
+    if (drop_dominated or redundancy > 0) and block.n_views > 1:
+        # reduced per group of REDUCTION_GROUP_VIEWS candidates (the chunks start at multiples of it), so the kept
+        # columns do not depend on the chunk size, the workers or the timing
+        keep = np.ones(block.n_views, dtype=bool)
+        by = np.full(block.n_views, -1, dtype=np.int64)
+        bounds = np.searchsorted(columns, np.arange(0, len(poses) + REDUCTION_GROUP_VIEWS, REDUCTION_GROUP_VIEWS))
+        for lo, hi in itertools.pairwise(bounds.tolist()):
+            if hi - lo < 2:
+                continue
+            group = _select(block, np.arange(lo, hi))
+            if drop_dominated:
+                by_group = dominated_columns(group)
+                gone = np.flatnonzero(by_group >= 0)
+                keep[lo + gone], by[lo + gone] = False, lo + by_group[gone]
+            if redundancy > 0:
+                alive = np.flatnonzero(keep[lo:hi])
+                covered = redundant_columns_kept(_select(group, alive), redundancy)
+                keep[lo + alive[~covered]] = False
+        if not keep.all():
+            gone = np.flatnonzero(~keep)
+            dropped = columns[gone]
+            dominator = np.where(by[gone] >= 0, columns[np.maximum(by[gone], 0)], -1)
+            block, columns = _select(block, np.flatnonzero(keep)), columns[keep]
+    info = {
+        "wall_s": time.perf_counter() - started,
+        "cpu_s": time.process_time() - cpu_started,
+        "dropped": dropped,
+        "dominator": dominator,
+        "dropped_pairs": int(counts[dropped].sum()),
+    }
+    return block, columns.astype(np.int64), info
 
 
 def _merge(blocks: list[MeasurabilityResult], n_points: int) -> MeasurabilityResult:
@@ -279,75 +494,156 @@ def evaluate_streaming(
     pilot_index = np.sort(np.random.default_rng(0).choice(n, pilot_n, replace=False))
     pilot_started = time.perf_counter()
     pilot, _, _ = chunk_block(sensor_model, poses[pilot_index], threshold_mm, deflection_mm)
-    stats.pilot_s = time.perf_counter() - pilot_started
-    per_view_s = stats.pilot_s / pilot_n
+    per_view_s = (time.perf_counter() - pilot_started) / pilot_n
     pairs_per_view = pilot.nnz / pilot_n
     kept_share = pilot.n_views / pilot_n
-    stats.projected_pairs = pairs_per_view * n
-    store = stats.projected_pairs * BYTES_PER_KEPT_ENTRY + kept_share * n * BYTES_PER_KEPT_VIEW
-    stats.projected_bytes = STORE_HEADROOM * store + fixed_bytes
-    if stats.projected_bytes > budget:
-        raise _refuse(
-            f"request refused before the evaluation: a pilot of {pilot_n} of the {n:,} candidates measures "
-            f"{pairs_per_view:.0f} points each, so the run would keep ~{stats.projected_pairs:,.0f} measurable pairs "
-            f"(~{store / 1e9:.2f} GB, ~{stats.projected_bytes / 1e9:.2f} GB with the later stages' copies and the "
-            f"candidates); the memory budget is {budget / 1e9:.2f} GB (--max-memory / max_memory_gb, default "
-            f"{DEFAULT_MEMORY_SHARE:.0%} of the available memory): raise it, or lower the sampling density, the "
-            "orientations or the tilt mode"
-        )
     del pilot
+    stats.projected_pairs = pairs_per_view * n
+    # the store's types follow the projection only, so every set-up keeps the same values
+    compact = settings.compact if settings.compact is not None else stats.projected_pairs > COMPACT_ABOVE_PAIRS
+    per_entry = BYTES_PER_COMPACT_ENTRY if compact else BYTES_PER_KEPT_ENTRY
+    stats.compact = bool(compact)
+    headroom = float(settings.store_headroom)
+
+    def projected(pair_share: float, view_share: float) -> tuple[float, float]:
+        store = pair_share * stats.projected_pairs * per_entry + view_share * n * BYTES_PER_KEPT_VIEW
+        return store, headroom * store + fixed_bytes
+
+    store_bytes, stats.projected_bytes = projected(1.0, kept_share)
 
     # chunks: about CHUNK_TARGET_S of work each, several per worker, and the chunks in flight within a tenth of
     # the budget left after the store
     parallel = executor.parallelism() if executor is not None else 1
     chunk = int(CHUNK_TARGET_S / max(per_view_s, 1e-9))
     chunk = min(chunk, max(MIN_CHUNK_VIEWS, math.ceil(n / (4 * parallel))))
-    in_flight_bytes = 0.1 * max(budget - stats.projected_bytes, 0.0)
+    in_flight_bytes = 0.1 * max(budget - min(stats.projected_bytes, budget / 2), 0.0)
     per_chunk_bytes = max(pairs_per_view, 1.0) * (8 + 8 + 8) * 2  # raw float64 result and its compact copy
     chunk = min(chunk, int(min(in_flight_bytes / max(1, 2 * parallel), MAX_CHUNK_RESULT_BYTES) / per_chunk_bytes))
     chunk = int(min(max(chunk, MIN_CHUNK_VIEWS), MAX_CHUNK_VIEWS, n))
+
+    drop = settings.drop_dominated
+    if drop is None:  # only when the budget requires it: dropping can change the plan
+        drop = stats.projected_bytes > budget
+    redundancy = int(settings.redundancy or 0)
+    if drop or redundancy:
+        group = REDUCTION_GROUP_VIEWS
+        chunk = int(min(max(group, (chunk // group) * group), max(n, 1)))
+    if drop:
+        # what dropping keeps, from contiguous chunk-sized slices (a random spread has no dominated columns), for
+        # dominance alone and for the redundancy-fold covers after it
+        steps = (settings.redundancy,) if settings.redundancy is not None else (0, *REDUNDANCY_STEPS)
+        evaluated = kept = views = sliced = 0
+        group = REDUCTION_GROUP_VIEWS
+        for k in range(DOMINANCE_PILOT_SLICES):
+            start = int((k + 0.5) / DOMINANCE_PILOT_SLICES * n) // group * group - group
+            start = min(max(start, 0), max(n - 2 * group, 0)) // group * group
+            for at in (start, start + group):
+                block, _, info = chunk_block(
+                    sensor_model, poses[at : at + group], threshold_mm, deflection_mm, compact=compact,
+                    drop_dominated=True,
+                )  # fmt: skip
+                evaluated += block.nnz + info["dropped_pairs"]
+                sliced += len(poses[at : at + group])
+                kept, views = kept + block.nnz, views + block.n_views
+                del block
+        share, view_share = kept / max(evaluated, 1), views / max(sliced, 1)
+        size = kept / max(views, 1)  # pairs of a column that survives dominance
+        for step in steps:
+            # the cover keeps at most step x points columns, each of about a surviving column's size
+            bound = min(1.0, step * n_points * size / max(share * stats.projected_pairs, 1.0)) if step else 1.0
+            store_bytes, stats.projected_bytes = projected(
+                share * bound, min(view_share, step * n_points / n) if step else view_share
+            )
+            redundancy = int(step or 0)
+            if stats.projected_bytes <= budget:
+                break
+        stats.dominance_kept_share = share
+    stats.redundancy = redundancy
+    stats.drop_dominated = bool(drop)
+    stats.pilot_s = time.perf_counter() - pilot_started
+    if stats.projected_bytes > budget:
+        dropping = (
+            f", {100 * stats.dominance_kept_share:.0f} % of them after dropping dominated candidates"
+            + (f" and keeping a {redundancy}-fold cover" if redundancy else "")
+            if drop
+            else ""
+        )
+        raise _refuse(
+            f"request refused before the evaluation: a pilot of {pilot_n} of the {n:,} candidates measures "
+            f"{pairs_per_view:.0f} points each, so the run would keep ~{stats.projected_pairs:,.0f} measurable pairs"
+            f"{dropping} (~{store_bytes / 1e9:.2f} GB at {per_entry} bytes per pair, ~{stats.projected_bytes / 1e9:.2f}"
+            f" GB with the later stages' copies and the candidates); the memory budget is {budget / 1e9:.2f} GB "
+            f"(--max-memory / max_memory_gb, default {DEFAULT_MEMORY_SHARE:.0%} of the available memory): raise it, "
+            "or lower the sampling density, the orientations or the tilt mode"
+        )
+
     starts = list(range(0, n, chunk))
     stats.chunks, stats.chunk_views = len(starts), chunk
-
-    store = _Store(n_points, 1.5 * stats.projected_pairs)
+    store = _Store(n_points, 1.5 * stats.projected_pairs * stats.dominance_kept_share)
     waiting: dict = {}  # blocks that arrived before an earlier one
     next_index = 0
     seconds = [0.0] * len(starts)
+    cpu_seconds = [0.0] * len(starts)
+    reserve, reserve_by = [], []
     done_views = 0
     kept_pairs = 0
     limit = budget - fixed_bytes
 
-    def arrived(index: int, block: MeasurabilityResult, columns: np.ndarray, wall_s: float) -> None:
+    covered = np.zeros(n_points, dtype=np.int32) if redundancy else None
+
+    def arrived(index: int, block: MeasurabilityResult, columns: np.ndarray, info: dict) -> None:
         nonlocal done_views, kept_pairs, next_index
         start = starts[index]
         waiting[index] = (block, columns + start)
         while next_index in waiting:
-            store.append(*waiting.pop(next_index))
+            block_here, columns_here = waiting.pop(next_index)
+            if redundancy and block_here.n_views:
+                # the redundancy-fold cover in candidate order: the same wherever and whenever blocks arrive
+                keep = redundant_columns_kept(block_here, redundancy, covered)
+                if not keep.all():
+                    reserve.append(columns_here[~keep])
+                    reserve_by.append(np.full(int((~keep).sum()), -1, dtype=np.int64))
+                    stats.dropped_pairs += int(block_here.counts[~keep].sum())
+                    block_here, columns_here = _select(block_here, np.flatnonzero(keep)), columns_here[keep]
+            store.append(block_here, columns_here)
             next_index += 1
-        seconds[index] = wall_s
+        seconds[index], cpu_seconds[index] = info["wall_s"], info["cpu_s"]
+        if info["dropped"].size:
+            reserve.append(info["dropped"] + start)
+            reserve_by.append(np.where(info["dominator"] >= 0, info["dominator"] + start, -1))
+            stats.dropped_pairs += info["dropped_pairs"]
         done_views += min(chunk, n - start)
-        kept_pairs += block.nnz
-        if kept_pairs * BYTES_PER_KEPT_ENTRY * STORE_HEADROOM > limit:
+        kept_pairs = store.nnz + sum(b.nnz for b, _ in waiting.values())
+        if kept_pairs * per_entry * headroom > limit:
             raise _refuse(
                 f"the evaluation stopped: {kept_pairs:,} measurable pairs kept after {done_views:,} of {n:,} "
                 f"candidates exceed the memory budget of {budget / 1e9:.2f} GB (the pilot projected "
-                f"{stats.projected_pairs:,.0f}); raise --max-memory or lower the density, orientations or tilts"
+                f"{stats.projected_pairs * stats.dominance_kept_share:,.0f}); raise --max-memory or lower the "
+                "density, orientations or tilts"
             )
         if report is not None:
             report("metrology", done_views / n, f"{done_views} of {n} viewpoints")
 
     chunks = [poses[s : s + chunk] for s in starts]
+    options = {"compact": bool(compact), "drop_dominated": bool(drop)}
     if executor is None:
         for index, part in enumerate(chunks):
-            arrived(index, *chunk_block(sensor_model, part, threshold_mm, deflection_mm, compact=settings.compact))
+            arrived(index, *chunk_block(sensor_model, part, threshold_mm, deflection_mm, **options))
     else:
-        executor.evaluate(sensor_model, chunks, threshold_mm, deflection_mm, arrived, compact=settings.compact)
+        executor.evaluate(sensor_model, chunks, threshold_mm, deflection_mm, arrived, **options)
     del chunks
     merge_started = time.perf_counter()
     result, kept = store.result()
     stats.kept_views, stats.kept_pairs = result.n_views, result.nnz
+    if reserve:
+        order_index, order_by = np.concatenate(reserve).astype(np.int64), np.concatenate(reserve_by)
+        order = np.argsort(order_index, kind="stable")
+        stats.reserve_index, stats.reserve_dominator = order_index[order], order_by[order]
+    else:
+        stats.reserve_index = stats.reserve_dominator = np.zeros(0, dtype=np.int64)
+    stats.dropped_views = int(stats.reserve_index.size)
     stats.store_bytes = result.nbytes + kept.nbytes
-    stats.chunk_seconds = seconds
+    stats.chunk_seconds, stats.chunk_cpu_seconds = seconds, cpu_seconds
     stats.merge_s = time.perf_counter() - merge_started
     stats.scatter_s = getattr(executor, "last_scatter_s", 0.0)
     stats.wall_s = time.perf_counter() - started
@@ -364,7 +660,12 @@ def evaluate_in_chunks(
     """Batch metrology with progress (stage 'metrology') over all ``poses``, empty columns included (the former
     API; planning uses :func:`evaluate_streaming`)."""
     result, kept = evaluate_streaming(
-        sensor_model, poses, threshold_mm, deflection, report, settings=EvaluationSettings(max_memory_bytes=1e15)
+        sensor_model,
+        poses,
+        threshold_mm,
+        deflection,
+        report,
+        settings=EvaluationSettings(max_memory_bytes=1e15, compact=False, drop_dominated=False),
     )
     counts = np.zeros(len(poses), dtype=np.int64)
     counts[kept] = result.counts

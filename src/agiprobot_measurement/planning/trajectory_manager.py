@@ -126,6 +126,11 @@ AUTO_SAME_COVERAGE = 0.005
 
 #: an IP solve of one verification round stops after this long (s): its cover only names what to verify next
 ROUND_IP_TIME_S = 2.0
+#: ... and this long on problems of at least LARGE_PROBLEM_VIEWS views (tilt full): there the pool's programmes have
+#: a ~40 % integrality gap, so a round's solve always runs to its limit; 1 s gave the same covers as 2 s on the
+#: cylinder and idler_riser and saved ~25 s on the cylinder
+LARGE_ROUND_IP_TIME_S = 1.0
+LARGE_PROBLEM_VIEWS = 100_000
 #: ... and one over all views after this long (s): its reductions name the candidate pool of the next rounds
 FULL_ROUND_IP_TIME_S = 8.0
 #: the set cover loop solves the problem over all views at most this often (the rest over the candidate pool)
@@ -140,32 +145,106 @@ SUBSTITUTES_PER_VIEW = 20
 POOL_LIKELY_COLUMNS = 6000
 
 
+def _measurable_structure(matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(indptr, row indices, column sizes) of the measurable (non-zero) entries of a points x views matrix,
+    without copying its values: the planner's matrices hold tens of millions of entries at tilt full."""
+    csc = matrix if scipy.sparse.issparse(matrix) and matrix.format == "csc" else scipy.sparse.csc_matrix(matrix)
+    alive = csc.data != 0
+    if alive.all():
+        return csc.indptr, csc.indices, np.diff(csc.indptr)
+    col_of_entry = np.repeat(np.arange(csc.shape[1], dtype=np.int32), np.diff(csc.indptr))
+    sizes = np.bincount(col_of_entry[alive], minlength=csc.shape[1])
+    indptr = np.zeros(csc.shape[1] + 1, dtype=np.int64)
+    np.cumsum(sizes, out=indptr[1:])
+    return indptr, csc.indices[alive], sizes
+
+
+#: columns gathered at once when looking for the open points' views (bounds the temporary memory)
+OPEN_POINT_CHUNK_ENTRIES = 2_000_000
+
+
 def open_point_views(matrix, views: list[ViewPoint], per_point: int) -> np.ndarray:
     """Columns to verify for the rows (points) of ``matrix`` (points x views, CSC, non-zero = measurable) that
-    no verified view measures yet: up to ``per_point`` unverified columns each, the largest columns first."""
+    no verified view measures yet: up to ``per_point`` unverified columns each, the largest columns first
+    (equal sizes: the lower column first).
+
+    The columns are visited largest first in chunks, and the visit stops once every open row has its
+    ``per_point`` columns: the largest columns cover most rows, so the first round (every row open) touches a
+    few chunks of the matrix, not all of its entries.
+    """
     verified = np.array([v.mechanics_verified is True for v in views], dtype=bool)
     unverified = np.array([v.mechanics_verified is False for v in views], dtype=bool)
-    measurable = scipy.sparse.csc_matrix(matrix, copy=True)
-    measurable.eliminate_zeros()
-    sizes = np.diff(measurable.indptr)
-    done = np.asarray(measurable[:, np.flatnonzero(verified)].sum(axis=1)).ravel() > 0 if verified.any() else None
-    rows = measurable.tocsr()
-    open_rows = np.diff(rows.indptr) > 0
-    if done is not None:
-        open_rows &= ~done
-    if not open_rows.any():
+    indptr, indices, sizes = _measurable_structure(matrix)
+    n_rows = matrix.shape[0]
+    open_rows = np.zeros(n_rows, dtype=bool)
+    open_rows[indices] = True
+    if verified.any():
+        done_cols = np.flatnonzero(verified & (sizes > 0))
+        if done_cols.size:
+            open_rows[_gather_rows(indptr, indices, done_cols)] = False
+    if not open_rows.any() or per_point <= 0:
         return np.zeros(0, dtype=np.int64)
-    sub = rows[np.flatnonzero(open_rows)].tocoo()
-    keep = unverified[sub.col]
-    r, c = sub.row[keep], sub.col[keep]
-    order = np.lexsort((-sizes[c], r))
-    r, c = r[order], c[order]
-    first = np.searchsorted(r, r, side="left")
-    rank = np.arange(r.size) - first
-    picked = c[rank < per_point]
+    # only unverified columns holding an open row can be picked; largest first, then the lower index
+    candidates = np.flatnonzero(unverified & (sizes > 0))
+    candidates = candidates[np.lexsort((candidates, -sizes[candidates]))]
+    need = np.where(open_rows, per_point, 0).astype(np.int64)
+    picked_cols, picked_rows = [], []
+    position = 0
+    while position < candidates.size and need.any():
+        cum = np.cumsum(sizes[candidates[position:]])
+        stop = position + max(1, int(np.searchsorted(cum, OPEN_POINT_CHUNK_ENTRIES, side="right")))
+        chunk = candidates[position:stop]
+        position = stop
+        lengths = sizes[chunk]
+        rows = _gather_rows(indptr, indices, chunk)
+        cols = np.repeat(chunk, lengths)
+        wanted = need[rows] > 0
+        rows, cols = rows[wanted], cols[wanted]
+        if rows.size == 0:
+            continue
+        # rank of each entry among its row's entries in this chunk, in column order (stable sort by row)
+        order = np.argsort(rows, kind="stable")
+        rows, cols = rows[order], cols[order]
+        rank = np.arange(rows.size) - np.searchsorted(rows, rows, side="left")
+        take = rank < need[rows]
+        picked_rows.append(rows[take])
+        picked_cols.append(cols[take])
+        need -= np.bincount(rows[take], minlength=n_rows)
+    if not picked_cols:
+        return np.zeros(0, dtype=np.int64)
+    picked = np.concatenate(picked_cols)
     # most-shared columns first: one view that settles many open points is worth more than many that settle one
     unique, counts = np.unique(picked, return_counts=True)
-    return unique[np.lexsort((-sizes[unique], -counts))]
+    return unique[np.lexsort((-sizes[unique], -counts))].astype(np.int64)
+
+
+def _segment_counts(mask: np.ndarray, indptr: np.ndarray) -> np.ndarray:
+    """Per segment (column) of a CSC ``indptr``: how many entries of ``mask`` hold."""
+    counts = np.zeros(indptr.size - 1, dtype=np.int64)
+    nonempty = np.flatnonzero(np.diff(indptr) > 0)
+    if nonempty.size:
+        # reduceat runs from one start to the next; empty segments in between hold no entries
+        counts[nonempty] = np.add.reduceat(mask, indptr[nonempty], dtype=np.int64)
+    return counts
+
+
+def _segment_max(values: np.ndarray, indptr: np.ndarray) -> np.ndarray:
+    """Per segment of a CSC ``indptr``: the largest finite value (0 for an empty segment), float64."""
+    out = np.zeros(indptr.size - 1)
+    nonempty = np.flatnonzero(np.diff(indptr) > 0)
+    if nonempty.size:
+        finite = np.where(np.isfinite(values), values, 0.0) if not np.all(np.isfinite(values)) else values
+        out[nonempty] = np.maximum.reduceat(finite, indptr[nonempty])
+    return np.maximum(out, 0.0)
+
+
+def _gather_rows(indptr: np.ndarray, indices: np.ndarray, columns: np.ndarray) -> np.ndarray:
+    """The row indices of ``columns`` (in that order), concatenated."""
+    starts = np.asarray(indptr)[columns]
+    lengths = np.asarray(indptr)[columns + 1] - starts
+    offsets = np.zeros(columns.size, dtype=np.int64)
+    np.cumsum(lengths[:-1], out=offsets[1:])
+    return indices[np.repeat(starts - offsets, lengths) + np.arange(int(lengths.sum()))]
 
 
 def _select_columns(result: MeasurabilityResult, columns: np.ndarray) -> MeasurabilityResult:
@@ -824,7 +903,7 @@ class TrajectoryManager:
                 )
                 LOG.warning("%s", message)
                 self.warnings.append(message)
-            matrix, durations = self._coverage_problem(views, n_points, only_verified)
+            matrix, worst, durations = self._coverage_problem(views, n_points, only_verified)
             self._report("set cover", min(0.9, round_index / max(max_rounds, 1)), f"round {round_index + 1}")
             # an IP solve never takes all the time left: verification and the last solve need some
             # a round's cover only decides what to verify next (its columns change after that): a short solve is
@@ -836,13 +915,15 @@ class TrajectoryManager:
                 executable = _executable_columns(views)
                 columns = executable if executable.size else columns
             # a solve over all views names the pool the next rounds choose from: its reductions must finish
-            limit = min(time_limit_s, FULL_ROUND_IP_TIME_S if columns.size == len(views) else ROUND_IP_TIME_S)
+            round_s = LARGE_ROUND_IP_TIME_S if len(views) >= LARGE_PROBLEM_VIEWS else ROUND_IP_TIME_S
+            limit = min(time_limit_s, FULL_ROUND_IP_TIME_S if columns.size == len(views) else round_s)
             if math.isfinite(remaining):
                 limit = max(1.0, min(limit, 0.5 * remaining))
             sub = matrix if columns.size == len(views) else matrix[:, columns]
             result = solve_set_cover(
                 sub,
                 solver_type,
+                uncertainties=worst[columns],
                 durations_s=durations[columns] if solver_type == "IP_time" else None,
                 time_limit_s=limit,
                 mip_gap=mip_gap,
@@ -907,7 +988,7 @@ class TrajectoryManager:
             if solver_type != "greedy" and columns.size < len(views):
                 # the greedy cover of the pool costs little and names views the next solve may want (a solve over
                 # all views already started from its own greedy cover, and a greedy pass over all is not cheap)
-                extra = solve_set_cover(sub, "greedy", time_limit_s=limit)
+                extra = solve_set_cover(sub, "greedy", uncertainties=worst[columns], time_limit_s=limit)
                 set_cover_time += extra.solve_time_s
                 greedy_pending = [
                     views[j] for j in columns[extra.selected].tolist() if views[j].mechanics_verified is False
@@ -969,13 +1050,14 @@ class TrajectoryManager:
             if not math.isfinite(left):
                 left = time_limit_s
             if left > 2.0:
-                matrix, durations = self._coverage_problem(views, n_points, only_verified=True)
+                matrix, worst, durations = self._coverage_problem(views, n_points, only_verified=True)
                 executable = _executable_columns(views)
                 if executable.size == 0:
                     executable = np.arange(len(views))
                 polished = solve_set_cover(
                     matrix[:, executable],
                     solver_type,
+                    uncertainties=worst[executable],
                     durations_s=durations[executable] if solver_type == "IP_time" else None,
                     time_limit_s=max(1.0, min(time_limit_s, 0.8 * left)),
                     mip_gap=mip_gap,
@@ -1007,8 +1089,15 @@ class TrajectoryManager:
         return set(chosen)
 
     def _coverage_problem(self, views: list[ViewPoint], n_points: int, only_verified: bool = False):
-        """(points x views CSC matrix of uncertainties, per-view durations) for the set cover. Rejected views
-        have empty columns, shortened ones only their remaining points."""
+        """(points x views boolean CSC matrix of the measurable entries, per-view worst uncertainty, per-view
+        durations in s) for the set cover. Rejected views have empty columns, shortened ones only their
+        remaining points; with ``only_verified`` the unverified views are empty too.
+
+        The matrix holds only the live entries and no values: the solvers need per-view figures only (the
+        worst uncertainty is the greedy tie-break and the cost of IP_uncertainty), and at tilt full the store
+        has tens of millions of entries, so a float64 copy of them (plus its temporaries) was the largest
+        allocation of the whole plan.
+        """
         store = self.measurability
         columns = [v.coverage_column for v in views]
         from_store = store is not None and all(
@@ -1016,33 +1105,41 @@ class TrajectoryManager:
             for c, v in zip(columns, views, strict=True)
         )
         if from_store:
-            data = np.where(self._entry_alive, np.maximum(store.uncertainties, 1e-12), 0.0)
-            matrix = scipy.sparse.csc_matrix(
-                (data, store.point_indices, store.indptr), shape=(store.n_points, store.n_views)
-            )
             columns = np.asarray(columns, dtype=np.int64)
+            alive = self._entry_alive
+            if only_verified:
+                verified_store = np.zeros(store.n_views, dtype=bool)
+                verified_store[columns[[v.mechanics_verified is not False for v in views]]] = True
+                alive = alive & np.repeat(verified_store, np.diff(store.indptr))
+            counts = _segment_counts(alive, store.indptr)
+            indptr = np.zeros(store.n_views + 1, dtype=np.int64)
+            np.cumsum(counts, out=indptr[1:])
+            matrix = scipy.sparse.csc_matrix(
+                (np.ones(int(indptr[-1]), dtype=bool), store.point_indices[alive], indptr),
+                shape=(store.n_points, store.n_views),
+            )
+            worst = _segment_max(store.uncertainties[alive], indptr)
             if len(columns) != store.n_views or np.any(columns != np.arange(store.n_views)):
-                matrix = matrix[:, columns]
+                matrix, worst = matrix[:, columns], worst[columns]
             durations = np.where(self._duration_verified, self._durations, self._durations * self._duration_bias)[
                 columns
             ]
         else:
-            indices = [v.measurable_indices if v.mechanics_valid else np.zeros(0, np.int64) for v in views]
-            values = [v.measurable_uncertainties if v.mechanics_valid else np.zeros(0) for v in views]
+            usable = [v.mechanics_valid and not (only_verified and v.mechanics_verified is False) for v in views]
+            indices = [
+                v.measurable_indices if ok else np.zeros(0, np.int64) for v, ok in zip(views, usable, strict=True)
+            ]
+            values = [v.measurable_uncertainties if ok else np.zeros(0) for v, ok in zip(views, usable, strict=True)]
             indptr = np.zeros(len(views) + 1, dtype=np.int64)
             np.cumsum([len(i) for i in indices], out=indptr[1:])
             rows = np.concatenate(indices) if indices else np.zeros(0, dtype=np.int64)
-            data = np.maximum(np.concatenate(values), 1e-12) if values else np.zeros(0)
-            matrix = scipy.sparse.csc_matrix((data, rows, indptr), shape=(n_points, len(views)))
+            matrix = scipy.sparse.csc_matrix(
+                (np.ones(rows.size, dtype=bool), rows, indptr), shape=(n_points, len(views))
+            )
+            worst = _segment_max(np.concatenate(values) if values else np.zeros(0), indptr)
             durations = np.array([1.0 if v.estimated_duration_s is None else v.estimated_duration_s for v in views])
-        if only_verified:
-            unverified = np.flatnonzero([v.mechanics_verified is False for v in views])
-            if unverified.size:
-                keep = np.ones(matrix.shape[1])
-                keep[unverified] = 0.0
-                matrix = matrix @ scipy.sparse.diags(keep)
-                matrix = scipy.sparse.csc_matrix(matrix)
-        return matrix, durations
+        matrix.sort_indices()
+        return matrix, worst, durations
 
     # ----------------------------------------------------------------------------------- connection
     def connect(self, start: np.ndarray, goal: np.ndarray, planning_time_s: float = 0.2, attempts: int = 3):
@@ -1462,10 +1559,17 @@ class TrajectoryManager:
         return state
 
     def _plan_auto(self, t0: float, deadline: float, settings: dict) -> list[ViewPoint]:
+        """Tilt none, then (when its cover is large or short and time is left) tilt full, and tilt full's
+        verified views solved again for the points tilt none covered. Among the plans that cover at least what
+        tilt none covers (within :data:`AUTO_SAME_COVERAGE` of the samples), the one with the fewest views wins,
+        then the one covering more; the choice and the figures of every plan are in ``parameters['tilt_choice']``.
+        Tilt full covering more points with more views is reported, not chosen: the same coverage with fewer
+        views is what tilts are tried for."""
         base_warnings = list(self.warnings)
         ordered = self._plan_once("none", deadline, **settings)
         first = self.coverage_report()
         first_state = self._snapshot()
+        first_points = np.isfinite(point_uncertainties(ordered, len(self.samples)))
         short = first.n_covered < AUTO_COVERAGE_SHARE * first.n_coverable_metrology
         large = first.n_views > AUTO_VIEWS
         left = deadline - time.perf_counter()
@@ -1482,24 +1586,42 @@ class TrajectoryManager:
             except PlanningError as exc:
                 second, reason = None, str(exc)
             tolerance = AUTO_SAME_COVERAGE * first.n_samples
-            better = second is not None and (
-                (second.n_covered >= first.n_covered - tolerance and second.n_views < first.n_views)
-                or second.n_covered > first.n_covered + 2 * tolerance
+            enough = second is not None and second.n_covered >= first.n_covered - tolerance
+            third = None
+            if second is not None and not (enough and second.n_views < first.n_views):
+                # tilt full's cover may buy extra points with extra views: its verified views, solved for the
+                # points tilt none covered, give the same coverage with (possibly) fewer views
+                full_timings = dict(self.timings_s)
+                third = self._cover_points_with_verified(first_points, settings, deadline)
+                if third is not None:
+                    self.timings_s = {**full_timings, **self.timings_s}
+            third_enough = third is not None and third.n_covered >= first.n_covered - tolerance
+            full_detail = (
+                f"tilt full: {second.n_views} views, {second.n_covered} covered"
+                if second is not None
+                else f"tilt full failed: {reason}"
             )
-            if better:
+            if enough and second.n_views < first.n_views:
                 ordered = list(self.last_ordered)
                 choice = (
                     f"full ({second.n_views} views, {second.n_covered} covered; tilt none: {first.n_views} views, "
                     f"{first.n_covered} covered)"
                 )
                 self.timings_s["tilt_none_total"] = first.timings_s.get("total", 0.0)
-            else:
-                detail = (
-                    f"tilt full: {second.n_views} views, {second.n_covered} covered"
-                    if second is not None
-                    else f"tilt full failed: {reason}"
+            elif third_enough and third.n_views < first.n_views:
+                ordered = list(self.last_ordered)
+                choice = (
+                    f"full, for tilt none's points ({third.n_views} views, {third.n_covered} covered; tilt none: "
+                    f"{first.n_views} views, {first.n_covered} covered; {full_detail})"
                 )
-                choice = f"none ({first.n_views} views, {first.n_covered} covered; {detail})"
+                self.timings_s["tilt_none_total"] = first.timings_s.get("total", 0.0)
+            else:
+                restricted = (
+                    f"; for tilt none's points: {third.n_views} views, {third.n_covered} covered"
+                    if third is not None
+                    else ""
+                )
+                choice = f"none ({first.n_views} views, {first.n_covered} covered; {full_detail}{restricted})"
                 full_time = time.perf_counter() - t0
                 self.__dict__.update(first_state)
                 self.timings_s["tilt_full_total"] = full_time
@@ -1507,3 +1629,35 @@ class TrajectoryManager:
         self.parameters["tilt_choice"] = choice
         LOG.info("tilt auto: %s", choice)
         return ordered
+
+    def _cover_points_with_verified(self, points: np.ndarray, settings: dict, deadline: float) -> CoverageReport | None:
+        """Cover the points of the mask ``points`` with the current generation's verified executable views
+        (no new verification: every cover is executable), connect the cover and report it; None when there is
+        no time, no such view or the samples differ."""
+        views = list(self.last_viewpoints or [])
+        left = deadline - time.perf_counter()
+        if not views or points.size != len(self.samples) or not points.any() or left < 5.0:
+            return None
+        started = time.perf_counter()
+        matrix, worst, durations = self._coverage_problem(views, len(self.samples), only_verified=True)
+        executable = _executable_columns(views)
+        if executable.size == 0:
+            return None
+        solver_type = settings["solver_type"]
+        sub = scipy.sparse.csr_matrix(matrix)[np.flatnonzero(points)].tocsc()[:, executable]
+        result = solve_set_cover(
+            sub,
+            solver_type,
+            uncertainties=worst[executable],
+            durations_s=durations[executable] if solver_type == "IP_time" else None,
+            time_limit_s=max(1.0, min(settings["set_cover_time_limit_s"], 0.5 * left)),
+            mip_gap=settings["mip_gap"],
+        )
+        chosen = [views[j] for j in executable[result.selected].tolist()]
+        if not chosen:
+            return None
+        self.last_set_cover = dataclasses.replace(result, selected=executable[result.selected])
+        self.timings_s["set_cover_restricted"] = time.perf_counter() - started
+        self._finish_scan_trajectories(chosen)
+        self.connect_viewpoints(chosen, min_planning_time=settings["min_planning_time"])
+        return self.coverage_report()

@@ -143,15 +143,15 @@ def test_a_killed_worker_has_its_chunks_recomputed(monkeypatch):
         killed = []
         original = evaluator.evaluate
 
-        def evaluate_and_kill(sensor_model, chunks, threshold, deflection, arrived, compact=True):
-            def arrived_then_kill(index, block, columns, wall_s):
-                arrived(index, block, columns, wall_s)
+        def evaluate_and_kill(sensor_model, chunks, threshold, deflection, arrived, **options):
+            def arrived_then_kill(index, block, columns, info):
+                arrived(index, block, columns, info)
                 if not killed:
                     victim = sorted(pids.values())[0]
                     os.kill(victim, signal.SIGKILL)
                     killed.append(victim)
 
-            return original(sensor_model, chunks, threshold, deflection, arrived_then_kill, compact)
+            return original(sensor_model, chunks, threshold, deflection, arrived_then_kill, **options)
 
         monkeypatch.setattr(evaluator, "evaluate", evaluate_and_kill)
         stats = StreamStats()

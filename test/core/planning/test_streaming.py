@@ -13,11 +13,13 @@ from agiprobot_measurement.planning.streaming import (
     EvaluationSettings,
     StreamStats,
     chunk_block,
+    dominated_columns,
     evaluate_in_chunks,
     evaluate_streaming,
+    redundant_columns_kept,
 )
 from agiprobot_measurement.planning.viewpoint import generate_viewpoint_poses
-from agiprobot_measurement.sensors.laser_line.model import SensorModel
+from agiprobot_measurement.sensors.laser_line.model import MeasurabilityResult, SensorModel
 from agiprobot_measurement.station import PACKAGE_ROOT
 
 CUBE = PACKAGE_ROOT / "parts" / "objectA_wuerfel.stl"
@@ -57,19 +59,24 @@ def test_culled_and_dense_evaluations_are_identical(pocket_part):
         np.testing.assert_array_equal(getattr(dense, name), getattr(culled, name))
 
 
-def test_stream_is_compact_exact_in_extents_and_independent_of_chunking(pocket_part, monkeypatch):
+def test_stream_is_compact_consistent_in_extents_and_independent_of_chunking(pocket_part, monkeypatch):
     model, poses = pocket_part
     full = model.evaluate_viewpoints_batch(poses, 0.1, 500.0)
     stats = StreamStats()
     store, kept = evaluate_streaming(model, poses, 0.1, 500.0, stats=stats, settings=EvaluationSettings(compact=True))
     np.testing.assert_array_equal(kept, np.flatnonzero(full.counts > 0))
+    assert stats.compact and not stats.drop_dominated
     assert store.point_indices.dtype == np.int32
-    assert store.uncertainties.dtype == np.float32 and store.trajectory_distances.dtype == np.float64
-    # the extents and t0s are the exact float64 ones; the uncertainties float32 roundings of the exact values
-    np.testing.assert_array_equal(store.t0_min, full.t0_min[kept])
-    np.testing.assert_array_equal(store.t0_max, full.t0_max[kept])
+    assert store.uncertainties.dtype == np.float32 and store.trajectory_distances.dtype == np.float32
+    # float32 roundings of the exact values, and each column's t0 range is that of the stored t0s (the scan line's
+    # ends and the partial acceptance then compare the same numbers)
     np.testing.assert_array_equal(store.uncertainties, full.uncertainties.astype(np.float32))
-    np.testing.assert_array_equal(store.trajectory_distances, full.trajectory_distances)
+    np.testing.assert_array_equal(store.trajectory_distances, full.trajectory_distances.astype(np.float32))
+    starts = store.indptr[:-1]
+    np.testing.assert_array_equal(store.t0_min, np.minimum.reduceat(store.trajectory_distances, starts))
+    np.testing.assert_array_equal(store.t0_max, np.maximum.reduceat(store.trajectory_distances, starts))
+    assert store.t0_min.dtype == np.float64
+    np.testing.assert_allclose(store.t0_min, full.t0_min[kept], atol=1e-4)
     assert stats.kept_pairs == full.nnz and stats.kept_views == kept.size
     # the pilot's projection is close to what was kept
     assert stats.projected_pairs == pytest.approx(full.nnz, rel=0.25)
@@ -86,10 +93,15 @@ def test_stream_is_compact_exact_in_extents_and_independent_of_chunking(pocket_p
     np.testing.assert_array_equal(kept_again, kept)
     for name in ("indptr", "point_indices", "uncertainties", "trajectory_distances", "extent_min", "extent_max"):
         np.testing.assert_array_equal(getattr(again, name), getattr(store, name))
-    # the default keeps float64: the exact values
-    exact, _ = evaluate_streaming(model, poses, 0.1, 500.0)
-    assert exact.uncertainties.dtype == np.float64
+    # a store this small keeps float64 by default: the exact values
+    exact, _ = evaluate_streaming(model, poses, 0.1, 500.0, stats=small)
+    assert not small.compact and exact.uncertainties.dtype == np.float64
     np.testing.assert_array_equal(exact.uncertainties, full.uncertainties)
+    np.testing.assert_array_equal(exact.t0_min, full.t0_min[kept])
+    # ... and the compact types above COMPACT_ABOVE_PAIRS projected pairs, decided by the projection alone
+    monkeypatch.setattr(streaming, "COMPACT_ABOVE_PAIRS", 0.5 * full.nnz)
+    auto, _ = evaluate_streaming(model, poses, 0.1, 500.0, stats=small)
+    assert small.compact and auto.trajectory_distances.dtype == np.float32
     # the former API keeps every column, empty ones included
     old = evaluate_in_chunks(model, poses, 0.1, 500.0)
     assert old.n_views == len(poses)
@@ -98,11 +110,96 @@ def test_stream_is_compact_exact_in_extents_and_independent_of_chunking(pocket_p
 
 def test_a_chunk_block_drops_empty_columns_only(pocket_part):
     model, poses = pocket_part
-    block, columns, wall_s = chunk_block(model, poses[:500], 0.1, 500.0, compact=False)
+    block, columns, info = chunk_block(model, poses[:500], 0.1, 500.0, compact=False)
     full = model.evaluate_viewpoints_batch(poses[:500], 0.1, 500.0)
     np.testing.assert_array_equal(columns, np.flatnonzero(full.counts > 0))
     np.testing.assert_array_equal(block.uncertainties, full.uncertainties)
-    assert wall_s > 0
+    assert info["wall_s"] > 0 and info["cpu_s"] > 0 and info["dropped"].size == 0
+
+
+def _point_sets(result):
+    return [set(result.point_indices[result.indptr[j] : result.indptr[j + 1]].tolist()) for j in range(result.n_views)]
+
+
+def test_dominated_columns_are_exactly_the_subsets_and_their_dominators_are_kept():
+    # columns: {0,1,2}, {0,1} (in 0), {3}, {0,1,2} (equal to 0: the first stays), {2,3} , {3} (equal to 2, in 4)
+    sets = [[0, 1, 2], [0, 1], [3], [0, 1, 2], [2, 3], [3]]
+    indptr = np.cumsum([0] + [len(c) for c in sets])
+    ids = np.concatenate(sets).astype(np.int32)
+    result = MeasurabilityResult(5, len(sets), indptr, ids, np.ones(ids.size), np.zeros(ids.size))
+    np.testing.assert_array_equal(dominated_columns(result), [-1, 0, 4, 0, -1, 4])
+
+
+def test_a_redundant_cover_keeps_every_point_measured_k_times_where_it_can(pocket_part):
+    model, poses = pocket_part
+    block, _, _ = chunk_block(model, poses[:600], 0.1, 500.0)
+    total = np.bincount(block.point_indices, minlength=block.n_points)
+    for k in (1, 3):
+        keep = redundant_columns_kept(block, k)
+        assert 0 < keep.sum() < block.n_views
+        entries = np.concatenate(
+            [block.point_indices[block.indptr[j] : block.indptr[j + 1]] for j in np.flatnonzero(keep)]
+        )
+        np.testing.assert_array_equal(np.bincount(entries, minlength=block.n_points) >= np.minimum(total, k), True)
+    reduced, _, info = chunk_block(model, poses[:600], 0.1, 500.0, drop_dominated=True, redundancy=3)
+    assert (info["dominator"] == -1).any() and reduced.n_views < block.n_views
+    assert np.array_equal(np.unique(reduced.point_indices), np.unique(block.point_indices))
+
+
+def test_dropping_dominated_candidates_keeps_the_coverage_and_a_reserve(pocket_part, monkeypatch):
+    model, poses = pocket_part
+    plain, kept = evaluate_streaming(model, poses, 0.1, 500.0, settings=EvaluationSettings(drop_dominated=False))
+    stats = StreamStats()
+    settings = EvaluationSettings(drop_dominated=True, redundancy=0)
+    dropped, kept_dropped = evaluate_streaming(model, poses, 0.1, 500.0, settings=settings, stats=stats)
+    assert stats.drop_dominated and 0 < stats.dropped_views < plain.n_views
+    assert kept_dropped.size + stats.dropped_views == kept.size
+    np.testing.assert_array_equal(np.sort(np.concatenate([kept_dropped, stats.reserve_index])), kept)
+    assert stats.dropped_pairs + dropped.nnz == plain.nnz
+    assert 0 < stats.dominance_kept_share < 1
+    # every dropped candidate's points are all measured by its (kept) dominator; the kept columns are unchanged
+    plain_sets = dict(zip(kept.tolist(), _point_sets(plain), strict=True))
+    kept_sets = dict(zip(kept_dropped.tolist(), _point_sets(dropped), strict=True))
+    for index, by in zip(stats.reserve_index.tolist(), stats.reserve_dominator.tolist(), strict=True):
+        assert by in kept_sets and plain_sets[index] <= kept_sets[by]
+    for index, points in kept_sets.items():
+        assert points == plain_sets[index]
+    # the same points stay coverable
+    np.testing.assert_array_equal(np.unique(dropped.point_indices), np.unique(plain.point_indices))
+    # the reduction works on fixed groups of candidates: other chunk sizes keep the same columns
+    import agiprobot_measurement.planning.streaming as streaming
+
+    monkeypatch.setattr(streaming, "REDUCTION_GROUP_VIEWS", 512)
+    reference, reference_kept = evaluate_streaming(model, poses, 0.1, 500.0, settings=settings)
+    monkeypatch.setattr(streaming, "CHUNK_TARGET_S", 1e-6)
+    small = StreamStats()
+    again, again_kept = evaluate_streaming(model, poses, 0.1, 500.0, settings=settings, stats=small)
+    assert small.chunks > 4 and small.chunk_views % 512 == 0
+    np.testing.assert_array_equal(again_kept, reference_kept)
+    np.testing.assert_array_equal(again.point_indices, reference.point_indices)
+    # by default nothing is dropped when the store fits the budget
+    auto = StreamStats()
+    evaluate_streaming(model, poses, 0.1, 500.0, stats=auto)
+    assert not auto.drop_dominated and auto.dropped_views == 0
+
+
+def test_the_budget_turns_dropping_on_before_it_refuses(pocket_part):
+    model, poses = pocket_part
+    probe = StreamStats()
+    evaluate_streaming(model, poses, 0.1, 500.0, stats=probe, settings=EvaluationSettings(store_headroom=1.0))
+    # a budget between the store with and without the dominated candidates
+    budget = probe.projected_bytes * 0.97
+    stats = StreamStats()
+    evaluate_streaming(
+        model, poses, 0.1, 500.0, stats=stats, settings=EvaluationSettings(max_memory_bytes=budget, store_headroom=1)
+    )
+    assert stats.drop_dominated and stats.dropped_views > 0 and stats.projected_bytes <= budget
+    # a budget dominance alone cannot meet: a redundancy-fold cover, the largest that fits
+    tight = probe.projected_bytes * 0.3
+    evaluate_streaming(
+        model, poses, 0.1, 500.0, stats=stats, settings=EvaluationSettings(max_memory_bytes=tight, store_headroom=1)
+    )
+    assert stats.redundancy > 0 and stats.projected_bytes <= tight and stats.kept_pairs < 0.5 * probe.projected_pairs
 
 
 def test_work_beyond_the_budget_is_refused_with_the_estimate(pocket_part):
