@@ -123,9 +123,12 @@ class Policy:
 
 class OursPolicy(Policy):
     """The report's method in 3D: frontier targets (growth / candidate voxels with the PCA predicted surface),
-    candidate views perpendicular to it filtered by the sphere of visibility, scored by the expected newly seen
-    surface of the predicted-surface model (:func:`~.gains.expected_surface`: Viditelnost = camera and projector
-    rays clear and in range, Kolmost = perpendicularity), times the motion factor Pohyb ``exp(-lambda C)``."""
+    candidate views perpendicular to it filtered by the sphere of visibility, scored by the weighted terms of
+    config/nbv.yaml ``planning.ours_weights`` (each normalised by its best candidate; the default mixes rpg's
+    proximity count with the report's gain), times the motion factor Pohyb ``exp(-lambda C)``. The expected newly
+    seen surface of the predicted-surface model (:func:`~.gains.expected_surface`: camera and projector rays clear
+    and in range, perpendicularity) ranks the fallbacks and drives the stopping rule; it is a score term only when
+    the weights name it (as the only term it chose worse views on the benchmark objects)."""
 
     name = "ours"
     #: the score: each term normalised by its best candidate (config/nbv.yaml planning.ours_weights); the name
