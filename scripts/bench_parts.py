@@ -170,6 +170,8 @@ def run_one(path: str, unit: str, tilt: str, solver: str, time_limit_s: float, s
         tilt_choice=manager.parameters.get("tilt_choice", tilt),
         estimated_execution_s=round(report.estimated_execution_time_s, 2),
         scan_lines_verified=t.get("scan_lines_verified", 0),
+        dropped_dominated=0 if manager.last_stream_stats is None else manager.last_stream_stats.dropped_views,
+        revived_views=manager.revived_views,
         set_cover_rounds=t.get("set_cover_rounds", 0),
         time_s={
             "placement_check": round(t.get("placement_check", 0.0), 3),

@@ -17,9 +17,12 @@ keep float64 exactly as before. ``EvaluationSettings(compact=True/False)`` force
 
 Dominated candidates (:func:`dominated_columns`): a candidate whose measurable points are a subset of another
 candidate's in the same group of :data:`REDUCTION_GROUP_VIEWS` consecutive candidates (the tilts and orientations
-of some twenty neighbouring samples) adds nothing to the coverage. They are dropped (on the workers, per fixed
-group, so the result does not depend on the chunking) only when the budget requires it (the projected store does
-not fit otherwise), or with ``EvaluationSettings(drop_dominated=True)``. If that is not enough (measured: the 1 m^2
+of some twenty neighbouring samples) adds nothing to the coverage while its dominator is executable. They are
+dropped (on the workers, per fixed group, so the result does not depend on the chunking) when the pilot projects
+more than :data:`DROP_DOMINATED_ABOVE_PAIRS` pairs or the budget requires it, or with
+``EvaluationSettings(drop_dominated=True)``; the set cover evaluates a dropped candidate again when the mechanics
+reject or shorten its dominator (``TrajectoryManager`` revives it from the reserve below), so dropping does not
+lose points whose dominator cannot be driven. If that is not enough (measured: the 1 m^2
 panel at tilt full keeps ~80 % of its pairs), the client keeps a ``redundancy``-fold cover
 (:func:`redundant_columns_kept`, the largest of :data:`REDUNDANCY_STEPS` that fits): blocks are committed in
 candidate order, and a candidate is kept while one of its points is measured by fewer than ``redundancy`` kept
@@ -58,6 +61,7 @@ __all__ = [
     "BYTES_PER_KEPT_ENTRY",
     "BYTES_PER_KEPT_VIEW",
     "COMPACT_ABOVE_PAIRS",
+    "DROP_DOMINATED_ABOVE_PAIRS",
     "EvaluationSettings",
     "StreamStats",
     "chunk_block",
@@ -74,6 +78,9 @@ T0_DTYPE = np.float32
 #: a store projected above this many measurable pairs (about 1 GB in float64) is kept in the compact types; the
 #: parts of the benchmarks and tests today (the cube at tilt full: 38 million) stay float64 and keep their plans
 COMPACT_ABOVE_PAIRS = 60e6
+#: a store projected above this many measurable pairs drops dominated candidates (the cube at tilt full: 38 million
+#: pairs, ~70 % of its columns dominated); smaller ones (tilt none on the benchmark parts) keep every candidate
+DROP_DOMINATED_ABOVE_PAIRS = 10e6
 #: a kept measurable pair: point id (int32), uncertainty, t0 (float64; float32 when compact)
 BYTES_PER_KEPT_ENTRY = 4 + 8 + 8
 BYTES_PER_COMPACT_ENTRY = 4 + np.dtype(UNCERTAINTY_DTYPE).itemsize + np.dtype(T0_DTYPE).itemsize
@@ -136,7 +143,7 @@ class EvaluationSettings:
     of an existing Dask scheduler (e.g. ``tcp://host:8786``; overrides ``workers``); ``max_memory_bytes``: the
     budget of this process (None = :func:`default_max_memory_bytes`); ``compact``: float32 uncertainties and t0
     (None = above :data:`COMPACT_ABOVE_PAIRS` projected pairs); ``drop_dominated``: drop dominated candidates
-    (None = when the budget requires it); ``redundancy``: keep per chunk only a ``redundancy``-fold cover of its
+    (None = above :data:`DROP_DOMINATED_ABOVE_PAIRS` projected pairs or when the budget requires it); ``redundancy``: keep per chunk only a ``redundancy``-fold cover of its
     points (:func:`redundant_columns_kept`; None = the largest of :data:`REDUNDANCY_STEPS` the budget allows when
     dropping dominated candidates is not enough, 0 = never); ``store_headroom``: how many times the store must fit the budget
     (:data:`STORE_HEADROOM`; 1 when nothing runs after the evaluation).
@@ -522,8 +529,8 @@ def evaluate_streaming(
     chunk = int(min(max(chunk, MIN_CHUNK_VIEWS), MAX_CHUNK_VIEWS, n))
 
     drop = settings.drop_dominated
-    if drop is None:  # only when the budget requires it: dropping can change the plan
-        drop = stats.projected_bytes > budget
+    if drop is None:  # above the size where the store dominates the memory, or when the budget requires it
+        drop = stats.projected_pairs > DROP_DOMINATED_ABOVE_PAIRS or stats.projected_bytes > budget
     redundancy = int(settings.redundancy or 0)
     if drop or redundancy:
         group = REDUCTION_GROUP_VIEWS

@@ -87,7 +87,7 @@ from agiprobot_measurement.planning.request import (
     estimate_work,
 )
 from agiprobot_measurement.planning.set_cover import SOLVER_TYPES, SetCoverResult, solve_set_cover
-from agiprobot_measurement.planning.streaming import EvaluationSettings, StreamStats, evaluate_streaming
+from agiprobot_measurement.planning.streaming import EvaluationSettings, StreamStats, chunk_block, evaluate_streaming
 from agiprobot_measurement.planning.viewpoint import (
     TILT_MODES,
     ViewPoint,
@@ -300,6 +300,21 @@ def substitute_views(matrix, views: list[ViewPoint], columns: np.ndarray, per_vi
     return c[np.sort(first)]
 
 
+def _views_problem(views: list[ViewPoint], n_points: int, only_verified: bool):
+    """The coverage problem (points x views boolean CSC matrix, worst uncertainty, duration s) of views that are
+    not columns of the store, from their own measurements."""
+    usable = [v.mechanics_valid and not (only_verified and v.mechanics_verified is False) for v in views]
+    indices = [v.measurable_indices if ok else np.zeros(0, np.int64) for v, ok in zip(views, usable, strict=True)]
+    values = [v.measurable_uncertainties if ok else np.zeros(0) for v, ok in zip(views, usable, strict=True)]
+    indptr = np.zeros(len(views) + 1, dtype=np.int64)
+    np.cumsum([len(i) for i in indices], out=indptr[1:])
+    rows = np.concatenate(indices) if indices else np.zeros(0, dtype=np.int64)
+    matrix = scipy.sparse.csc_matrix((np.ones(rows.size, dtype=bool), rows, indptr), shape=(n_points, len(views)))
+    worst = _segment_max(np.concatenate(values) if values else np.zeros(0), indptr)
+    durations = np.array([1.0 if v.estimated_duration_s is None else v.estimated_duration_s for v in views])
+    return matrix, worst, durations
+
+
 #: progress callback: (stage, fraction done 0..1, message)
 ProgressCallback = Callable[[str, float, str], None]
 
@@ -389,6 +404,14 @@ class TrajectoryManager:
         self.time_limit_hit = False
         self._generation_views: list[ViewPoint] | None = None
         self._duration_bias = 1.0
+        # dropped (dominated) candidates: candidate indices, the store column of each one's dominator (-1: none),
+        # whether each was evaluated again, and which store columns were looked at for revival
+        self._reserve_candidates = np.zeros(0, dtype=np.int64)
+        self._reserve_dominator_column = np.zeros(0, dtype=np.int64)
+        self._reserve_revived = np.zeros(0, dtype=bool)
+        self._revival_checked = np.zeros(0, dtype=bool)
+        self._evaluation_limits: tuple[float, float] = (0.0, 0.0)
+        self.revived_views = 0
         # mechanics settings used by the lazy verification (set by generate_samples_and_viewpoints)
         self._mechanics = {
             "minimum_required_overmeasure": 5.0,
@@ -629,18 +652,23 @@ class TrajectoryManager:
             stats=stats,
         )
         self.last_stream_stats = stats
+        allowed = None
         if viewpoint_tilt_mode == "limited":
             valid_all = np.zeros(len(candidates.poses), dtype=bool)
             valid_all[index[useful_index]] = True
             keep_all = select_limited_tilt(
                 valid_all, candidates.sample_index, candidates.orientation_index, candidates.tilt_index
             )
+            allowed = keep_all
             chosen = np.flatnonzero(keep_all[index[useful_index]])
             if chosen.size < result.n_views:
                 result = _select_columns(result, chosen)
                 useful_index = useful_index[chosen]
         timings["metrology"] = time.perf_counter() - t2
         kept = index[useful_index]
+        self._keep_reserve(stats, index, useful_index, allowed)
+        self._evaluation_limits = (float(threshold), float(maximum_deflection))
+        self.revived_views = 0
         self._report("metrology", 1.0, f"{kept.size} viewpoints measure something")
         t3 = time.perf_counter()
         # the views hold slices of the store's arrays (no per-view copies); the set cover's matrix is built from
@@ -680,7 +708,9 @@ class TrajectoryManager:
             view.mechanics_verified = False
             view.mechanics_valid = True
             view.estimated_duration_s = float(self._durations[j])
-        self._generation_views = views
+        # a copy: revived views join last_viewpoints, not the store's columns
+        self._generation_views = list(views)
+        self._revival_checked = np.zeros(len(views), dtype=bool)
         timings["viewpoint_objects"] = time.perf_counter() - t3
         self.last_viewpoints = views
         if not views:
@@ -734,6 +764,85 @@ class TrajectoryManager:
             plan_path_to_check_reachability=self._mechanics["plan_path_to_check_reachability"],
         )
         return self._verify_mechanics(viewpoint, settings)
+
+    def _keep_reserve(self, stats: StreamStats, index: np.ndarray, useful_index: np.ndarray, allowed) -> None:
+        """Remember the dominated candidates the evaluation dropped, each with its dominator's store column.
+
+        ``index``: the candidate index of each evaluated pose; ``useful_index``: the evaluated poses kept as store
+        columns (ascending); ``allowed``: a mask of the candidates the tilt mode may use (None = all). The
+        redundancy cover's drops (no dominator) are not revived: they exist only when the budget requires them.
+        """
+        dropped = np.zeros(0, dtype=np.int64) if stats.reserve_index is None else stats.reserve_index
+        by = np.zeros(0, dtype=np.int64) if stats.reserve_dominator is None else stats.reserve_dominator
+        column = np.searchsorted(useful_index, np.maximum(by, 0))
+        found = (by >= 0) & (column < useful_index.size)
+        found[found] &= useful_index[column[found]] == by[found]
+        candidates = index[dropped] if dropped.size else dropped
+        if allowed is not None and candidates.size:
+            found &= allowed[candidates]
+        self._reserve_candidates = candidates[found]
+        self._reserve_dominator_column = column[found].astype(np.int64)
+        self._reserve_revived = np.zeros(self._reserve_candidates.size, dtype=bool)
+
+    def _revive_dominated(self) -> list[ViewPoint]:
+        """Evaluate again the dropped candidates whose dominator the mechanics rejected or shortened since the
+        last call, and return the new (unverified) views of those that measure something.
+
+        A dominated candidate measures a subset of its dominator's points, so it adds nothing while the
+        dominator is executable; when the dominator's scan line cannot be driven (or only part of it), the
+        dominated one may be, and without it its points would be lost. The new views are not columns of the
+        store (their arrays are their own), and are added to :attr:`last_viewpoints`.
+        """
+        views = self._generation_views
+        if not self._reserve_candidates.size or not views or self.measurability is None:
+            return []
+        store = self.measurability
+        verified = np.fromiter((v.mechanics_verified is True for v in views), dtype=bool, count=len(views))
+        candidates = verified & ~self._revival_checked
+        if not candidates.any():
+            return []
+        invalid = np.fromiter((not v.mechanics_valid for v in views), dtype=bool, count=len(views))
+        shortened = _segment_counts(self._entry_alive, store.indptr) < np.diff(store.indptr)
+        failed = candidates & (invalid | shortened)
+        self._revival_checked |= candidates
+        pick = np.flatnonzero(failed[self._reserve_dominator_column] & ~self._reserve_revived)
+        if pick.size == 0:
+            return []
+        self._reserve_revived[pick] = True
+        started = time.perf_counter()
+        chosen = self._reserve_candidates[pick]
+        threshold, deflection = self._evaluation_limits
+        block, columns, _ = chunk_block(self.sensor_model, self.candidates.poses[chosen], threshold, deflection)
+        revived = build_viewpoints(
+            self.candidates,
+            self.samples.points,
+            self.samples.normals,
+            int(self.parameters["orientations_around_boresight"]),
+            self.parameters["viewpoint_tilt_mode"],
+            self.sensor_model,
+            selection=chosen[columns],
+        )
+        lo, hi = scan_line_extents(
+            block.t0_min,
+            block.t0_max,
+            self._mechanics["minimum_required_overmeasure"],
+            self._mechanics["minimum_trajectory_length"],
+        )
+        for j, view in enumerate(revived):
+            a, b = block.indptr[j], block.indptr[j + 1]
+            view.attach_measurements(
+                block.point_indices[a:b], block.uncertainties[a:b], block.trajectory_distances[a:b]
+            )
+            view.coverage_column = None
+            view.scan_line = (float(lo[j]), float(hi[j]))
+            view.mechanics_verified = False
+            view.mechanics_valid = True
+            view.estimated_duration_s = float(estimate_scan_duration((lo[j], hi[j]), self.scan_speed_mm_s))
+        self.last_viewpoints.extend(revived)
+        self.revived_views += len(revived)
+        self.timings_s["revival"] = self.timings_s.get("revival", 0.0) + time.perf_counter() - started
+        LOG.debug("revived %d dominated candidates of %d failed views", len(revived), int(failed.sum()))
+        return revived
 
     def _column_range(self, view: ViewPoint):
         """The view's entry range in the generation's coverage store, or None for a foreign view."""
@@ -974,7 +1083,7 @@ class TrajectoryManager:
                         if views[j].mechanics_verified is False:
                             self._verify_mechanics(views[j], time_parameterize=not defer_trajectories)
                             verified_count += 1
-                    pool = np.union1d(columns, open_columns)
+                    pool = np.union1d(np.union1d(columns, open_columns), self._revive_in(views, provided))
                     continue
                 message = (
                     f"set cover: the gap holds for a candidate pool of {columns.size} of {len(views)} views (no "
@@ -1034,9 +1143,10 @@ class TrajectoryManager:
                         min(1.0, verified_count / (verified_count + 10)),
                         f"verified {verified_count} scan lines",
                     )
+            revived = self._revive_in(views, provided)
             verified_columns = np.flatnonzero([v.mechanics_verified is True and v.mechanics_valid for v in views])
             previous = np.zeros(0, dtype=np.int64) if pool is None else pool
-            extra_columns = [result.selected, verified_columns, previous]
+            extra_columns = [result.selected, verified_columns, previous, revived]
             if likely is not None:
                 # the most likely only: without a finished reduction (tilt full, a loaded machine) the list is
                 # every column, and a pool of all columns makes every round a full solve
@@ -1088,6 +1198,15 @@ class TrajectoryManager:
         self._report("set cover", 1.0, f"{len(chosen)} views cover {int(result.covered.sum())} points")
         return set(chosen)
 
+    def _revive_in(self, views: list[ViewPoint], provided: set) -> np.ndarray:
+        """Append to ``views`` (and to the ids in ``provided``) the dominated candidates revived for the views
+        the mechanics failed (:meth:`_revive_dominated`); returns their columns."""
+        revived = self._revive_dominated()
+        start = len(views)
+        views.extend(revived)
+        provided.update(id(v) for v in revived)
+        return np.arange(start, len(views), dtype=np.int64)
+
     def _coverage_problem(self, views: list[ViewPoint], n_points: int, only_verified: bool = False):
         """(points x views boolean CSC matrix of the measurable entries, per-view worst uncertainty, per-view
         durations in s) for the set cover. Rejected views have empty columns, shortened ones only their
@@ -1099,46 +1218,54 @@ class TrajectoryManager:
         allocation of the whole plan.
         """
         store = self.measurability
-        columns = [v.coverage_column for v in views]
-        from_store = store is not None and all(
-            c is not None and c < store.n_views and self._generation_views[c] is v
-            for c, v in zip(columns, views, strict=True)
+        generation = self._generation_views
+        in_store = np.array(
+            [
+                store is not None
+                and v.coverage_column is not None
+                and v.coverage_column < store.n_views
+                and generation[v.coverage_column] is v
+                for v in views
+            ],
+            dtype=bool,
         )
-        if from_store:
-            columns = np.asarray(columns, dtype=np.int64)
-            alive = self._entry_alive
-            if only_verified:
-                verified_store = np.zeros(store.n_views, dtype=bool)
-                verified_store[columns[[v.mechanics_verified is not False for v in views]]] = True
-                alive = alive & np.repeat(verified_store, np.diff(store.indptr))
-            counts = _segment_counts(alive, store.indptr)
-            indptr = np.zeros(store.n_views + 1, dtype=np.int64)
-            np.cumsum(counts, out=indptr[1:])
-            matrix = scipy.sparse.csc_matrix(
-                (np.ones(int(indptr[-1]), dtype=bool), store.point_indices[alive], indptr),
-                shape=(store.n_points, store.n_views),
-            )
-            worst = _segment_max(store.uncertainties[alive], indptr)
-            if len(columns) != store.n_views or np.any(columns != np.arange(store.n_views)):
-                matrix, worst = matrix[:, columns], worst[columns]
-            durations = np.where(self._duration_verified, self._durations, self._durations * self._duration_bias)[
-                columns
-            ]
+        if store is not None and in_store.all():
+            matrix, worst, durations = self._store_problem(views, only_verified)
+        elif not in_store.any():
+            matrix, worst, durations = _views_problem(views, n_points, only_verified)
         else:
-            usable = [v.mechanics_valid and not (only_verified and v.mechanics_verified is False) for v in views]
-            indices = [
-                v.measurable_indices if ok else np.zeros(0, np.int64) for v, ok in zip(views, usable, strict=True)
-            ]
-            values = [v.measurable_uncertainties if ok else np.zeros(0) for v, ok in zip(views, usable, strict=True)]
-            indptr = np.zeros(len(views) + 1, dtype=np.int64)
-            np.cumsum([len(i) for i in indices], out=indptr[1:])
-            rows = np.concatenate(indices) if indices else np.zeros(0, dtype=np.int64)
-            matrix = scipy.sparse.csc_matrix(
-                (np.ones(rows.size, dtype=bool), rows, indptr), shape=(n_points, len(views))
-            )
-            worst = _segment_max(np.concatenate(values) if values else np.zeros(0), indptr)
-            durations = np.array([1.0 if v.estimated_duration_s is None else v.estimated_duration_s for v in views])
+            # the store's columns and the revived (or foreign) views, then back in the order of ``views``
+            inside, outside = np.flatnonzero(in_store), np.flatnonzero(~in_store)
+            m_in, w_in, d_in = self._store_problem([views[j] for j in inside], only_verified)
+            m_out, w_out, d_out = _views_problem([views[j] for j in outside], m_in.shape[0], only_verified)
+            matrix = scipy.sparse.hstack([m_in, m_out], format="csc")
+            worst, durations = np.concatenate([w_in, w_out]), np.concatenate([d_in, d_out])
+            order = np.argsort(np.concatenate([inside, outside]), kind="stable")
+            if np.any(order != np.arange(order.size)):  # revived views come last in the set cover's list
+                matrix, worst, durations = matrix[:, order], worst[order], durations[order]
         matrix.sort_indices()
+        return matrix, worst, durations
+
+    def _store_problem(self, views: list[ViewPoint], only_verified: bool):
+        """:meth:`_coverage_problem` of views that are all columns of the store."""
+        store = self.measurability
+        columns = np.asarray([v.coverage_column for v in views], dtype=np.int64)
+        alive = self._entry_alive
+        if only_verified:
+            verified_store = np.zeros(store.n_views, dtype=bool)
+            verified_store[columns[[v.mechanics_verified is not False for v in views]]] = True
+            alive = alive & np.repeat(verified_store, np.diff(store.indptr))
+        counts = _segment_counts(alive, store.indptr)
+        indptr = np.zeros(store.n_views + 1, dtype=np.int64)
+        np.cumsum(counts, out=indptr[1:])
+        matrix = scipy.sparse.csc_matrix(
+            (np.ones(int(indptr[-1]), dtype=bool), store.point_indices[alive], indptr),
+            shape=(store.n_points, store.n_views),
+        )
+        worst = _segment_max(store.uncertainties[alive], indptr)
+        if len(columns) != store.n_views or np.any(columns != np.arange(store.n_views)):
+            matrix, worst = matrix[:, columns], worst[columns]
+        durations = np.where(self._duration_verified, self._durations, self._durations * self._duration_bias)[columns]
         return matrix, worst, durations
 
     # ----------------------------------------------------------------------------------- connection
@@ -1248,6 +1375,14 @@ class TrajectoryManager:
                 "mean_uncertainty_mm": round(report.mean_uncertainty_mm, 6),
                 "max_uncertainty_mm": round(report.max_uncertainty_mm, 6),
                 "solver_gap": report.solver_gap,
+            }
+            stats = self.last_stream_stats
+            # dominated candidates dropped at the evaluation, and those evaluated again for failed dominators
+            meta["candidates"] = {
+                "total": report.n_candidates,
+                "measuring": report.n_valid_candidates,
+                "dropped_dominated": 0 if stats is None else int(stats.dropped_views),
+                "revived": int(self.revived_views),
             }
             meta["planning_time_s"] = {k: round(v, 3) for k, v in self.timings_s.items()}
         return meta

@@ -1,0 +1,126 @@
+"""Dominated candidates dropped at the evaluation come back when the mechanics fail their dominator: the reserve
+names each one's dominator, a failed dominator revives exactly its dominated candidates (once), and a plan whose
+dominators cannot be driven covers what the plan without dropping covers."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+import agiprobot_measurement.planning.trajectory_manager as tm
+from agiprobot_measurement.planning.report import point_uncertainties
+from agiprobot_measurement.planning.streaming import chunk_block
+from agiprobot_measurement.station import PACKAGE_ROOT
+
+CUBE = PACKAGE_ROOT / "parts" / "objectA_wuerfel.stl"
+#: the cube at tilt full, coarse: a few hundred samples, ~40,000 candidates
+DENSITY, THRESHOLD_MM, ORIENTATIONS = 0.004, 0.1, 4
+
+
+def _manager(drop: bool) -> tm.TrajectoryManager:
+    manager = tm.TrajectoryManager(seed=1)
+    manager.evaluation = dataclasses.replace(manager.evaluation, drop_dominated=drop)
+    manager.load_target_mesh(str(CUBE))
+    return manager
+
+
+@pytest.fixture(scope="module")
+def dropped_generation():
+    manager = _manager(True)
+    manager.generate_samples_and_viewpoints(DENSITY, THRESHOLD_MM, ORIENTATIONS, "full")
+    return manager
+
+
+def _points(view) -> set:
+    return set(np.asarray(view.measurable_indices).tolist())
+
+
+def test_the_reserve_names_a_dominator_measuring_all_points_of_each_dropped_candidate(dropped_generation):
+    manager = dropped_generation
+    stats = manager.last_stream_stats
+    assert stats.drop_dominated and stats.dropped_views > 0
+    reserve = manager._reserve_candidates
+    assert reserve.size == stats.dropped_views  # every drop here is a dominance drop with its dominator
+    views = manager._generation_views
+    sample = np.linspace(0, reserve.size - 1, min(reserve.size, 200)).astype(int)
+    block, columns, _ = chunk_block(
+        manager.sensor_model, manager.candidates.poses[reserve[sample]], THRESHOLD_MM, 500.0
+    )
+    assert columns.size == sample.size  # a dropped candidate measured something
+    for j, k in enumerate(sample.tolist()):
+        points = set(block.point_indices[block.indptr[j] : block.indptr[j + 1]].tolist())
+        dominator = views[manager._reserve_dominator_column[k]]
+        assert points <= _points(dominator)
+
+
+def test_a_failed_dominator_revives_exactly_its_dominated_candidates_once(dropped_generation):
+    manager = dropped_generation
+    views = manager._generation_views
+    dominators, counts = np.unique(manager._reserve_dominator_column, return_counts=True)
+    column = int(dominators[np.argmax(counts)])
+    view = views[column]
+    a, b = manager.measurability.indptr[column], manager.measurability.indptr[column + 1]
+    assert manager._revive_dominated() == []  # nothing verified yet: nothing to revive
+    view.mechanics_verified, view.mechanics_valid = True, False
+    manager._entry_alive[a:b] = False
+    before = len(manager.last_viewpoints)
+    revived = manager._revive_dominated()
+    expected = manager._reserve_candidates[manager._reserve_dominator_column == column]
+    assert sorted(v.metadata["candidate"] for v in revived) == sorted(expected.tolist())
+    assert len(manager.last_viewpoints) == before + len(revived)
+    for candidate_view in revived:
+        np.testing.assert_allclose(
+            candidate_view.get_anchor_pose(), manager.candidates.poses[candidate_view.metadata["candidate"]], atol=1e-6
+        )
+        assert candidate_view.coverage_column is None and candidate_view.mechanics_verified is False
+        assert 0 < len(_points(candidate_view)) and _points(candidate_view) <= set(
+            manager.measurability.point_indices[a:b].tolist()
+        )
+        lo, hi = candidate_view.scan_line
+        assert lo < hi and candidate_view.estimated_duration_s > 0
+    assert manager._revive_dominated() == []  # the same failure revives nothing twice
+    # the coverage problem takes the store's columns and the revived views together, in the views' order
+    mixed = views[:50] + revived + views[50:100]
+    matrix, worst, _ = manager._coverage_problem(mixed, len(manager.samples))
+    assert matrix.shape == (manager.measurability.n_points, len(mixed))
+    for k, v in enumerate(mixed):
+        rows = set(matrix.indices[matrix.indptr[k] : matrix.indptr[k + 1]].tolist())
+        assert rows == (set() if v is view else _points(v))
+        if rows:
+            assert worst[k] == pytest.approx(float(np.max(v.measurable_uncertainties)))
+
+
+def test_a_plan_whose_dominators_fail_covers_what_the_plan_without_dropping_covers(monkeypatch):
+    """The mechanics reject every view that dominates a dropped candidate (and pass the others as the real
+    check does): with revival the points only those views measured are still covered by the dominated ones."""
+    probe = _manager(True)
+    probe.generate_samples_and_viewpoints(DENSITY, THRESHOLD_MM, ORIENTATIONS, "full")
+    failing = {probe._generation_views[c].metadata["candidate"] for c in np.unique(probe._reserve_dominator_column)}
+    real_check = tm.check_scan_line
+
+    def check(view, *args, **kwargs):
+        if view.metadata.get("candidate") in failing:
+            view.mechanics_verified, view.mechanics_valid = True, False  # as the real check marks a rejection
+            return None
+        return real_check(view, *args, **kwargs)
+
+    monkeypatch.setattr(tm, "check_scan_line", check)
+    covered = {}
+    for name, drop, revive in (("plain", False, True), ("dropped", True, True), ("no revival", True, False)):
+        manager = _manager(drop)
+        if not revive:
+            monkeypatch.setattr(manager, "_revive_dominated", lambda: [])
+        try:
+            ordered = manager.plan(DENSITY, THRESHOLD_MM, ORIENTATIONS, "full", "IP_basic", time_limit_s=240.0)
+        except tm.PlanningError:
+            assert not revive  # without revival every kept view may fail here
+            covered[name] = np.zeros(len(manager.samples), dtype=bool)
+            continue
+        assert not manager.time_limit_hit
+        covered[name] = np.isfinite(point_uncertainties(ordered, len(manager.samples)))
+        if name == "dropped":
+            assert manager.revived_views > 0
+            assert not any(v.metadata["candidate"] in failing for v in ordered)
+    assert covered["dropped"].sum() == covered["plain"].sum()
+    # without revival the points only the failed dominators measured are lost: the test sees the difference
+    assert covered["no revival"].sum() < covered["plain"].sum()
