@@ -120,7 +120,8 @@ def aggregate(runs: list[dict], max_views: int) -> dict:
 
 def self_terminated(summary: dict) -> dict:
     """The run as it would have ended at its stopping rule: the prefix of a budget run up to the view where the rule
-    fired (the loop is deterministic up to there), with the metrics of that prefix. A run whose rule never fired is
+    fired (the views and their measurements are the same up to there; the motions between them may differ, since
+    OMPL's random planner is seeded once per process), with the metrics of that prefix. A run whose rule never fired is
     returned as it is."""
     from agiprobot_measurement.nbv.ground_truth import auc, views_to
 
