@@ -126,11 +126,18 @@ AUTO_SAME_COVERAGE = 0.005
 
 #: an IP solve of one verification round stops after this long (s): its cover only names what to verify next
 ROUND_IP_TIME_S = 2.0
-#: ... and this long on problems of at least LARGE_PROBLEM_VIEWS views (tilt full): there the pool's programmes have
-#: a ~40 % integrality gap, so a round's solve always runs to its limit; 1 s gave the same covers as 2 s on the
-#: cylinder and idler_riser and saved ~25 s on the cylinder
+#: ... and this long on problems of at least LARGE_PROBLEM_VIEWS candidates (tilt full; counted before dominated
+#: ones were dropped): there the pool's programmes have a ~40 % integrality gap, so a round's solve always runs to
+#: its limit; 1 s gave the same covers as 2 s on the cylinder and idler_riser and saved ~25 s on the cylinder
 LARGE_ROUND_IP_TIME_S = 1.0
 LARGE_PROBLEM_VIEWS = 100_000
+#: a round over the candidate pool verifies up to this many of the pool's unverified views at once: the next
+#: solves choose from the pool, so they are final sooner than when a few new picks are verified per round
+POOL_VERIFY_MAX = 3000
+#: the last solve over the verified views, when the rounds left a gap, stops after this long (s): at tilt full its
+#: programme (tens of thousands of verified views) closes little of the gap after the first seconds (cylinder:
+#: 40 s for the same cover)
+POLISH_IP_TIME_S = 15.0
 #: ... and one over all views after this long (s): its reductions name the candidate pool of the next rounds
 FULL_ROUND_IP_TIME_S = 8.0
 #: the set cover loop solves the problem over all views at most this often (the rest over the candidate pool)
@@ -404,12 +411,15 @@ class TrajectoryManager:
         self.time_limit_hit = False
         self._generation_views: list[ViewPoint] | None = None
         self._duration_bias = 1.0
-        # dropped (dominated) candidates: candidate indices, the store column of each one's dominator (-1: none),
-        # whether each was evaluated again, and which store columns were looked at for revival
+        # dropped (dominated) candidates: candidate indices, the store column of each one's dominator, whether each
+        # was evaluated again; which store columns were looked at for revival, and which of them failed
         self._reserve_candidates = np.zeros(0, dtype=np.int64)
         self._reserve_dominator_column = np.zeros(0, dtype=np.int64)
         self._reserve_revived = np.zeros(0, dtype=bool)
         self._revival_checked = np.zeros(0, dtype=bool)
+        self._failed_dominator = np.zeros(0, dtype=bool)
+        # dropped candidates evaluated again but not needed yet: every point they measure has another view
+        self._revival_shelf: list[ViewPoint] = []
         self._evaluation_limits: tuple[float, float] = (0.0, 0.0)
         self.revived_views = 0
         # mechanics settings used by the lazy verification (set by generate_samples_and_viewpoints)
@@ -711,6 +721,8 @@ class TrajectoryManager:
         # a copy: revived views join last_viewpoints, not the store's columns
         self._generation_views = list(views)
         self._revival_checked = np.zeros(len(views), dtype=bool)
+        self._failed_dominator = np.zeros(len(views), dtype=bool)
+        self._revival_shelf = []
         timings["viewpoint_objects"] = time.perf_counter() - t3
         self.last_viewpoints = views
         if not views:
@@ -785,42 +797,65 @@ class TrajectoryManager:
         self._reserve_revived = np.zeros(self._reserve_candidates.size, dtype=bool)
 
     def _revive_dominated(self) -> list[ViewPoint]:
-        """Evaluate again the dropped candidates whose dominator the mechanics rejected or shortened since the
-        last call, and return the new (unverified) views of those that measure something.
+        """Evaluate again the dropped candidates of dominators the mechanics rejected or shortened, and return
+        the new (unverified) views of those that measure a point no other view measures any more.
 
         A dominated candidate measures a subset of its dominator's points, so it adds nothing while the
         dominator is executable; when the dominator's scan line cannot be driven (or only part of it), the
-        dominated one may be, and without it its points would be lost. The new views are not columns of the
-        store (their arrays are their own), and are added to :attr:`last_viewpoints`.
+        dominated one may be. It is needed only for points left without a view that may still be executable (a
+        view not yet verified counts until it fails): the dominated candidates of a failed dominator are
+        evaluated once one of its points is left so, and those of them that measure only points measured
+        elsewhere wait on a shelf until they are needed. The new views are not columns of the store (their
+        arrays are their own), and are added to :attr:`last_viewpoints`.
         """
         views = self._generation_views
         if not self._reserve_candidates.size or not views or self.measurability is None:
             return []
         store = self.measurability
-        verified = np.fromiter((v.mechanics_verified is True for v in views), dtype=bool, count=len(views))
-        candidates = verified & ~self._revival_checked
-        if not candidates.any():
+        newly = np.flatnonzero(~self._revival_checked)
+        if newly.size:
+            newly = newly[[views[j].mechanics_verified is True for j in newly.tolist()]]
+        if newly.size:
+            # rejected, or shortened (a shortened view keeps only the points it still sweeps)
+            failed = [not views[j].mechanics_valid or views[j].measurable_indices.size < store.indptr[j + 1] - store.indptr[j]
+                      for j in newly.tolist()]  # fmt: skip
+            self._failed_dominator[newly[np.asarray(failed, dtype=bool)]] = True
+            self._revival_checked[newly] = True
+        waiting = ~self._reserve_revived & self._failed_dominator[self._reserve_dominator_column]
+        if not waiting.any() and not self._revival_shelf:
             return []
-        invalid = np.fromiter((not v.mechanics_valid for v in views), dtype=bool, count=len(views))
-        shortened = _segment_counts(self._entry_alive, store.indptr) < np.diff(store.indptr)
-        failed = candidates & (invalid | shortened)
-        self._revival_checked |= candidates
-        pick = np.flatnonzero(failed[self._reserve_dominator_column] & ~self._reserve_revived)
-        if pick.size == 0:
-            return []
-        self._reserve_revived[pick] = True
         started = time.perf_counter()
-        chosen = self._reserve_candidates[pick]
+        measured = self._measured_counts()
+        if waiting.any():
+            dominators = np.unique(self._reserve_dominator_column[waiting])
+            needy = dominators[self._has_open_points(dominators, measured)]
+            pick = np.flatnonzero(waiting & np.isin(self._reserve_dominator_column, needy))
+            if pick.size:
+                self._reserve_revived[pick] = True
+                self._revival_shelf.extend(self._evaluate_again(self._reserve_candidates[pick]))
+        revived, shelf = [], []
+        for view in self._revival_shelf:
+            (revived if np.any(measured[view.measurable_indices] == 0) else shelf).append(view)
+        self._revival_shelf = shelf
+        self.last_viewpoints.extend(revived)
+        self.revived_views += len(revived)
+        self.timings_s["revival"] = self.timings_s.get("revival", 0.0) + time.perf_counter() - started
+        if revived:
+            LOG.debug("revived %d dominated candidates (%d wait)", len(revived), len(shelf))
+        return revived
+
+    def _evaluate_again(self, candidates: np.ndarray) -> list[ViewPoint]:
+        """The views (unverified, not store columns) of dropped candidates that measure something."""
         threshold, deflection = self._evaluation_limits
-        block, columns, _ = chunk_block(self.sensor_model, self.candidates.poses[chosen], threshold, deflection)
-        revived = build_viewpoints(
+        block, columns, _ = chunk_block(self.sensor_model, self.candidates.poses[candidates], threshold, deflection)
+        views = build_viewpoints(
             self.candidates,
             self.samples.points,
             self.samples.normals,
             int(self.parameters["orientations_around_boresight"]),
             self.parameters["viewpoint_tilt_mode"],
             self.sensor_model,
-            selection=chosen[columns],
+            selection=candidates[columns],
         )
         lo, hi = scan_line_extents(
             block.t0_min,
@@ -828,7 +863,7 @@ class TrajectoryManager:
             self._mechanics["minimum_required_overmeasure"],
             self._mechanics["minimum_trajectory_length"],
         )
-        for j, view in enumerate(revived):
+        for j, view in enumerate(views):
             a, b = block.indptr[j], block.indptr[j + 1]
             view.attach_measurements(
                 block.point_indices[a:b], block.uncertainties[a:b], block.trajectory_distances[a:b]
@@ -838,11 +873,28 @@ class TrajectoryManager:
             view.mechanics_verified = False
             view.mechanics_valid = True
             view.estimated_duration_s = float(estimate_scan_duration((lo[j], hi[j]), self.scan_speed_mm_s))
-        self.last_viewpoints.extend(revived)
-        self.revived_views += len(revived)
-        self.timings_s["revival"] = self.timings_s.get("revival", 0.0) + time.perf_counter() - started
-        LOG.debug("revived %d dominated candidates of %d failed views", len(revived), int(failed.sum()))
-        return revived
+        return views
+
+    def _measured_counts(self) -> np.ndarray:
+        """Per point, how many views that may still be executable measure it: live store entries and revived
+        views not rejected."""
+        store = self.measurability
+        measured = np.bincount(store.point_indices[self._entry_alive], minlength=store.n_points)
+        for view in self.last_viewpoints[len(self._generation_views) :]:
+            if view.mechanics_valid:
+                measured[np.asarray(view.measurable_indices, dtype=np.int64)] += 1
+        return measured
+
+    def _has_open_points(self, columns: np.ndarray, measured: np.ndarray) -> np.ndarray:
+        """For store columns, whether one of their points (as evaluated, before any shortening) has
+        ``measured == 0``."""
+        store = self.measurability
+        starts, ends = store.indptr[columns], store.indptr[columns + 1]
+        lengths = ends - starts
+        owner = np.repeat(np.arange(columns.size), lengths)
+        entries = np.repeat(starts - np.cumsum(lengths) + lengths, lengths) + np.arange(int(lengths.sum()))
+        open_entry = measured[store.point_indices[entries]] == 0
+        return np.bincount(owner[open_entry], minlength=columns.size) > 0
 
     def _column_range(self, view: ViewPoint):
         """The view's entry range in the generation's coverage store, or None for a foreign view."""
@@ -998,6 +1050,9 @@ class TrajectoryManager:
         full_checked = False
         full_solve_s = 0.0
         best_verified: SetCoverResult | None = None
+        # a round's cover whose picks all verified as executable with their points: the next round takes it as
+        # its (verified) cover instead of solving again, which could pick other, equally good unverified views
+        settled: SetCoverResult | None = None
         full_solves = 0
         for round_index in range(max_rounds + 1):
             rounds_used = round_index + 1
@@ -1024,24 +1079,28 @@ class TrajectoryManager:
                 executable = _executable_columns(views)
                 columns = executable if executable.size else columns
             # a solve over all views names the pool the next rounds choose from: its reductions must finish
-            round_s = LARGE_ROUND_IP_TIME_S if len(views) >= LARGE_PROBLEM_VIEWS else ROUND_IP_TIME_S
+            n_candidates = max(len(views), 0 if self.candidates is None else len(self.candidates.poses))
+            round_s = LARGE_ROUND_IP_TIME_S if n_candidates >= LARGE_PROBLEM_VIEWS else ROUND_IP_TIME_S
             limit = min(time_limit_s, FULL_ROUND_IP_TIME_S if columns.size == len(views) else round_s)
             if math.isfinite(remaining):
                 limit = max(1.0, min(limit, 0.5 * remaining))
             sub = matrix if columns.size == len(views) else matrix[:, columns]
-            result = solve_set_cover(
-                sub,
-                solver_type,
-                uncertainties=worst[columns],
-                durations_s=durations[columns] if solver_type == "IP_time" else None,
-                time_limit_s=limit,
-                mip_gap=mip_gap,
-            )
-            set_cover_time += result.solve_time_s
-            if columns.size == len(views):
-                full_solve_s = result.solve_time_s
-                full_solves += 1
-            result = dataclasses.replace(result, selected=columns[result.selected])
+            if settled is not None and not only_verified:
+                result, settled = settled, None
+            else:
+                result = solve_set_cover(
+                    sub,
+                    solver_type,
+                    uncertainties=worst[columns],
+                    durations_s=durations[columns] if solver_type == "IP_time" else None,
+                    time_limit_s=limit,
+                    mip_gap=mip_gap,
+                )
+                set_cover_time += result.solve_time_s
+                if columns.size == len(views):
+                    full_solve_s = result.solve_time_s
+                    full_solves += 1
+                result = dataclasses.replace(result, selected=columns[result.selected])
             chosen = [views[j] for j in result.selected.tolist()]
             pending = [v for v in chosen if v.mechanics_verified is False]
             if only_verified:
@@ -1083,7 +1142,10 @@ class TrajectoryManager:
                         if views[j].mechanics_verified is False:
                             self._verify_mechanics(views[j], time_parameterize=not defer_trajectories)
                             verified_count += 1
-                    pool = np.union1d(np.union1d(columns, open_columns), self._revive_in(views, provided))
+                    # revived views join the problem, not the pool: they come into it verified, as the open
+                    # points' views (above) or through a solve over all views
+                    self._revive_in(views, provided)
+                    pool = np.union1d(columns, open_columns)
                     continue
                 message = (
                     f"set cover: the gap holds for a candidate pool of {columns.size} of {len(views)} views (no "
@@ -1123,6 +1185,8 @@ class TrajectoryManager:
                 index_of = {id(v): j for j, v in enumerate(views)}
                 picked_columns = np.array([index_of[id(v)] for v in pending], dtype=np.int64)
             batch += [views[j] for j in substitute_views(matrix, views, picked_columns, SUBSTITUTES_PER_VIEW)]
+            if columns.size < len(views):
+                batch += [views[j] for j in columns.tolist() if views[j].mechanics_verified is False][:POOL_VERIFY_MAX]
             batch = list(dict.fromkeys(batch))
             LOG.debug(
                 "set cover round %d: %d of %d columns, %d chosen, %d pending, %d to verify (%s)",
@@ -1143,10 +1207,16 @@ class TrajectoryManager:
                         min(1.0, verified_count / (verified_count + 10)),
                         f"verified {verified_count} scan lines",
                     )
-            revived = self._revive_in(views, provided)
+            if all(v.mechanics_verified is True and v.mechanics_valid for v in chosen):
+                still = np.zeros(result.covered.size, dtype=bool)
+                for view in chosen:
+                    still[np.asarray(view.measurable_indices, dtype=np.int64)] = True
+                if still[result.covered].all():
+                    settled = result
+            self._revive_in(views, provided)  # into the problem, not the pool (see above)
             verified_columns = np.flatnonzero([v.mechanics_verified is True and v.mechanics_valid for v in views])
             previous = np.zeros(0, dtype=np.int64) if pool is None else pool
-            extra_columns = [result.selected, verified_columns, previous, revived]
+            extra_columns = [result.selected, verified_columns, previous]
             if likely is not None:
                 # the most likely only: without a finished reduction (tilt full, a loaded machine) the list is
                 # every column, and a pool of all columns makes every round a full solve
@@ -1169,7 +1239,7 @@ class TrajectoryManager:
                     solver_type,
                     uncertainties=worst[executable],
                     durations_s=durations[executable] if solver_type == "IP_time" else None,
-                    time_limit_s=max(1.0, min(time_limit_s, 0.8 * left)),
+                    time_limit_s=max(1.0, min(time_limit_s, 0.8 * left, POLISH_IP_TIME_S)),
                     mip_gap=mip_gap,
                 )
                 polished = dataclasses.replace(polished, selected=executable[polished.selected])
@@ -1200,7 +1270,9 @@ class TrajectoryManager:
 
     def _revive_in(self, views: list[ViewPoint], provided: set) -> np.ndarray:
         """Append to ``views`` (and to the ids in ``provided``) the dominated candidates revived for the views
-        the mechanics failed (:meth:`_revive_dominated`); returns their columns."""
+        the mechanics failed (:meth:`_revive_dominated`); returns their columns. They are not added to the
+        candidate pool as they come: thousands of unverified views there (most fail like their dominators)
+        would be picked a few per round for many rounds."""
         revived = self._revive_dominated()
         start = len(views)
         views.extend(revived)

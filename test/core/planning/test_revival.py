@@ -1,6 +1,7 @@
 """Dominated candidates dropped at the evaluation come back when the mechanics fail their dominator: the reserve
-names each one's dominator, a failed dominator revives exactly its dominated candidates (once), and a plan whose
-dominators cannot be driven covers what the plan without dropping covers."""
+names each one's dominator, a failed dominator revives exactly its dominated candidates (once, and only when no other
+view measures one of its points), and a plan whose dominators cannot be driven covers what the plan without
+dropping covers."""
 
 import dataclasses
 
@@ -53,18 +54,28 @@ def test_the_reserve_names_a_dominator_measuring_all_points_of_each_dropped_cand
         assert points <= _points(dominator)
 
 
-def test_a_failed_dominator_revives_exactly_its_dominated_candidates_once(dropped_generation):
+def test_a_failed_dominator_revives_its_dominated_candidates_once_when_its_points_are_left_open(dropped_generation):
     manager = dropped_generation
     views = manager._generation_views
+    store = manager.measurability
     dominators, counts = np.unique(manager._reserve_dominator_column, return_counts=True)
     column = int(dominators[np.argmax(counts)])
     view = views[column]
-    a, b = manager.measurability.indptr[column], manager.measurability.indptr[column + 1]
+    a, b = store.indptr[column], store.indptr[column + 1]
+    its_points = store.point_indices[a:b]
     assert manager._revive_dominated() == []  # nothing verified yet: nothing to revive
     view.mechanics_verified, view.mechanics_valid = True, False
     manager._entry_alive[a:b] = False
+    # every point of the failed view is still measured by other views (the cube's are seen from many): the
+    # dominated candidates are not needed yet
+    others = np.isin(store.point_indices, its_points) & manager._entry_alive
+    assert np.all(np.isin(its_points, store.point_indices[others]))
+    assert manager._revive_dominated() == []
+    # the other views of those points fail too (not verified yet, their entries gone): now the points are open
+    manager._entry_alive[others] = False
     before = len(manager.last_viewpoints)
     revived = manager._revive_dominated()
+    manager._entry_alive[others] = True  # back as they were: the rest of the test reads the store's columns
     expected = manager._reserve_candidates[manager._reserve_dominator_column == column]
     assert sorted(v.metadata["candidate"] for v in revived) == sorted(expected.tolist())
     assert len(manager.last_viewpoints) == before + len(revived)
