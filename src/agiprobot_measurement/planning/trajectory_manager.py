@@ -131,8 +131,9 @@ ROUND_IP_TIME_S = 2.0
 #: its limit; 1 s gave the same covers as 2 s on the cylinder and idler_riser and saved ~25 s on the cylinder
 LARGE_ROUND_IP_TIME_S = 1.0
 LARGE_PROBLEM_VIEWS = 100_000
-#: a round over the candidate pool verifies up to this many of the pool's unverified views at once: the next
-#: solves choose from the pool, so they are final sooner than when a few new picks are verified per round
+#: a round over the candidate pool of a large problem verifies up to this many of the pool's unverified views at
+#: once: the next solves choose from the pool, so they are final sooner than when a few new picks are verified per
+#: round (cylinder at tilt full: 22 rounds instead of 28; at tilt none it costs more than the rounds it saves)
 POOL_VERIFY_MAX = 3000
 #: the last solve over the verified views, when the rounds left a gap, stops after this long (s): at tilt full its
 #: programme (tens of thousands of verified views) closes little of the gap after the first seconds (cylinder:
@@ -1185,7 +1186,7 @@ class TrajectoryManager:
                 index_of = {id(v): j for j, v in enumerate(views)}
                 picked_columns = np.array([index_of[id(v)] for v in pending], dtype=np.int64)
             batch += [views[j] for j in substitute_views(matrix, views, picked_columns, SUBSTITUTES_PER_VIEW)]
-            if columns.size < len(views):
+            if columns.size < len(views) and n_candidates >= LARGE_PROBLEM_VIEWS:
                 batch += [views[j] for j in columns.tolist() if views[j].mechanics_verified is False][:POOL_VERIFY_MAX]
             batch = list(dict.fromkeys(batch))
             LOG.debug(
