@@ -323,6 +323,21 @@ def _views_problem(views: list[ViewPoint], n_points: int, only_verified: bool):
     return matrix, worst, durations
 
 
+def _attach_unverified(views: list[ViewPoint], arrays, lo, hi, durations_s, store_columns: bool) -> None:
+    """Give each view its slice of ``arrays`` (the store or an evaluated block: ``indptr``, ``point_indices``,
+    ``uncertainties``, ``trajectory_distances``), its scan line ``(lo, hi)`` (mm) and estimated duration (s), not
+    yet verified; ``store_columns``: the views are the store's columns in order (else they have none)."""
+    indptr = arrays.indptr
+    for j, view in enumerate(views):
+        a, b = indptr[j], indptr[j + 1]
+        view.attach_measurements(arrays.point_indices[a:b], arrays.uncertainties[a:b], arrays.trajectory_distances[a:b])
+        view.coverage_column = j if store_columns else None
+        view.scan_line = (float(lo[j]), float(hi[j]))
+        view.mechanics_verified = False
+        view.mechanics_valid = True
+        view.estimated_duration_s = float(durations_s[j])
+
+
 #: progress callback: (stage, fraction done 0..1, message)
 ProgressCallback = Callable[[str, float, str], None]
 
@@ -684,7 +699,6 @@ class TrajectoryManager:
         t3 = time.perf_counter()
         # the views hold slices of the store's arrays (no per-view copies); the set cover's matrix is built from
         # them directly
-        indptr = result.indptr
         self.measurability = result
         del result
         store = self.measurability
@@ -709,16 +723,7 @@ class TrajectoryManager:
         self._durations_estimate = self._durations.copy()
         self._duration_verified = np.zeros(len(self._durations), dtype=bool)
         self._duration_bias = 1.0
-        for j, view in enumerate(views):
-            a, b = indptr[j], indptr[j + 1]
-            view.attach_measurements(
-                store.point_indices[a:b], store.uncertainties[a:b], store.trajectory_distances[a:b]
-            )
-            view.coverage_column = j
-            view.scan_line = (float(lo[j]), float(hi[j]))
-            view.mechanics_verified = False
-            view.mechanics_valid = True
-            view.estimated_duration_s = float(self._durations[j])
+        _attach_unverified(views, store, lo, hi, self._durations, store_columns=True)
         # a copy: revived views join last_viewpoints, not the store's columns
         self._generation_views = list(views)
         self._revival_checked = np.zeros(len(views), dtype=bool)
@@ -864,16 +869,8 @@ class TrajectoryManager:
             self._mechanics["minimum_required_overmeasure"],
             self._mechanics["minimum_trajectory_length"],
         )
-        for j, view in enumerate(views):
-            a, b = block.indptr[j], block.indptr[j + 1]
-            view.attach_measurements(
-                block.point_indices[a:b], block.uncertainties[a:b], block.trajectory_distances[a:b]
-            )
-            view.coverage_column = None
-            view.scan_line = (float(lo[j]), float(hi[j]))
-            view.mechanics_verified = False
-            view.mechanics_valid = True
-            view.estimated_duration_s = float(estimate_scan_duration((lo[j], hi[j]), self.scan_speed_mm_s))
+        durations = [estimate_scan_duration((a, b), self.scan_speed_mm_s) for a, b in zip(lo, hi, strict=True)]
+        _attach_unverified(views, block, lo, hi, durations, store_columns=False)
         return views
 
     def _measured_counts(self) -> np.ndarray:
