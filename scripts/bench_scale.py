@@ -394,11 +394,14 @@ def report_panel(runs: dict, counts) -> None:
 
 
 def same_digests(results) -> str:
-    groups = {}
+    digests = {}
     for r in results:
         if "digest" in r:
-            groups.setdefault((r["area_m2"], r["tilt"]), set()).add(r["digest"])
-    return "yes" if all(len(d) == 1 for d in groups.values()) else f"NO: {groups}"
+            digests.setdefault((r["area_m2"], r["tilt"]), []).append(r["digest"])
+    compared = {key: set(d) for key, d in digests.items() if len(d) > 1}
+    if not compared:
+        return "not compared (fewer than two configurations finished per panel and tilt)"
+    return "yes" if all(len(d) == 1 for d in compared.values()) else f"NO: {compared}"
 
 
 if __name__ == "__main__":

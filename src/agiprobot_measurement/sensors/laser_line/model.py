@@ -32,6 +32,7 @@ from concurrent.futures import ThreadPoolExecutor
 from contextlib import nullcontext
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 import scipy.sparse
 import trimesh
@@ -268,6 +269,74 @@ class _RayCaster:
             hit_distance = np.einsum("ij,ij->i", loc - origins[ray], directions[ray])
             result[ray] = hit_distance < distances[ray]
         return result
+
+
+@numba.njit(cache=True, nogil=True)
+def _cull_pairs(
+    rot,
+    anchor,
+    center,
+    radius,
+    start,
+    order,
+    point_data,
+    min_standoff,
+    max_standoff,
+    tan_half,
+    deflection,
+    tan_psi,
+    margin,
+):  # pragma: no cover - compiled
+    """(view, point) pairs that may pass the exact tests: cells whose bounding sphere (``radius`` with its
+    margin) meets a view's frustum, then per point the psi limit and the frustum with ``margin`` (mm).
+    ``rot`` (V, 3, 3) columns t, l, s; ``anchor`` (V, 3) mm. View-major; within a view by cell."""
+    n_views, n_cells = rot.shape[0], center.shape[0]
+    reach = np.zeros((n_views, n_cells), np.bool_)
+    bound = 0
+    for v in range(n_views):
+        for c in range(n_cells):
+            dx, dy, dz = center[c, 0] - anchor[v, 0], center[c, 1] - anchor[v, 1], center[c, 2] - anchor[v, 2]
+            qx = rot[v, 0, 0] * dx + rot[v, 1, 0] * dy + rot[v, 2, 0] * dz
+            qy = rot[v, 0, 1] * dx + rot[v, 1, 1] * dy + rot[v, 2, 1] * dz
+            qz = rot[v, 0, 2] * dx + rot[v, 1, 2] * dy + rot[v, 2, 2] * dz
+            r = radius[c]
+            if (
+                abs(qx) <= deflection + r
+                and qz > min_standoff - r
+                and qz < max_standoff + r
+                and abs(qy) <= qz * tan_half + r * (1.0 + tan_half)
+            ):
+                reach[v, c] = True
+                bound += start[c + 1] - start[c]
+    views = np.empty(bound, np.int64)
+    points = np.empty(bound, np.int64)
+    n = 0
+    for v in range(n_views):
+        tx, ty, tz = rot[v, 0, 0], rot[v, 1, 0], rot[v, 2, 0]
+        lx, ly, lz = rot[v, 0, 1], rot[v, 1, 1], rot[v, 2, 1]
+        sx, sy, sz = rot[v, 0, 2], rot[v, 1, 2], rot[v, 2, 2]
+        ax, ay, az = anchor[v, 0], anchor[v, 1], anchor[v, 2]
+        for c in range(n_cells):
+            if not reach[v, c]:
+                continue
+            for k in range(start[c], start[c + 1]):
+                p = order[k]
+                nx, ny, nz = point_data[3, p], point_data[4, p], point_data[5, p]
+                ns = nx * sx + ny * sy + nz * sz
+                if not abs(nx * tx + ny * ty + nz * tz) < -ns * tan_psi + 1e-9:
+                    continue
+                dx, dy, dz = point_data[0, p] - ax, point_data[1, p] - ay, point_data[2, p] - az
+                pz = dx * sx + dy * sy + dz * sz
+                if not (pz > min_standoff - margin and pz < max_standoff + margin):
+                    continue
+                if not abs(dx * lx + dy * ly + dz * lz) <= pz * tan_half + margin:
+                    continue
+                if not abs(dx * tx + dy * ty + dz * tz) <= deflection + margin:
+                    continue
+                views[n] = v
+                points[n] = p
+                n += 1
+    return views[:n], points[:n]
 
 
 @dataclass(frozen=True)
@@ -699,41 +768,21 @@ class SensorModel:
 
     def _cell_pairs(self, poses, view_data, ctx, cells, deflection, max_pairs):
         """Candidate (view, point) pairs of a chunk from the cells each view's frustum may reach, in groups of
-        at most about ``max_pairs``: a superset of the exact tests (conservative for a cell's bounding sphere,
-        then the frustum and psi limits per pair with small margins). Yields (view indices, point indices)."""
-        rot = poses[:, :3, :3]
-        local = np.einsum("vji,vcj->vci", rot, cells.center[None, :, :] - poses[:, None, :3, 3])
-        qx, qy, qz = local[..., 0], local[..., 1], local[..., 2]
-        r = cells.radius[None, :] + 1e-6 * (self.maximum_standoff + deflection) + 1e-3
-        tan_half = self._tan_half_fan
-        mask = np.abs(qx) <= deflection + r
-        mask &= qz > self.minimum_standoff - r
-        mask &= qz < self.maximum_standoff + r
-        mask &= np.abs(qy) <= qz * tan_half + r * (1.0 + tan_half)
-        vc, cc = np.nonzero(mask)
-        sizes = cells.sizes[cc]
-        bounds = np.searchsorted(np.cumsum(sizes), np.arange(max_pairs, int(sizes.sum()), max_pairs))
-        tan_psi = math.tan(self.psi_max)
-        for group in np.split(np.arange(vc.size), bounds):
-            if group.size == 0:
-                continue
-            lengths = sizes[group]
-            first = cells.start[cc[group]]
-            offsets = np.cumsum(lengths) - lengths
-            vi = np.repeat(vc[group], lengths)
-            pi = cells.order[np.repeat(first - offsets, lengths) + np.arange(int(lengths.sum()))]
-            tx, ty, tz, lx, ly, lz, sx, sy, sz, ax, ay, az = np.take(view_data, vi, axis=1)
-            px, py, pz, nx, ny, nz = np.take(ctx.point_data, pi, axis=1)
-            dx, dy, dz = px - ax, py - ay, pz - az
-            margin = 1e-6 * (self.maximum_standoff + deflection) + 1e-6
-            ns = nx * sx + ny * sy + nz * sz
-            keep = np.abs(nx * tx + ny * ty + nz * tz) < -ns * tan_psi + 1e-9
-            pz_local = dx * sx + dy * sy + dz * sz
-            keep &= pz_local > self.minimum_standoff - margin
-            keep &= pz_local < self.maximum_standoff + margin
-            keep &= np.abs(dx * lx + dy * ly + dz * lz) <= pz_local * tan_half + margin
-            keep &= np.abs(dx * tx + dy * ty + dz * tz) <= deflection + margin
-            yield vi[keep], pi[keep]
+        at most ``max_pairs``: a superset of the exact tests (conservative for a cell's bounding sphere, then the
+        frustum and psi limits per pair with small margins). Yields (view indices, point indices).
+
+        One compiled pass (:func:`_cull_pairs`): the dense (view x cell) and (view x pair) temporaries of an
+        array formulation made the evaluation memory-bound, so two workers on one machine slowed each other."""
+        del view_data  # the kernel reads the poses directly
+        margin = 1e-6 * (self.maximum_standoff + deflection) + 1e-6
+        vi, pi = _cull_pairs(
+            np.ascontiguousarray(poses[:, :3, :3]), np.ascontiguousarray(poses[:, :3, 3]), cells.center,
+            cells.radius + (1e-6 * (self.maximum_standoff + deflection) + 1e-3), cells.start, cells.order,
+            ctx.point_data, float(self.minimum_standoff), float(self.maximum_standoff), float(self._tan_half_fan),
+            float(deflection), math.tan(self.psi_max), margin,
+        )  # fmt: skip
+        for at in range(0, vi.size, max(int(max_pairs), 1)):
+            yield vi[at : at + max_pairs], pi[at : at + max_pairs]
 
     def _evaluate_pairs(self, view_data, ctx, vi, pi, threshold, deflection):
         """Exact float64 tests and ray casts of candidate pairs. Returns (keep mask, u, t0) of the kept.
