@@ -99,6 +99,16 @@ class Policy:
         limit_evaluated(cands, targets, r.max_evaluated, r.rng)
         return cands, targets
 
+    def feasible_pool(self, q: np.ndarray):
+        """(candidates, stats) of the pool at joints ``q``; the candidates are None (and the pool remembered
+        without utilities) when none is feasible."""
+        cands, _ = self.pool(q)
+        stats = self.stats(cands)
+        if not cands.feasible.any():
+            self.remember(cands, None)
+            return None, stats
+        return cands, stats
+
     def stats(self, cands) -> dict:
         return {"total": cands.total, "feasible": int(cands.feasible.sum()), "rejections": cands.rejections()}
 
@@ -152,10 +162,8 @@ class OursPolicy(Policy):
         from agiprobot_measurement.nbv.gains import expected_surface
 
         r = self.recon
-        cands, _ = self.pool(q)
-        stats = self.stats(cands)
-        if not cands.feasible.any():
-            self.remember(cands, None)
+        cands, stats = self.feasible_pool(q)
+        if cands is None:
             return None, "frontier_exhausted", stats
         idx = np.nonzero(cands.feasible)[0]
         exp_gain, exp_area = expected_surface(r.planning_map, cands.poses[idx], r.view_model, self.model)
@@ -192,10 +200,8 @@ class MetricPolicy(Policy):
         from agiprobot_measurement.nbv.gains import utility
 
         r = self.recon
-        cands, _ = self.pool(q)
-        stats = self.stats(cands)
-        if not cands.feasible.any():
-            self.remember(cands, None)
+        cands, stats = self.feasible_pool(q)
+        if cands is None:
             return None, "frontier_exhausted", stats
         g, idx = r.evaluate(cands, self.name)
         cost = _motion_cost(r, q, cands.joints[idx])

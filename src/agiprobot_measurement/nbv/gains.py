@@ -182,6 +182,26 @@ def camera_ray_directions(view: ViewModel) -> np.ndarray:
     return _pinhole_dirs(view.fov_h_rad, view.fov_v_rad, view.rays_h, view.rays_v)
 
 
+def _sensor_arguments(poses: np.ndarray, view: ViewModel) -> tuple:
+    """The kernels' leading arguments: camera poses (V, 4, 4), camera ray directions, and the projector (offset,
+    rotation, shadow-map ray directions, their grid size and half-angle tangents)."""
+    return (
+        np.ascontiguousarray(poses),
+        np.ascontiguousarray(camera_ray_directions(view)),
+        view.projector_offset_m,
+        np.ascontiguousarray(view.projector_rotation),
+        np.ascontiguousarray(
+            _pinhole_dirs(
+                view.projector_fov_h_rad, view.projector_fov_v_rad, view.projector_rays_h, view.projector_rays_v
+            )
+        ),
+        int(view.projector_rays_h),
+        int(view.projector_rays_v),
+        math.tan(0.5 * view.projector_fov_h_rad),
+        math.tan(0.5 * view.projector_fov_v_rad),
+    )
+
+
 @dataclass
 class ViewGains:
     """Gains of V views: ``gain`` (V,) the chosen metric, ``new_surface_area_m2`` (V,) expected newly seen surface
@@ -290,23 +310,13 @@ def evaluate_views(
         empty = np.zeros(0)
         return ViewGains(empty, empty.copy(), np.zeros(0, dtype=np.int64), {name: empty.copy() for name in GAIN_NAMES})
     state, blocked, prob, ent, flags, normals, pc_value = _gain_fields(grid, max_dist)
-    proj_dirs = _pinhole_dirs(
-        view.projector_fov_h_rad, view.projector_fov_v_rad, view.projector_rays_h, view.projector_rays_v
-    )
     nx, ny, nz = grid.shape
     parallel = rc.parallel_allowed()
     n_chunks = max(1, min(numba.get_num_threads(), n_views)) if parallel else 1
     kernel = rc.evaluate_bundle if parallel else rc.evaluate_bundle_serial
     gains, new_vox, visible = kernel(
-        np.ascontiguousarray(poses),
-        np.ascontiguousarray(camera_ray_directions(view)),
-        view.projector_offset_m,
-        np.ascontiguousarray(view.projector_rotation),
-        np.ascontiguousarray(proj_dirs),
-        int(view.projector_rays_h),
-        int(view.projector_rays_v),
-        math.tan(0.5 * view.projector_fov_h_rad),
-        math.tan(0.5 * view.projector_fov_v_rad),
+        n_chunks,
+        *_sensor_arguments(poses, view),
         state,
         blocked,
         prob,
@@ -326,7 +336,6 @@ def evaluate_views(
         w,
         AREA_FACTOR_OCCUPIED_DESIRED,
         AREA_FACTOR_OCCPLANE_DESIRED,
-        n_chunks,
     )
     all_gains = {name: gains[:, i].copy() for i, name in enumerate(GAIN_NAMES)}
     return ViewGains(
@@ -555,23 +564,13 @@ def expected_surface(
         return np.zeros(0), np.zeros(0)
     weight, normals = expected_surface_fields(grid, model)
     blocked = (grid.labels() == FULL).reshape(-1).astype(np.uint8)
-    proj_dirs = _pinhole_dirs(
-        view.projector_fov_h_rad, view.projector_fov_v_rad, view.projector_rays_h, view.projector_rays_v
-    )
     nx, ny, nz = grid.shape
     parallel = rc.parallel_allowed()
     n_chunks = max(1, min(numba.get_num_threads(), len(poses))) if parallel else 1
     kernel = rc.expected_surface_bundle if parallel else rc.expected_surface_bundle_serial
     gain, vox = kernel(
-        np.ascontiguousarray(poses),
-        np.ascontiguousarray(camera_ray_directions(view)),
-        view.projector_offset_m,
-        np.ascontiguousarray(view.projector_rotation),
-        np.ascontiguousarray(proj_dirs),
-        int(view.projector_rays_h),
-        int(view.projector_rays_v),
-        math.tan(0.5 * view.projector_fov_h_rad),
-        math.tan(0.5 * view.projector_fov_v_rad),
+        n_chunks,
+        *_sensor_arguments(poses, view),
         blocked,
         weight,
         normals,
@@ -584,6 +583,5 @@ def expected_surface(
         float(view.range_max_m),
         math.cos(view.max_incidence_rad),
         float(model.kolmost_weight),
-        n_chunks,
     )
     return gain, vox * grid.resolution_m**2

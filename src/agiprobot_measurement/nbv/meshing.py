@@ -19,7 +19,7 @@ import numba
 import numpy as np
 
 from agiprobot_measurement.errors import InputError
-from agiprobot_measurement.nbv.raycast3d import parallel_allowed
+from agiprobot_measurement.nbv.raycast3d import parallel_allowed, threaded_and_serial
 
 __all__ = ["TSDFVolume"]
 
@@ -65,8 +65,7 @@ def _integrate_slab(i, tsdf, weight, origin, voxel, depth, fx, fy, cx, cy, rot_w
     return count
 
 
-@numba.njit(cache=True, parallel=True)
-def _integrate_projective(tsdf, weight, origin, voxel, depth, fx, fy, cx, cy, rot_wc, trans_wc, truncation):
+def _integrate_projective_slabs(tsdf, weight, origin, voxel, depth, fx, fy, cx, cy, rot_wc, trans_wc, truncation):
     """Fuse one depth image (H, W, z-depth in m, 0 = invalid) seen from camera pose world <- camera (R, t)."""
     nx = tsdf.shape[0]
     updated = np.zeros(nx, dtype=np.int64)
@@ -77,13 +76,7 @@ def _integrate_projective(tsdf, weight, origin, voxel, depth, fx, fy, cx, cy, ro
     return updated.sum()
 
 
-@numba.njit(cache=True)
-def _integrate_projective_serial(tsdf, weight, origin, voxel, depth, fx, fy, cx, cy, rot_wc, trans_wc, truncation):
-    """:func:`_integrate_projective` without threads (forked child processes)."""
-    total = 0
-    for i in range(tsdf.shape[0]):
-        total += _integrate_slab(i, tsdf, weight, origin, voxel, depth, fx, fy, cx, cy, rot_wc, trans_wc, truncation)
-    return total
+_integrate_projective, _integrate_projective_serial = threaded_and_serial(_integrate_projective_slabs)
 
 
 def _vector3(value, name: str) -> np.ndarray:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import os
+import types
 
 import numba
 import numpy as np
@@ -28,6 +29,7 @@ __all__ = [
     "parallel_allowed",
     "pool_max",
     "pool_sum",
+    "threaded_and_serial",
     "traverse",
 ]
 
@@ -185,8 +187,7 @@ def _apply_marks(start, stop, log_odds, observed, mark, l_hit, l_miss, l_min, l_
     return n_free, n_hit
 
 
-@numba.njit(cache=True, parallel=True)
-def fuse_frame(
+def _fuse_frame(
     log_odds,
     observed,
     hits,
@@ -237,33 +238,6 @@ def fuse_frame(
     return n_free, n_hit
 
 
-@numba.njit(cache=True)
-def fuse_frame_serial(
-    log_odds,
-    observed,
-    hits,
-    normal_sum,
-    static,
-    mark,
-    origin_g,
-    points_g,
-    normals,
-    kept,
-    end_flat,
-    nx,
-    ny,
-    nz,
-    l_hit,
-    l_miss,
-    l_min,
-    l_max,
-):
-    """:func:`fuse_frame` without threads (for a forked child process, where GNU OpenMP must not run)."""
-    _mark_hits(hits, normal_sum, mark, normals, kept, end_flat)
-    _carve_rays(0, points_g.shape[0], static, mark, origin_g, points_g, end_flat, nx, ny, nz)
-    return _apply_marks(0, nx * ny * nz, log_odds, observed, mark, l_hit, l_miss, l_min, l_max)
-
-
 def parallel_allowed() -> bool:
     """Whether this process may run the threaded (GNU OpenMP) kernels: not in a child forked from a process that
     imported this module (OpenMP is not fork-safe; numba would terminate the child), e.g. a fork-started process
@@ -280,6 +254,22 @@ def _after_fork_in_child() -> None:
 
 
 os.register_at_fork(after_in_child=_after_fork_in_child)
+
+
+def threaded_and_serial(py_func):
+    """Compile ``py_func`` (its loop over chunks written with ``numba.prange``) twice: threaded, and serial for the
+    processes :func:`parallel_allowed` refuses (numba runs ``prange`` as ``range`` there). Returns ``(threaded,
+    serial)``. The serial copy has a name of its own, so numba's on-disk cache keeps the two compilations apart."""
+    serial = types.FunctionType(
+        py_func.__code__, py_func.__globals__, py_func.__name__ + "_serial", py_func.__defaults__, py_func.__closure__
+    )
+    serial.__qualname__ = py_func.__qualname__ + "_serial"
+    serial.__module__ = py_func.__module__
+    serial.__doc__ = f"The serial compilation of :func:`{py_func.__qualname__}` (for a forked child process)."
+    return numba.njit(cache=True, parallel=True)(py_func), numba.njit(cache=True)(serial)
+
+
+fuse_frame, fuse_frame_serial = threaded_and_serial(_fuse_frame)
 
 
 @numba.njit(cache=True)
@@ -662,38 +652,7 @@ def _evaluate_chunk(
         visible[v] = n_vis
 
 
-@numba.njit(cache=True, parallel=True)
-def evaluate_bundle(
-    poses,
-    cam_dirs,
-    proj_offset,
-    proj_rot,
-    proj_dirs,
-    proj_w,
-    proj_h,
-    proj_tan_h,
-    proj_tan_v,
-    state,
-    blocked,
-    prob,
-    entropy,
-    flags,
-    normals,
-    pc_value,
-    origin,
-    res,
-    nx,
-    ny,
-    nz,
-    range_min,
-    range_max,
-    cos_max_incidence,
-    rpg_compat,
-    kolmost_weight,
-    af_occupied_des,
-    af_occplane_des,
-    n_chunks,
-):
+def _evaluate_bundle(n_chunks, *scene):
     """All gains of many camera poses by a ray bundle on a dense grid (flat arrays, see ``gains.py``).
 
     ``poses`` (V, 4, 4) world <- camera (z optical axis); ``cam_dirs`` (R, 3) unit ray directions in the camera
@@ -706,125 +665,19 @@ def evaluate_bundle(
     ``H(prob)`` per voxel. Each voxel contributes once per view to the sum metrics. Visibility along a ray is
     ``prod(1 - p)`` over the voxels before (the paper) or ``prod(p)`` with ``rpg_compat`` (the rpg code).
 
-    Returns ``(gains (V, N_GAINS), new_surface_voxels (V,), visible_voxels (V,))``.
+    ``scene``: the arguments of :func:`_evaluate_chunk` after its outputs, ``poses`` first; ``n_chunks``: the
+    threads' shares of the views. Returns ``(gains (V, N_GAINS), new_surface_voxels (V,), visible_voxels (V,))``.
     """
-    n_views = poses.shape[0]
+    n_views = scene[0].shape[0]
     gains = np.zeros((n_views, N_GAINS))
     new_surface = np.zeros(n_views, dtype=np.int64)
     visible = np.zeros(n_views, dtype=np.int64)
     for c in numba.prange(n_chunks):
-        _evaluate_chunk(
-            c,
-            n_chunks,
-            gains,
-            new_surface,
-            visible,
-            poses,
-            cam_dirs,
-            proj_offset,
-            proj_rot,
-            proj_dirs,
-            proj_w,
-            proj_h,
-            proj_tan_h,
-            proj_tan_v,
-            state,
-            blocked,
-            prob,
-            entropy,
-            flags,
-            normals,
-            pc_value,
-            origin,
-            res,
-            nx,
-            ny,
-            nz,
-            range_min,
-            range_max,
-            cos_max_incidence,
-            rpg_compat,
-            kolmost_weight,
-            af_occupied_des,
-            af_occplane_des,
-        )
+        _evaluate_chunk(c, n_chunks, gains, new_surface, visible, *scene)
     return gains, new_surface, visible
 
 
-@numba.njit(cache=True)
-def evaluate_bundle_serial(
-    poses,
-    cam_dirs,
-    proj_offset,
-    proj_rot,
-    proj_dirs,
-    proj_w,
-    proj_h,
-    proj_tan_h,
-    proj_tan_v,
-    state,
-    blocked,
-    prob,
-    entropy,
-    flags,
-    normals,
-    pc_value,
-    origin,
-    res,
-    nx,
-    ny,
-    nz,
-    range_min,
-    range_max,
-    cos_max_incidence,
-    rpg_compat,
-    kolmost_weight,
-    af_occupied_des,
-    af_occplane_des,
-    n_chunks,
-):
-    """:func:`evaluate_bundle` without threads (for a forked child process, where GNU OpenMP must not run)."""
-    n_views = poses.shape[0]
-    gains = np.zeros((n_views, N_GAINS))
-    new_surface = np.zeros(n_views, dtype=np.int64)
-    visible = np.zeros(n_views, dtype=np.int64)
-    for c in range(n_chunks):
-        _evaluate_chunk(
-            c,
-            n_chunks,
-            gains,
-            new_surface,
-            visible,
-            poses,
-            cam_dirs,
-            proj_offset,
-            proj_rot,
-            proj_dirs,
-            proj_w,
-            proj_h,
-            proj_tan_h,
-            proj_tan_v,
-            state,
-            blocked,
-            prob,
-            entropy,
-            flags,
-            normals,
-            pc_value,
-            origin,
-            res,
-            nx,
-            ny,
-            nz,
-            range_min,
-            range_max,
-            cos_max_incidence,
-            rpg_compat,
-            kolmost_weight,
-            af_occupied_des,
-            af_occplane_des,
-        )
-    return gains, new_surface, visible
+evaluate_bundle, evaluate_bundle_serial = threaded_and_serial(_evaluate_bundle)
 
 
 @numba.njit(cache=True)
@@ -940,11 +793,7 @@ def _expected_chunk(
         area[v] = a
 
 
-@numba.njit(cache=True, parallel=True)
-def expected_surface_bundle(
-    poses, cam_dirs, proj_offset, proj_rot, proj_dirs, proj_w, proj_h, proj_tan_h, proj_tan_v, blocked, exp_weight,
-    exp_normals, origin, res, nx, ny, nz, range_min, range_max, cos_max_incidence, kolmost_weight, n_chunks,
-):  # fmt: skip
+def _expected_surface_bundle(n_chunks, *scene):
     """Expected newly seen surface of many camera poses (the predicted-surface model of ``gains.py``).
 
     ``exp_weight`` (flat float64) is each voxel's expected-surface weight (0: none; the likelihood that the surface
@@ -952,33 +801,15 @@ def expected_surface_bundle(
     to ``range_max`` depth) ends at the first full voxel or the first expected-surface voxel; that voxel counts
     once per view when its depth is in range, both incidence cosines (camera and projector, signed: the front side
     of the predicted surface) are at least ``cos_max_incidence`` and the projector lights it. Returns ``(gain (V,),
-    voxels (V,))``: the sum of ``weight x (w cos a + 1 - w)`` (Kolmost) and the sum of weights.
+    voxels (V,))``: the sum of ``weight x (w cos a + 1 - w)`` (Kolmost) and the sum of weights. ``scene``: the
+    arguments of :func:`_expected_chunk` after its outputs, ``poses`` first; ``n_chunks``: the threads' shares.
     """
-    n_views = poses.shape[0]
+    n_views = scene[0].shape[0]
     gain = np.zeros(n_views)
     area = np.zeros(n_views)
     for c in numba.prange(n_chunks):
-        _expected_chunk(
-            c, n_chunks, gain, area, poses, cam_dirs, proj_offset, proj_rot, proj_dirs, proj_w, proj_h, proj_tan_h,
-            proj_tan_v, blocked, exp_weight, exp_normals, origin, res, nx, ny, nz, range_min, range_max,
-            cos_max_incidence, kolmost_weight,
-        )  # fmt: skip
+        _expected_chunk(c, n_chunks, gain, area, *scene)
     return gain, area
 
 
-@numba.njit(cache=True)
-def expected_surface_bundle_serial(
-    poses, cam_dirs, proj_offset, proj_rot, proj_dirs, proj_w, proj_h, proj_tan_h, proj_tan_v, blocked, exp_weight,
-    exp_normals, origin, res, nx, ny, nz, range_min, range_max, cos_max_incidence, kolmost_weight, n_chunks,
-):  # fmt: skip
-    """:func:`expected_surface_bundle` without threads (for a forked child process)."""
-    n_views = poses.shape[0]
-    gain = np.zeros(n_views)
-    area = np.zeros(n_views)
-    for c in range(n_chunks):
-        _expected_chunk(
-            c, n_chunks, gain, area, poses, cam_dirs, proj_offset, proj_rot, proj_dirs, proj_w, proj_h, proj_tan_h,
-            proj_tan_v, blocked, exp_weight, exp_normals, origin, res, nx, ny, nz, range_min, range_max,
-            cos_max_incidence, kolmost_weight,
-        )  # fmt: skip
-    return gain, area
+expected_surface_bundle, expected_surface_bundle_serial = threaded_and_serial(_expected_surface_bundle)

@@ -29,49 +29,46 @@ TOUCH_EPS = 1e-9
 
 
 @numba.njit(cache=True)
-def _supercover_into(x0, y0, x1, y1, nx, ny, out):
-    """Fill ``out`` (k x 2 int) with the supercover cells of the segment, in order; returns k."""
+def _column_span(x0, y0, x1, y1, nx):
+    """The segment's columns: (first, last) column index in grid order, clipped to ``nx`` columns."""
+    k_lo = max(int(math.ceil(min(x0, x1) - 0.5 - TOUCH_EPS)), 0)
+    k_hi = min(int(math.floor(max(x0, x1) + 0.5 + TOUCH_EPS)), nx - 1)
+    return k_lo, k_hi
+
+
+@numba.njit(cache=True)
+def _column_rows(k, x0, y0, x1, y1, ny):
+    """The rows (first, last; clipped to ``ny`` rows) of the cells of column ``k`` that the segment touches."""
     dx = x1 - x0
     dy = y1 - y0
-    eps = TOUCH_EPS
-    xmin = min(x0, x1)
-    xmax = max(x0, x1)
-    k_lo = int(math.ceil(xmin - 0.5 - eps))
-    k_hi = int(math.floor(xmax + 0.5 + eps))
-    if k_lo < 0:
-        k_lo = 0
-    if k_hi > nx - 1:
-        k_hi = nx - 1
+    if abs(dx) > 1e-15:
+        ta = (k - 0.5 - x0) / dx
+        tb = (k + 0.5 - x0) / dx
+        t_lo = max(0.0, min(ta, tb))
+        t_hi = min(1.0, max(ta, tb))
+        if t_lo > t_hi:
+            # the column is touched only within the tolerance: take the nearer segment end
+            t_lo = t_hi = 0.0 if abs(x0 - k) < abs(x1 - k) else 1.0
+        ya = y0 + dy * t_lo
+        yb = y0 + dy * t_hi
+    else:
+        ya = y0
+        yb = y1
+    j_lo = max(int(math.ceil(min(ya, yb) - 0.5 - TOUCH_EPS)), 0)
+    j_hi = min(int(math.floor(max(ya, yb) + 0.5 + TOUCH_EPS)), ny - 1)
+    return j_lo, j_hi
+
+
+@numba.njit(cache=True)
+def _supercover_into(x0, y0, x1, y1, nx, ny, out):
+    """Fill ``out`` (k x 2 int) with the supercover cells of the segment, in order; returns k."""
+    k_lo, k_hi = _column_span(x0, y0, x1, y1, nx)
     n = 0
-    if k_lo > k_hi:
-        return 0
-    ncols = k_hi - k_lo + 1
-    for c in range(ncols):
-        k = k_lo + c if dx >= 0 else k_hi - c
-        if abs(dx) > 1e-15:
-            ta = (k - 0.5 - x0) / dx
-            tb = (k + 0.5 - x0) / dx
-            t_lo = max(0.0, min(ta, tb))
-            t_hi = min(1.0, max(ta, tb))
-            if t_lo > t_hi:
-                # the column is touched only within the tolerance: take the nearer segment end
-                t_lo = t_hi = 0.0 if abs(x0 - k) < abs(x1 - k) else 1.0
-            ya = y0 + dy * t_lo
-            yb = y0 + dy * t_hi
-        else:
-            ya = y0
-            yb = y1
-        ylo = min(ya, yb)
-        yhi = max(ya, yb)
-        j_lo = int(math.ceil(ylo - 0.5 - eps))
-        j_hi = int(math.floor(yhi + 0.5 + eps))
-        if j_lo < 0:
-            j_lo = 0
-        if j_hi > ny - 1:
-            j_hi = ny - 1
-        nrows = j_hi - j_lo + 1
-        for r in range(nrows):
-            j = j_lo + r if dy >= 0 else j_hi - r
+    for c in range(k_hi - k_lo + 1):
+        k = k_lo + c if x1 >= x0 else k_hi - c
+        j_lo, j_hi = _column_rows(k, x0, y0, x1, y1, ny)
+        for r in range(j_hi - j_lo + 1):
+            j = j_lo + r if y1 >= y0 else j_hi - r
             if n < out.shape[0]:
                 out[n, 0] = k
                 out[n, 1] = j
@@ -135,29 +132,12 @@ def _supercover_first(blocking, x0, y0, x1, y1, skip_i, skip_j):
     The same walk as :func:`_supercover_into` without a buffer, for the hot loops (planner checks, brute force).
     """
     nx, ny = blocking.shape
-    dx = x1 - x0
-    dy = y1 - y0
-    eps = TOUCH_EPS
-    k_lo = max(int(math.ceil(min(x0, x1) - 0.5 - eps)), 0)
-    k_hi = min(int(math.floor(max(x0, x1) + 0.5 + eps)), nx - 1)
+    k_lo, k_hi = _column_span(x0, y0, x1, y1, nx)
     for c in range(k_hi - k_lo + 1):
-        k = k_lo + c if dx >= 0 else k_hi - c
-        if abs(dx) > 1e-15:
-            ta = (k - 0.5 - x0) / dx
-            tb = (k + 0.5 - x0) / dx
-            t_lo = max(0.0, min(ta, tb))
-            t_hi = min(1.0, max(ta, tb))
-            if t_lo > t_hi:
-                t_lo = t_hi = 0.0 if abs(x0 - k) < abs(x1 - k) else 1.0
-            ya = y0 + dy * t_lo
-            yb = y0 + dy * t_hi
-        else:
-            ya = y0
-            yb = y1
-        j_lo = max(int(math.ceil(min(ya, yb) - 0.5 - eps)), 0)
-        j_hi = min(int(math.floor(max(ya, yb) + 0.5 + eps)), ny - 1)
+        k = k_lo + c if x1 >= x0 else k_hi - c
+        j_lo, j_hi = _column_rows(k, x0, y0, x1, y1, ny)
         for r in range(j_hi - j_lo + 1):
-            j = j_lo + r if dy >= 0 else j_hi - r
+            j = j_lo + r if y1 >= y0 else j_hi - r
             if blocking[k, j] and not (k == skip_i and j == skip_j):
                 return k, j
     return -1, -1

@@ -500,7 +500,7 @@ class VoxelMap:
         if parallel_allowed():
             n_free, n_hit = fuse_frame(*args, numba.get_num_threads())
         else:
-            n_free, n_hit = fuse_frame_serial(*args)
+            n_free, n_hit = fuse_frame_serial(*args, 1)
         self.raw.append(points[kept], normals[kept], view_id, sigma[kept])
         self.views_integrated += 1
         self._changed()
