@@ -147,6 +147,31 @@ def _targets(rows, short_len):
     return out
 
 
+def run_options(items) -> dict:
+    """``NAME=VALUE`` texts -> RunConfig overrides; a switch takes true/false (any case) or 1/0, others JSON or text.
+
+    Raises ValueError naming the item for an unknown field or a switch given anything else ("False" read as text
+    would be a true value).
+    """
+    fields = set(RunConfig.__dataclass_fields__) - {"script", "aim", "noise_sigma_cells", "seed", "score"}
+    extra = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or name not in fields:
+            raise ValueError(f"--run-option {item!r}: expected NAME=VALUE with NAME one of {', '.join(sorted(fields))}")
+        if RunConfig.__dataclass_fields__[name].type == "bool":
+            flag = {"true": True, "1": True, "false": False, "0": False}.get(value.strip().lower())
+            if flag is None:
+                raise ValueError(f"--run-option {item!r}: {name} is a switch, give true or false")
+            extra[name] = flag
+            continue
+        try:
+            extra[name] = json.loads(value)
+        except json.JSONDecodeError:
+            extra[name] = value
+    return extra
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--objects", nargs="+", default=list(OBJECT_NAMES), choices=OBJECT_NAMES)
@@ -168,16 +193,10 @@ def main(argv=None) -> int:
         help="any RunConfig field for every run, e.g. noise_laser_margin_sigmas=1 (value read as JSON, else text)",
     )  # fmt: skip
     args = p.parse_args(argv)
-    extra = {}
-    fields = set(RunConfig.__dataclass_fields__) - {"script", "aim", "noise_sigma_cells", "seed", "score"}
-    for item in args.run_option:
-        name, sep, value = item.partition("=")
-        if not sep or name not in fields:
-            p.error(f"--run-option {item!r}: expected NAME=VALUE with NAME one of {', '.join(sorted(fields))}")
-        try:
-            extra[name] = json.loads(value)
-        except json.JSONDecodeError:
-            extra[name] = value
+    try:
+        extra = run_options(args.run_option)
+    except ValueError as exc:
+        p.error(str(exc))
     if args.s2_orbit_budget is not None:
         extra["s2_orbit_budget"] = args.s2_orbit_budget
     if args.s2_orbit_budget_factor is not None:

@@ -48,14 +48,21 @@ Documented choices where the report is silent:
   3/6 and 2/6; s1_jump with factor 1 5/6 and 4/6, but the long-baseline triangle's coverage fell 0.988 -> 0.842
   (leaving the orbit round the acute apex left later candidates without a look-through view); factor 2 5/6 and
   2/6; factor 3 5/6 and 3/6 with every coverage unchanged, so 3 is the default; predicted 4/6 and 2/6.
+- Strategy 2 flies its orbit blind, as in the report. Option ``s2_skip_predicted_d2`` (off): an orbit step whose
+  laser can only return an already seen cell (its first cell not known empty is known full) is passed over without
+  measuring, so the source goes straight to the next step that may teach something. Measured: noise-free it
+  shortens the long-baseline triangle's path 7931 -> 6996 cells (D2 outcomes 60 -> 37) and flips no path target;
+  with depth noise a spurious full cell makes it pass over steps that would have measured, and the U-shape's
+  noisy long-baseline coverage falls 0.940 -> 0.884.
 - ``circpix``: the source moves on the circle around the scene centre through the first hit at the standoff, in
   steps of ``circ_step_deg`` counter-clockwise and never back. At each stop it measures, one after the other, the
   candidates it can see (laser and camera path free of known full cells, depth within the camera's field, no known
-  full cell on the laser behind the candidate before the first cell not known empty, nor within 5 cells of it:
-  either would make an empty candidate answer with an already seen cell), the one nearest the standoff first. "Never turning back" is kept literally: the
-  source keeps going round in the same sense, for up to ``circ_max_laps`` laps, and stops after a lap that could
-  measure nothing. The candidates still left then cannot be planned from the circle: they are marked unmeasurable
-  (the report's rule for a candidate without a plannable view), which exhausts the growth points.
+  full cell on the laser behind the candidate before the first cell not known empty, nor within 5 cells of it, nor
+  one with a free return behind at most ``circ_d0_max_unknown_cells`` unknown cells: each would make an empty
+  candidate answer with an already seen cell), the one nearest the standoff first. "Never turning back" is kept
+  literally: the source keeps going round in the same sense, for up to ``circ_max_laps`` laps, and stops after a
+  lap that could measure nothing. The candidates still left then cannot be planned from the circle: they are marked
+  unmeasurable (the report's rule for a candidate without a plannable view), which exhausts the growth points.
 
 Termination: each candidate is chosen once, and for one candidate every failed measurement forbids its configuration
 (at most 2 x 360 per aim point and strategy), strategy 2 stops after a full turn, and strategy switches are capped;
@@ -99,7 +106,7 @@ from .strategies import (
     predicted_return_free,
     start_orbit,
 )
-from .traversal import first_blocking
+from .traversal import first_blocking, supercover_cells
 from .visibility import N_SECTORS, make_circle_of_visibility, update_circ
 
 __all__ = ["TERMINATION_REASONS", "MeasurementRecord", "RunConfig", "RunResult", "run"]
@@ -141,11 +148,16 @@ class RunConfig:
     circ_step_deg: float = 2.0
     # circpix: laps on the circle (always onward); the sweep also stops after a lap that measured nothing
     circ_max_laps: int = 3
-    # option (off): circpix plans no view in which a known full cell on the laser behind the candidate, within the
-    # depth window, could answer with a free return (an empty candidate would give a D0). Measured: it removes the
-    # one D0 left (rotated rectangle, long baseline) but cuts short-baseline circpix coverage to 0.56-0.85
-    # (rectangle 1.000 -> 0.723), because the far side of the body, already measured, lies within the window
+    # circpix plans no view in which a known full cell on the laser behind the candidate, within the depth window,
+    # could answer with a free return (an empty candidate would give a D0) when at most
+    # ``circ_d0_max_unknown_cells`` unknown cells lie between them: few unknown cells are likely air, which is how
+    # the last noise-free D0 came about (rotated rectangle, long baseline: one unknown cell, then known empty ones,
+    # then a full cell 10 cells behind). Many unknown cells are likely the body itself. The strict option applies
+    # the check whatever lies between; measured, it cuts short-baseline circpix coverage to 0.67-0.85 (rectangle
+    # 1.000 -> 0.723), because the far side of the body, already measured, lies within the window. The bound of 2
+    # removes that D0 and changes no other noise-free benchmark run's coverage.
     circ_strict_d0_check: bool = False
+    circ_d0_max_unknown_cells: int = 2
     max_switches_per_candidate: int = 4
     max_measurements_per_candidate: int = 60
     max_measurements: int | None = None
@@ -178,6 +190,9 @@ class RunConfig:
     s0_continuation_return_check: bool = False
     # stratpix: before an orbit, strategy 1's planner checks that cc can be looked at at all (see resolve)
     s2_feasibility_check: bool = True
+    # strategy 2 passes over orbit steps whose laser can only return an already seen cell (strategies.plan_s2);
+    # off, since with depth noise a spurious full cell hides steps that would have measured (module docstring)
+    s2_skip_predicted_d2: bool = False
     # strategy 2's camera side: "leading" (ahead of the source in the sense of the turn) or "away" (further from pp)
     s2_camera: str = "leading"
     # where strategy 2's orbit begins: "normal" (the outward normal of pp) or "sensor" (where the sensor is)
@@ -219,6 +234,8 @@ class RunConfig:
         if self.s2_start not in ("normal", "sensor"):
             raise NbvInputError(f"s2_start must be 'normal' or 'sensor', got {self.s2_start!r}")
         _positive("max_time_s", self.max_time_s, allow_none=True)
+        if int(self.circ_d0_max_unknown_cells) < 0:
+            raise NbvInputError(f"circ_d0_max_unknown_cells must be >= 0, got {self.circ_d0_max_unknown_cells!r}")
         for name in ("contour_points", "max_switches_per_candidate", "max_measurements_per_candidate", "circ_max_laps"):
             if int(getattr(self, name)) < 1:
                 raise NbvInputError(f"{name} must be >= 1, got {getattr(self, name)!r}")
@@ -535,7 +552,7 @@ class _Engine:
                             strategy, switches, orbit, orbit_left = Strategy.S1, switches + 1, None, True
                             continue
                         orbit_budget = math.inf
-                plan = plan_s2(self.rf, orbit)
+                plan = plan_s2(self.rf, orbit, self.m if cfg.s2_skip_predicted_d2 else None)
                 if not isinstance(plan, NoView) and mode == "s1_jump":
                     step = float(np.hypot(*(plan.pos[0] - self.current_source)))
                     if orbit_spent + step > orbit_budget and switches < cfg.max_switches_per_candidate:
@@ -670,12 +687,15 @@ class _Engine:
             # should cc be empty the laser goes on: a known full cell behind cc, before any cell that is not known
             # empty or within the near stretch, would answer with an already seen cell (a D0); not planned
             d = (np.asarray(cc, dtype=float) - src) / depth[k]
-            behind = None
-            if self.cfg.circ_strict_d0_check:
-                # the first known full cell on the laser behind cc within the camera's depth window: should cc and
-                # the unknown cells before it be empty, it answers (a D0) unless its return is blocked
-                bi, bj = first_blocking(full, cc, src + (reach + 2.0) * d, skip=cc)
-                behind = None if bi < 0 else (bi, bj)
+            # the first known full cell on the laser behind cc within the camera's depth window: should cc and
+            # the unknown cells before it be empty, it answers (a D0) unless its return is blocked
+            bi, bj = first_blocking(full, cc, src + (reach + 2.0) * d, skip=cc)
+            behind = None if bi < 0 else (bi, bj)
+            if behind is not None and not self.cfg.circ_strict_d0_check:
+                between = supercover_cells(np.asarray(cc, dtype=float), np.asarray(behind, dtype=float), self.shape)
+                n_unknown = int(np.count_nonzero(self.m[between[1:-1, 0], between[1:-1, 1]] == UNKNOWN))
+                if n_unknown > self.cfg.circ_d0_max_unknown_cells:
+                    behind = None
             bi, bj = first_blocking(self.m != EMPTY, cc, src + reach * d, skip=cc)
             if bi >= 0 and full[bi, bj]:
                 continue

@@ -382,6 +382,14 @@ def start_orbit(
     )  # fmt: skip
 
 
+def _laser_sees_only_known_full(m: np.ndarray, src, aim, rf) -> bool:
+    """The first cell that is not known empty on the laser from ``src`` through ``aim`` is known full."""
+    d = (np.asarray(aim, dtype=float) - src) / np.hypot(*(np.asarray(aim, dtype=float) - src))
+    far = src + min(rf.depth_window_cells()[1] + 2.0, float(m.shape[0] + m.shape[1])) * d
+    bi, bj = first_blocking(m != EMPTY, src, far)
+    return bi >= 0 and m[bi, bj] == FULL
+
+
 def orbit_motion_to(rf, orbit: OrbitState, cell, current_source) -> float:
     """Predicted source motion (cells) until the orbit's laser aims at the unit-circle point towards ``cell``.
 
@@ -403,7 +411,7 @@ def orbit_motion_to(rf, orbit: OrbitState, cell, current_source) -> float:
     return lead_in + chord * max(k - (orbit.k + 1), 0)
 
 
-def plan_s2(rf, orbit: OrbitState) -> Plan | NoView:
+def plan_s2(rf, orbit: OrbitState, m: np.ndarray | None = None) -> Plan | NoView:
     """Strategy 2: orbit the growth point and test the points of the unit circle around it.
 
     Documented choice (the report's Fig. 9 is lost): the source moves on the circle of radius standoff around
@@ -411,15 +419,23 @@ def plan_s2(rf, orbit: OrbitState) -> Plan | NoView:
     the laser aims at the unit-circle point ``q = pp + u(theta + 90 deg)`` on the turning side, so it passes one
     cell beside ``pp``: an empty ``q`` lets it pass (D2, normal) while a surface continuing round a sharp corner is
     struck (A2). The camera goes to the side away from ``pp``. Visibility is not checked, as in the report.
+
+    With the model ``m`` (documented choice), a step whose laser can only give a D2 is passed over without
+    measuring: the first cell on the laser from the source that is not known empty is known full (``q`` known empty
+    included), so the return can only come from an already seen cell. The source then goes straight to the next
+    step that may teach something, a chord instead of the arc.
     """
-    orbit.k += 1
-    if orbit.k > orbit.n_steps:
-        return NoView("full_turn")
-    theta = orbit.theta0_rad + orbit.rotation * orbit.k * orbit.step_rad
     centre = np.asarray(orbit.centre, dtype=float)
-    src = centre + rf.standoff_cells * np.array([math.cos(theta), math.sin(theta)])
-    side_ang = theta + orbit.rotation * math.pi / 2
-    q = centre + np.array([math.cos(side_ang), math.sin(side_ang)])
+    while True:
+        orbit.k += 1
+        if orbit.k > orbit.n_steps:
+            return NoView("full_turn")
+        theta = orbit.theta0_rad + orbit.rotation * orbit.k * orbit.step_rad
+        src = centre + rf.standoff_cells * np.array([math.cos(theta), math.sin(theta)])
+        side_ang = theta + orbit.rotation * math.pi / 2
+        q = centre + np.array([math.cos(side_ang), math.sin(side_ang)])
+        if m is None or not _laser_sees_only_known_full(m, src, q, rf):
+            break
     poses = [rf.pose_through(src, q, side) for side in (1, -1)]
     if orbit.camera == "leading":
         # the camera ahead of the source in the sense of the turn, facing the surface the orbit is looking for

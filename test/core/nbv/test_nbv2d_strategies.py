@@ -108,6 +108,45 @@ def test_strategy2_gives_up_after_its_turn():
         assert math.isclose(orbit.n_steps, expected)
 
 
+def test_strategy2_passes_over_steps_that_can_only_give_a_d2():
+    from agiprobot_measurement.nbv.grid import EMPTY, UNKNOWN
+    from agiprobot_measurement.nbv.range_finder import RangeFinder2D
+    from agiprobot_measurement.nbv.strategies import NoView, plan_s2, start_orbit
+    from agiprobot_measurement.nbv.traversal import first_blocking
+
+    rf = RangeFinder2D.from_config()
+    n = 500
+    m = np.full((n, n), EMPTY)
+    m[250, 250] = FULL  # pp; everything round it known empty except a known full wall and one unknown patch
+    m[100:400, 420:424] = FULL
+    m[240:260, 255:262] = UNKNOWN
+
+    def orbit():
+        return start_orbit((250, 250), np.array([0.0, -1.0]), np.array([1.0, 0.0]), (251, 250), None, 10.0)
+
+    blind = []
+    o = orbit()
+    while not isinstance(p := plan_s2(rf, o), NoView):
+        blind.append(p)
+    seeing = []
+    o = orbit()
+    while not isinstance(p := plan_s2(rf, o, m), NoView):
+        seeing.append(p)
+    assert len(blind) == 36 and 0 < len(seeing) < len(blind)
+
+    def first_not_empty(pos):
+        d = (pos[2] - pos[0]) / np.hypot(*(pos[2] - pos[0]))
+        i, j = first_blocking(m != EMPTY, pos[0], pos[0] + 400.0 * d)
+        return None if i < 0 else m[i, j]
+
+    # every step kept may teach something, every step passed over would only have returned a known full cell
+    assert all(first_not_empty(p.pos) != FULL for p in seeing)
+    kept = {tuple(np.round(p.pos[0], 6)) for p in seeing}
+    skipped = [p for p in blind if tuple(np.round(p.pos[0], 6)) not in kept]
+    assert len(skipped) == len(blind) - len(seeing)
+    assert all(first_not_empty(p.pos) == FULL for p in skipped)
+
+
 def test_strategy0_loose_d0_check():
     from agiprobot_measurement.nbv.range_finder import RangeFinder2D
     from agiprobot_measurement.nbv.scoring import ScoreConfig

@@ -122,8 +122,8 @@ def _u_shape(n=100):
     return t
 
 
-@pytest.mark.parametrize("strict", [True, False])
-def test_circpix_strict_check_refuses_a_candidate_with_known_full_cells_behind_it(strict):
+@pytest.mark.parametrize(("strict", "known_empty_behind"), [(True, 0), (False, 0), (False, 5), (False, 4)])
+def test_circpix_strict_check_refuses_a_candidate_with_known_full_cells_behind_it(strict, known_empty_behind):
     from agiprobot_measurement.nbv.loop import _Engine
 
     rf = RangeFinder2D(12.0, math.pi / 2, math.atan2(30.0, 12.0), 0.45)
@@ -135,11 +135,14 @@ def test_circpix_strict_check_refuses_a_candidate_with_known_full_cells_behind_i
     eng.m[29, 30] = eng.m[29, 32] = EMPTY
     # 8 cells behind cc = (30, 31) on the laser from (0, 31), past unknown cells: an empty cc would give a D0
     eng.m[38, 31] = FULL
+    # cells 31.. behind cc already known empty: 7 - known_empty_behind unknown cells are left before the full one
+    eng.m[31 : 31 + known_empty_behind, 31] = EMPTY
     eng.w[:] = eng.m
     eng.bbox = [20, 40, 28, 34]
     near, far = rf.depth_window_cells()
     _, cc = eng._circ_plan(np.array([0.0, 31.0]), near, far)
-    if strict:
+    unknown_between = 7 - known_empty_behind
+    if strict or unknown_between <= eng.cfg.circ_d0_max_unknown_cells:
         assert cc != (30, 31)
     else:  # the loose rule (first cell behind not known full, none within 5 cells) accepts it
         assert cc == (30, 31)
