@@ -9,10 +9,13 @@ pairs, time per stage (sampling, anchor reachability, evaluation, view objects, 
 client and of every worker, a digest of the measurability store (equal digests = the same store, so the same
 plan), the speed-up of 2 local workers over 1, and a projection of the evaluation time for N workers.
 
-The projection is a model, not a measurement: the serial parts (pilot, merge) and the scatter of the sensor model
-(counted once per worker), measured in the 1-worker run, plus that run's measured chunk work, split into at least
-4 chunks per worker as the evaluation does, each chunk with the measured per-chunk overhead (the 1-worker run's
-wall time not spent in pilot, scatter, merge or chunks, per chunk). Efficiency = T(1) / (N T(N)) within the
+The projection is a model, not a measurement, built from the 1-worker run: the merge (serial, in the client); the
+scatter of the sensor model, a fixed part plus a part per worker, fitted through the scatters measured with 1 and
+2 workers (from a single run: all of it per worker, as if no two transfers overlapped); the pilot, whose tasks run
+on the workers (the random spread split over them, the dominance slices one task each, plus the pilot time not
+spent in tasks); and the measured chunk work, split into at least 4 chunks per worker as the evaluation does, each
+chunk with the measured per-chunk overhead (the workers' time in the chunk phase not spent computing a chunk).
+It assumes workers that do not slow each other, as on separate machines. Efficiency = T(1) / (N T(N)) within the
 model. Its 2-worker value is printed next to the measured one. ``--reproject FILE`` recomputes it from a JSON.
 
 Examples::
@@ -171,6 +174,8 @@ def fill_stats(out: dict, stats) -> None:
         chunk_seconds=stats.chunk_seconds,
         chunk_cpu_seconds=stats.chunk_cpu_seconds,
         pilot_s=stats.pilot_s,
+        pilot_spread_seconds=stats.pilot_spread_seconds,
+        pilot_dominance_seconds=stats.pilot_dominance_seconds,
         scatter_s=stats.scatter_s,
         merge_s=stats.merge_s,
         evaluation_s=stats.wall_s,
@@ -237,21 +242,55 @@ def child(args) -> dict:
     return out
 
 
-def projection(run: dict, n_workers: int) -> float:
-    """Projected evaluation time (s) on ``n_workers`` from a measured run on W workers (W = run["workers"]): its
-    serial parts (pilot, merge), the scatter of the sensor model (the measured broadcast's time per worker, counted
-    once per worker at the client, as if none overlapped), and its measured chunk work split as the evaluation
-    splits it for ``n_workers`` (at least 4 chunks per worker), each chunk with the measured per-chunk overhead: the
-    workers' time in the run not spent computing a chunk, per chunk (W x (wall - serial - scatter) - sum of the
-    chunks' times)."""
+def scatter_model(runs: list[dict]) -> tuple[float, float]:
+    """(fixed s, s per worker) of sending the sensor model: a line through the scatters measured with two
+    different worker counts; from one run, all of it per worker (as if no two transfers overlapped)."""
+    measured = {max(int(r["workers"]), 1): r["scatter_s"] for r in runs if "scatter_s" in r}
+    if len(measured) >= 2:
+        (w1, s1), (w2, s2) = sorted(measured.items())[:2]
+        per_worker = max((s2 - s1) / (w2 - w1), 0.0)
+        return max(s1 - per_worker * w1, 0.0), per_worker
+    (w, s1), *_ = measured.items()
+    return 0.0, s1 / w
+
+
+def pilot_model(run: dict, n_workers: int) -> float:
+    """Projected pilot time (s) on ``n_workers``: the random spread's work split over the workers, the dominance
+    slices one task each (at most one per worker at a time), plus the run's measured pilot time not spent in those
+    tasks (round trips, the projection's own arithmetic)."""
     workers = max(int(run["workers"]), 1)
+    spread = float(sum(run.get("pilot_spread_seconds") or []))
+    slices = np.asarray(run.get("pilot_dominance_seconds") or [], dtype=float)
+    mean = float(slices.mean()) if slices.size else 0.0
+
+    def tasks(n):
+        return spread / n + math.ceil(slices.size / n) * mean
+
+    overhead = max(run["pilot_s"] - tasks(workers), 0.0)
+    return tasks(n_workers) + overhead
+
+
+def projection(run: dict, n_workers: int, scatter: tuple[float, float] | None = None) -> float:
+    """Projected evaluation time (s) on ``n_workers`` from a measured run on W workers (W = run["workers"]): the
+    merge (serial, in the client), the scatter of the sensor model (:func:`scatter_model`), the pilot
+    (:func:`pilot_model`: its tasks run on the workers), and the run's measured chunk work split as the evaluation
+    splits it for ``n_workers`` (at least 4 chunks per worker), each chunk with the measured per-chunk overhead: the
+    workers' time in the chunk phase not spent computing a chunk, per chunk (W x (wall - pilot - merge - scatter) -
+    sum of the chunks' times)."""
+    workers = max(int(run["workers"]), 1)
+    fixed, per_worker = scatter if scatter is not None else scatter_model([run])
     chunks = np.asarray(run["chunk_seconds"], dtype=float)
-    serial = run["pilot_s"] + run["merge_s"]
-    busy = workers * (run["evaluation_s"] - serial - run["scatter_s"])
+    busy = workers * (run["evaluation_s"] - run["pilot_s"] - run["merge_s"] - run["scatter_s"])
     overhead = max(0.0, busy - chunks.sum()) / max(len(chunks), 1)
     count = max(len(chunks), 4 * n_workers)
     per_chunk = chunks.sum() / count + overhead * len(chunks) / count
-    return serial + run["scatter_s"] / workers * n_workers + math.ceil(count / n_workers) * per_chunk
+    return (
+        run["merge_s"]
+        + fixed
+        + per_worker * n_workers
+        + pilot_model(run, n_workers)
+        + math.ceil(count / n_workers) * per_chunk
+    )
 
 
 def run_child(area, tilt, workers, mesh_dir, args) -> dict:
@@ -380,14 +419,17 @@ def report_panel(runs: dict, counts) -> None:
             f"{cpu[0]:.1f} s vs {cpu[1]:.1f} s)"
         )
     base_run = measured[0]
-    base = projection(base_run, 1)
+    scatter = scatter_model(measured)
+    base = projection(base_run, 1, scatter)
+    source = "both runs' scatters" if len({r["workers"] for r in measured}) > 1 else "this run's scatter"
     text.append(
-        f"  PROJECTION (a model, not a measurement) from the {base_run['workers']}-worker run: "
-        f"{base_run['evaluation_s']:.1f} s measured; the model gives {projection(base_run, base_run['workers']):.1f} s "
-        f"for {base_run['workers']}, {base:.1f} s for 1"
+        f"  PROJECTION (a model, not a measurement) from the {base_run['workers']}-worker run's chunk and pilot task "
+        f"times: {base_run['evaluation_s']:.1f} s measured; the model gives "
+        f"{projection(base_run, base_run['workers'], scatter):.1f} s for {base_run['workers']}, {base:.1f} s for 1; "
+        f"scatter {scatter[0]:.2f} s + {scatter[1]:.2f} s per worker (from {source})"
     )
     for n in counts:
-        t = projection(base_run, n)
+        t = projection(base_run, n, scatter)
         note = f", measured {two['evaluation_s']:.1f} s" if n == 2 and two and "evaluation_s" in two else ""
         text.append(f"  PROJECTION for {n} workers: {t:.1f} s, efficiency {100 * base / (n * t):.0f} %{note}")
     print("\n".join(text), flush=True)

@@ -80,6 +80,13 @@ def _evaluate_task(sensor_model, poses, threshold_mm, deflection_mm, compact, dr
     )  # fmt: skip
 
 
+def _summary_task(sensor_model, poses, threshold_mm, deflection_mm, compact, drop_dominated):
+    from agiprobot_measurement.planning.streaming import block_summary
+
+    _tune_worker_heap()
+    return block_summary(sensor_model, poses, threshold_mm, deflection_mm, 1, compact, drop_dominated)
+
+
 def _worker_pid():
     return os.getpid()
 
@@ -172,6 +179,10 @@ class DaskEvaluator:
             self.last_scatter_s = time.perf_counter() - started
         return self._scattered[2]
 
+    def prepare(self, sensor_model) -> None:
+        """Send the sensor model to every worker now (once per model; :attr:`last_scatter_s` times it)."""
+        self._model_future(sensor_model)
+
     def evaluate(
         self,
         sensor_model,
@@ -186,21 +197,38 @@ class DaskEvaluator:
         """Evaluate every chunk of poses on the cluster; ``arrived(index, block, columns, info)`` for each (see
         :func:`~agiprobot_measurement.planning.streaming.chunk_block`), in the order they complete (the caller
         merges by index)."""
+        options = (threshold_mm, deflection_mm, compact, drop_dominated, redundancy)
+        self._run(_evaluate_task, sensor_model, chunks, options, lambda index, out: arrived(index, *out))
+
+    def summaries(
+        self, sensor_model, blocks: list, threshold_mm: float, deflection_mm: float, compact=False, drop_dominated=False
+    ) -> list[dict]:
+        """:func:`~agiprobot_measurement.planning.streaming.block_summary` of every block of poses, on the cluster
+        (the pilot's work spread over the workers), in the order of ``blocks``."""
+        out: list = [None] * len(blocks)
+
+        def arrived(index, summary):
+            out[index] = summary
+
+        self._run(_summary_task, sensor_model, blocks, (threshold_mm, deflection_mm, compact, drop_dominated), arrived)
+        return out
+
+    def _run(self, task, sensor_model, pieces: list, options: tuple, arrived: Callable[[int, object], None]) -> None:
+        """``task(model, piece, *options)`` for every piece, a bounded number in flight; ``arrived(index, output)``
+        as each completes. A piece lost with its worker is submitted again (up to MAX_ATTEMPTS); an error of the
+        task itself is raised."""
         from distributed import as_completed
 
         client = self.client
         model = self._model_future(sensor_model)
         limit = IN_FLIGHT_PER_THREAD * self.parallelism()
-        attempts = [0] * len(chunks)
-        pending = list(range(len(chunks)))[::-1]  # popped from the end: chunk 0 first
+        attempts = [0] * len(pieces)
+        pending = list(range(len(pieces)))[::-1]  # popped from the end: piece 0 first
         index_of = {}
 
         def submit(index):
             attempts[index] += 1
-            future = client.submit(
-                _evaluate_task, model, chunks[index], threshold_mm, deflection_mm, compact, drop_dominated, redundancy,
-                pure=False, retries=1,
-            )  # fmt: skip
+            future = client.submit(task, model, pieces[index], *options, pure=False, retries=1)
             index_of[future.key] = index
             return future
 
@@ -208,12 +236,12 @@ class DaskEvaluator:
         for future in running:
             index = index_of.pop(future.key)
             try:
-                block, columns, info = future.result()
+                output = future.result()
             except Exception as exc:  # the task's own error or the cluster's: sorted below
                 error = exc
             else:
                 future.release()
-                arrived(index, block, columns, info)
+                arrived(index, output)
                 error = None
             if error is not None:
                 future.release()

@@ -49,7 +49,7 @@ import math
 import os
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numba
 import numpy as np
@@ -193,6 +193,10 @@ class StreamStats:
     reserve_index: np.ndarray | None = None
     reserve_dominator: np.ndarray | None = None
     pilot_s: float = 0.0
+    #: the pilot's tasks' work (s each): the random spread (one piece per worker thread; in process one piece) and
+    #: the dominance slices (one task each); scatter_s: sending the sensor model to the workers, before the pilot
+    pilot_spread_seconds: list = field(default_factory=list)
+    pilot_dominance_seconds: list = field(default_factory=list)
     scatter_s: float = 0.0
     merge_s: float = 0.0
     wall_s: float = 0.0
@@ -408,6 +412,24 @@ def _without(block: MeasurabilityResult, name: str) -> MeasurabilityResult:
     return dataclasses.replace(block, **{name: np.zeros(0, dtype=getattr(block, name).dtype)})
 
 
+def block_summary(
+    sensor_model, poses, threshold_mm, deflection_mm, threads=None, compact=False, drop_dominated=False
+) -> dict:
+    """What the pilot needs of one block of poses (:func:`chunk_block`), without the block: ``views`` evaluated,
+    ``nnz`` kept pairs, ``n_views`` kept columns, ``dropped_pairs`` (by dominance) and ``wall_s`` of the work."""
+    block, _, info = chunk_block(
+        sensor_model, poses, threshold_mm, deflection_mm, threads=threads, compact=compact,
+        drop_dominated=drop_dominated,
+    )  # fmt: skip
+    return {
+        "views": len(poses),
+        "nnz": int(block.nnz),
+        "n_views": int(block.n_views),
+        "dropped_pairs": int(info["dropped_pairs"]),
+        "wall_s": float(info["wall_s"]),
+    }
+
+
 class _Store:
     """The kept measurability, filled in candidate order as blocks arrive. The entry arrays are allocated for the
     pilot's projection with slack; untouched pages of ``np.empty`` take no memory, so the slack is free. A block
@@ -499,12 +521,29 @@ def evaluate_streaming(
     # the pilot: a fixed random spread of candidates (a stride would alias with the orientation / tilt pattern)
     pilot_n = min(n, max(PILOT_MIN_VIEWS, round(PILOT_SHARE * n)))
     pilot_index = np.sort(np.random.default_rng(0).choice(n, pilot_n, replace=False))
+    parallel = 1
+    if executor is not None:
+        parallel = executor.parallelism()
+        executor.prepare(sensor_model)  # the sensor model to every worker once, timed apart from the pilot
     pilot_started = time.perf_counter()
-    pilot, _, _ = chunk_block(sensor_model, poses[pilot_index], threshold_mm, deflection_mm)
-    per_view_s = (time.perf_counter() - pilot_started) / pilot_n
-    pairs_per_view = pilot.nnz / pilot_n
-    kept_share = pilot.n_views / pilot_n
-    del pilot
+
+    def summaries(blocks, **options) -> list[dict]:
+        # on a cluster the pilot's work is spread over the workers like the chunks (it would otherwise be serial
+        # work in the client while every worker waits); its figures do not depend on where it ran
+        if executor is None:
+            return [block_summary(sensor_model, b, threshold_mm, deflection_mm, **options) for b in blocks]
+        return executor.summaries(sensor_model, blocks, threshold_mm, deflection_mm, **options)
+
+    pilot = summaries(np.array_split(poses[pilot_index], min(parallel, pilot_n)))
+    stats.pilot_spread_seconds = [p["wall_s"] for p in pilot]
+    # time per view on one worker thread (in process: on this process's threads), what a chunk's size follows
+    per_view_s = (
+        sum(stats.pilot_spread_seconds) / pilot_n
+        if executor is not None
+        else (time.perf_counter() - pilot_started) / pilot_n
+    )
+    pairs_per_view = sum(p["nnz"] for p in pilot) / pilot_n
+    kept_share = sum(p["n_views"] for p in pilot) / pilot_n
     stats.projected_pairs = pairs_per_view * n
     # the store's types follow the projection only, so every set-up keeps the same values
     compact = settings.compact if settings.compact is not None else stats.projected_pairs > COMPACT_ABOVE_PAIRS
@@ -520,7 +559,6 @@ def evaluate_streaming(
 
     # chunks: about CHUNK_TARGET_S of work each, several per worker, and the chunks in flight within a tenth of
     # the budget left after the store
-    parallel = executor.parallelism() if executor is not None else 1
     chunk = int(CHUNK_TARGET_S / max(per_view_s, 1e-9))
     chunk = min(chunk, max(MIN_CHUNK_VIEWS, math.ceil(n / (4 * parallel))))
     in_flight_bytes = 0.1 * max(budget - min(stats.projected_bytes, budget / 2), 0.0)
@@ -539,20 +577,17 @@ def evaluate_streaming(
         # what dropping keeps, from contiguous chunk-sized slices (a random spread has no dominated columns), for
         # dominance alone and for the redundancy-fold covers after it
         steps = (settings.redundancy,) if settings.redundancy is not None else (0, *REDUNDANCY_STEPS)
-        evaluated = kept = views = sliced = 0
         group = REDUCTION_GROUP_VIEWS
+        slices = []
         for k in range(DOMINANCE_PILOT_SLICES):
             start = int((k + 0.5) / DOMINANCE_PILOT_SLICES * n) // group * group - group
             start = min(max(start, 0), max(n - 2 * group, 0)) // group * group
-            for at in (start, start + group):
-                block, _, info = chunk_block(
-                    sensor_model, poses[at : at + group], threshold_mm, deflection_mm, compact=compact,
-                    drop_dominated=True,
-                )  # fmt: skip
-                evaluated += block.nnz + info["dropped_pairs"]
-                sliced += len(poses[at : at + group])
-                kept, views = kept + block.nnz, views + block.n_views
-                del block
+            slices += [poses[at : at + group] for at in (start, start + group)]
+        dominance = summaries(slices, compact=compact, drop_dominated=True)
+        stats.pilot_dominance_seconds = [d["wall_s"] for d in dominance]
+        kept, views = sum(d["nnz"] for d in dominance), sum(d["n_views"] for d in dominance)
+        evaluated = kept + sum(d["dropped_pairs"] for d in dominance)
+        sliced = sum(d["views"] for d in dominance)
         share, view_share = kept / max(evaluated, 1), views / max(sliced, 1)
         size = kept / max(views, 1)  # pairs of a column that survives dominance
         for step in steps:

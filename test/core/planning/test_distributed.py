@@ -163,6 +163,30 @@ def test_a_killed_worker_has_its_chunks_recomputed(monkeypatch):
         np.testing.assert_array_equal(getattr(store, name), getattr(reference, name))
 
 
+def test_the_pilot_runs_on_the_workers_and_projects_what_it_projects_in_process():
+    from agiprobot_measurement.planning.streaming import DOMINANCE_PILOT_SLICES, EvaluationSettings
+
+    model, poses = _model_and_poses()
+    settings = EvaluationSettings(drop_dominated=True)
+    here = StreamStats()
+    reference, kept = evaluate_streaming(model, poses, 0.1, 500.0, settings=settings, stats=here)
+    # in process: the random spread in one piece, then the dominance slices
+    assert len(here.pilot_spread_seconds) == 1 and len(here.pilot_dominance_seconds) == 2 * DOMINANCE_PILOT_SLICES
+    with DaskEvaluator(workers=2) as evaluator:
+        there = StreamStats()
+        store, kept_there = evaluate_streaming(
+            model, poses, 0.1, 500.0, settings=settings, executor=evaluator, stats=there
+        )
+    # on the cluster: the random spread split over the two workers, the slices as tasks of their own
+    assert len(there.pilot_spread_seconds) == 2 and len(there.pilot_dominance_seconds) == 2 * DOMINANCE_PILOT_SLICES
+    assert all(t > 0 for t in there.pilot_spread_seconds + there.pilot_dominance_seconds)
+    assert there.projected_pairs == here.projected_pairs
+    assert there.dominance_kept_share == here.dominance_kept_share
+    assert there.scatter_s > 0
+    np.testing.assert_array_equal(kept_there, kept)
+    np.testing.assert_array_equal(store.point_indices, reference.point_indices)
+
+
 def test_an_unreachable_scheduler_is_named(monkeypatch):
     import agiprobot_measurement.planning.distributed as distributed
 
