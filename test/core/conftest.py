@@ -1,5 +1,6 @@
 """Shared fixtures for the ROS-free core tests."""
 
+import importlib.util
 from pathlib import Path
 
 import pytest
@@ -27,3 +28,16 @@ def shared_dir() -> Path:
     if not SHARED_DIR.is_dir():
         pytest.skip("../shared is not present beside the checkout")
     return SHARED_DIR
+
+
+@pytest.fixture(scope="session")
+def load_script():
+    """``load_script("bench_scale")``: a command of ``scripts/`` as a module (its functions, its ``main``)."""
+
+    def load(name: str):
+        spec = importlib.util.spec_from_file_location(name, PACKAGE_ROOT / "scripts" / f"{name}.py")
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        return module
+
+    return load

@@ -2,19 +2,12 @@
 
 from __future__ import annotations
 
-import importlib.util
-
 import pytest
-
-from agiprobot_measurement._paths import PACKAGE_ROOT
 
 
 @pytest.fixture(scope="module")
-def bench():
-    spec = importlib.util.spec_from_file_location("bench_nbv2d", PACKAGE_ROOT / "scripts" / "bench_nbv2d.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+def bench(load_script):
+    return load_script("bench_nbv2d")
 
 
 @pytest.mark.parametrize(("text", "expected"), [("false", False), ("False", False), ("0", False), ("TRUE", True)])
@@ -29,7 +22,11 @@ def test_numbers_and_texts(bench):
 
 @pytest.mark.parametrize(
     ("item", "named"),
-    [("s2_skip_predicted_d2=maybe", "is a switch"), ("no_such_option=1", "expected NAME=VALUE"), ("circ_max_laps", "expected NAME=VALUE")],
+    [
+        ("s2_skip_predicted_d2=maybe", "is a switch"),
+        ("no_such_option=1", "expected NAME=VALUE"),
+        ("circ_max_laps", "expected NAME=VALUE"),
+    ],
 )
 def test_bad_items_are_named(bench, item, named):
     with pytest.raises(ValueError, match=named) as err:

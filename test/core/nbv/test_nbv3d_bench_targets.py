@@ -4,22 +4,16 @@ coverage; the targets' "best volumetric metric" picked once over the objects, no
 
 from __future__ import annotations
 
-import importlib.util
-
 import numpy as np
 import pytest
 
-from agiprobot_measurement._paths import PACKAGE_ROOT
 from agiprobot_measurement.nbv.ground_truth import GroundTruth, auc, simulate
 from agiprobot_measurement.nbv.reconstruction import ReconstructionRequest
 
 
 @pytest.fixture(scope="module")
-def bench():
-    spec = importlib.util.spec_from_file_location("bench_nbv", PACKAGE_ROOT / "scripts" / "bench_nbv.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+def bench(load_script):
+    return load_script("bench_nbv")
 
 
 def view(path_rad, coverage, motion_s=1.0):

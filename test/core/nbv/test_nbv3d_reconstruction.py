@@ -149,14 +149,8 @@ def test_integrate_refuses_what_is_not_a_frame(station):
         recon.integrate({"points": []})
 
 
-def test_reconstruct_cli_refuses_bad_input_before_any_work(tmp_path, capsys):
-    import importlib.util
-
-    from agiprobot_measurement._paths import PACKAGE_ROOT
-
-    spec = importlib.util.spec_from_file_location("reconstruct_cli", PACKAGE_ROOT / "scripts" / "reconstruct.py")
-    cli = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(cli)
+def test_reconstruct_cli_refuses_bad_input_before_any_work(tmp_path, capsys, load_script):
+    cli = load_script("reconstruct")
     busy = tmp_path / "busy"
     busy.mkdir()
     (busy / "old.txt").write_text("x")
