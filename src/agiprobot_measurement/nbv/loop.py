@@ -26,6 +26,12 @@ Documented choices where the report is silent:
   with ``theta`` the laser-camera angle at the point (:func:`.range_finder.noisy_return_margin_cells`). With a
   fixed half cell, at RFlength 250 (theta = 54 deg) the returns of too deep points erased the surface just
   measured (disc, fullpix, long, sigma 0.3: coverage 0.614 -> 0.95 with k = 2).
+- With depth noise the report's "no point is a candidate twice" is relaxed once the growth points are exhausted:
+  a noisy return can get a candidate marked (unmeasurable, or resolved without a measurement of it) and break the
+  contour-following chain, so the contour beyond is never reached (U-shape, edge midpoints, short baseline: 75 of
+  the slot's right-wall cells never became candidates). The marks of the cells still unknown are then cleared,
+  with the forbidden configurations, and the expansion runs again, while a pass adds full cells, at most
+  ``noise_reopen_passes`` (8) times (that U-shape run: coverage 0.804 -> 0.90). Noise-free runs keep one pass.
 - Contour fits and predicted points use the model's cells as in the noise-free case; the raw (noisy) points are
   kept per cell for the export.
 - The camera-in-front rule of :mod:`.scoring` applies to ``getcandidates2d`` candidates only, not to the general
@@ -66,7 +72,8 @@ Documented choices where the report is silent:
 
 Termination: each candidate is chosen once, and for one candidate every failed measurement forbids its configuration
 (at most 2 x 360 per aim point and strategy), strategy 2 stops after a full turn, and strategy switches are capped;
-so the number of measurements is finite on any finite grid (and ``max_measurements_per_candidate`` caps it further).
+so the number of measurements is finite on any finite grid (and ``max_measurements_per_candidate`` caps it further);
+with noise the expansion runs at most ``1 + noise_reopen_passes`` times.
 """
 
 from __future__ import annotations
@@ -177,6 +184,11 @@ class RunConfig:
     # air cells before grazed walls unknown; measured over the 48 noisy runs, k = 1 / 2 cut the disc (fullpix,
     # long, edge) to 0.525 and the triangle / U-shape (fullpix, long, edge) to 0.616 / 0.595
     noise_laser_margin_sigmas: float = 0.0
+    # with noise, a candidate marked on the way (unmeasurable, or resolved without being measured) may owe its mark
+    # to a noisy return, and the contour beyond it is then never reached: once the growth points are exhausted the
+    # marks of the cells still unknown are cleared with the forbidden configurations, and the expansion runs again,
+    # while a pass adds full cells, at most this many times (0: the report's single pass)
+    noise_reopen_passes: int = 8
     # fullpix: after a strategy finds no view, one that planned before may plan again (see ``_Engine.resolve``)
     retry_planned_strategies: bool = True
     # strategy 0 may take a view whose first not-known-empty cell behind cc is not known full when no view has a
@@ -236,6 +248,8 @@ class RunConfig:
         _positive("max_time_s", self.max_time_s, allow_none=True)
         if int(self.circ_d0_max_unknown_cells) < 0:
             raise NbvInputError(f"circ_d0_max_unknown_cells must be >= 0, got {self.circ_d0_max_unknown_cells!r}")
+        if int(self.noise_reopen_passes) < 0:
+            raise NbvInputError(f"noise_reopen_passes must be >= 0, got {self.noise_reopen_passes!r}")
         for name in ("contour_points", "max_switches_per_candidate", "max_measurements_per_candidate", "circ_max_laps"):
             if int(getattr(self, name)) < 1:
                 raise NbvInputError(f"{name} must be >= 1, got {getattr(self, name)!r}")
@@ -615,6 +629,28 @@ class _Engine:
         return pp
 
     def expand(self, first_hit) -> str:
+        """Expand growth points until they are exhausted; with depth noise, then reopen the marked candidates and
+        expand again, while a pass adds full cells (``noise_reopen_passes``)."""
+        reason = self._expand_pass(first_hit)
+        if self.cfg.noise_sigma_cells <= 0:
+            return reason
+        for _ in range(self.cfg.noise_reopen_passes):
+            reopened = (self.marks != 0) & (self.m == UNKNOWN)
+            if reason != "growth_points_exhausted" or not reopened.any():
+                break
+            full_before = int(np.count_nonzero(self.m == FULL))
+            self.marks[reopened] = 0.0
+            self.w[reopened] = UNKNOWN
+            self.forbidden.clear()
+            self.unmeasurable = [c for c in self.unmeasurable if not reopened[c]]
+            self.outcomes["noise: reopening pass"] += 1
+            self.outcomes["noise: candidates reopened"] += int(np.count_nonzero(reopened))
+            reason = self._expand_pass(first_hit)
+            if int(np.count_nonzero(self.m == FULL)) <= full_before:
+                break
+        return reason
+
+    def _expand_pass(self, first_hit) -> str:
         cfg = self.cfg
         transitions = TRANSITIONS[cfg.script]
         pp = first_hit

@@ -4,6 +4,7 @@ import json
 import math
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -173,3 +174,28 @@ def test_fullpix_goes_round_the_acute_apex():
     s = summarize(res, measurable_boundary(truth, rf), "triangle")
     assert res.termination == "growth_points_exhausted"
     assert s["coverage"] >= 0.95
+
+
+def test_with_noise_marked_candidates_are_reopened_until_a_pass_adds_nothing():
+    # U-shape, edge midpoints, short baseline, sigma 0.3: noisy returns got candidates on the slot's right wall
+    # marked, and the wall beyond them never became a candidate (coverage 0.804 with a single pass)
+    from agiprobot_measurement.nbv.evaluation import coverage, plannable_boundary
+
+    rf = RangeFinder2D.from_config().with_length(40.0)
+    truth = make_object("u_shape")
+    measurable = plannable_boundary(truth, rf, "edge_midpoints")
+    noisy = RunConfig(script="fullpix", aim="edge_midpoints", noise_sigma_cells=0.3, seed=0)
+    single = run(truth, rf, replace(noisy, noise_reopen_passes=0))
+    reopened = run(truth, rf, noisy)
+    assert single.outcomes["noise: reopening pass"] == 0
+    assert 1 <= reopened.outcomes["noise: reopening pass"] <= noisy.noise_reopen_passes
+    assert reopened.outcomes["noise: candidates reopened"] > 0
+    assert reopened.termination == single.termination == "growth_points_exhausted"
+    assert coverage(reopened.model, measurable) >= coverage(single.model, measurable) + 0.05
+    # a reopened cell counts as unmeasurable only if it failed again, once
+    assert len(set(reopened.unmeasurable)) == len(reopened.unmeasurable)
+    # noise-free runs keep the report's single pass
+    clean = run(truth, rf, replace(noisy, noise_sigma_cells=0.0))
+    assert clean.outcomes["noise: reopening pass"] == 0
+    with pytest.raises(NbvInputError, match="noise_reopen_passes"):
+        RunConfig(noise_reopen_passes=-1)
