@@ -159,7 +159,7 @@ def run_options(items) -> dict:
         name, sep, value = item.partition("=")
         if not sep or name not in fields:
             raise ValueError(f"--run-option {item!r}: expected NAME=VALUE with NAME one of {', '.join(sorted(fields))}")
-        if RunConfig.__dataclass_fields__[name].type == "bool":
+        if RunConfig.__dataclass_fields__[name].type in ("bool", bool):
             flag = {"true": True, "1": True, "false": False, "0": False}.get(value.strip().lower())
             if flag is None:
                 raise ValueError(f"--run-option {item!r}: {name} is a switch, give true or false")

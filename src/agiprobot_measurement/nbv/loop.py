@@ -31,7 +31,7 @@ Documented choices where the report is silent:
   contour-following chain, so the contour beyond is never reached (U-shape, edge midpoints, short baseline: 75 of
   the slot's right-wall cells never became candidates). The marks of the cells still unknown are then cleared,
   with the forbidden configurations, and the expansion runs again, while a pass adds full cells, at most
-  ``noise_reopen_passes`` (8) times (that U-shape run: coverage 0.804 -> 0.90). Noise-free runs keep one pass.
+  ``noise_reopen_passes`` (8) times (that U-shape run: coverage 0.804 -> 0.912). Noise-free runs keep one pass.
 - Contour fits and predicted points use the model's cells as in the noise-free case; the raw (noisy) points are
   kept per cell for the export.
 - The camera-in-front rule of :mod:`.scoring` applies to ``getcandidates2d`` candidates only, not to the general

@@ -384,7 +384,8 @@ def start_orbit(
 
 def _laser_sees_only_known_full(m: np.ndarray, src, aim, rf) -> bool:
     """The first cell that is not known empty on the laser from ``src`` through ``aim`` is known full."""
-    d = (np.asarray(aim, dtype=float) - src) / np.hypot(*(np.asarray(aim, dtype=float) - src))
+    ray = np.asarray(aim, dtype=float) - src
+    d = ray / np.hypot(*ray)
     far = src + min(rf.depth_window_cells()[1] + 2.0, float(m.shape[0] + m.shape[1])) * d
     bi, bj = first_blocking(m != EMPTY, src, far)
     return bi >= 0 and m[bi, bj] == FULL
