@@ -108,6 +108,13 @@ def door_panel(area_m2: float):
     return mesh
 
 
+def minor_faults() -> int:
+    """Minor page faults of this process so far (each a page the kernel zeroed and mapped)."""
+    import resource
+
+    return int(resource.getrusage(resource.RUSAGE_SELF).ru_minflt)
+
+
 def digest(store) -> str:
     h = hashlib.sha256()
     for array in (store.indptr, store.point_indices, store.uncertainties, store.trajectory_distances):
@@ -142,12 +149,13 @@ def evaluation_only(args, manager, out: dict) -> None:
     if args.drop != "auto":
         settings = dataclasses.replace(settings, drop_dominated=args.drop == "always")
     stats = StreamStats()
-    cpu_started = time.process_time()
+    cpu_started, faults_started = time.process_time(), minor_faults()
     store, _ = evaluate_streaming(
         manager.sensor_model, candidates.poses[reachable], THRESHOLD_MM, 500.0, settings=settings,
         executor=manager.evaluator(), stats=stats,
     )  # fmt: skip
     out["client_cpu_s"] = time.process_time() - cpu_started
+    out["client_minor_faults"] = minor_faults() - faults_started
     out.update(samples=len(samples), candidates=len(candidates.poses), reachable=int(reachable.size))
     out["times"] = {"sampling": sampling_s, "anchor_reachability": reach_s, "viewpoint_objects": 0.0}
     out["digest"] = digest(store)
@@ -209,6 +217,9 @@ def child(args) -> dict:
             )
             out["worker_cpu_s"] = (
                 sorted(evaluator.client.run(time.process_time).values()) if evaluator is not None else []
+            )
+            out["worker_minor_faults"] = (
+                sorted(evaluator.client.run(minor_faults).values()) if evaluator is not None else []
             )
             return out
         started = time.perf_counter()
@@ -403,6 +414,14 @@ def report_run(r: dict) -> None:
         f"| store {r['store_mb']:.0f} MB digest {r.get('digest', '-')} | load {r['load_1min']:.1f}",
         flush=True,
     )
+    if "client_cpu_s" in r:  # --evaluation-only: where the CPU went during the evaluation
+        worker_cpu = " ".join(f"{c:.1f}" for c in r.get("worker_cpu_s", [])) or "-"
+        worker_faults = " ".join(f"{f / 1e6:.2f}" for f in r.get("worker_minor_faults", [])) or "-"
+        print(
+            f"      evaluation CPU s: client {r['client_cpu_s']:.1f}, workers {worker_cpu} | minor page faults "
+            f"(millions): client {r.get('client_minor_faults', 0) / 1e6:.2f}, workers {worker_faults}",
+            flush=True,
+        )
 
 
 def report_panel(runs: dict, counts) -> None:

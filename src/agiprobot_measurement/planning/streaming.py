@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import mmap
 import os
 import time
 from collections.abc import Callable
@@ -430,9 +431,34 @@ def block_summary(
     }
 
 
+#: arrays from this size on are mapped with transparent huge pages (:func:`_empty_huge_paged`)
+HUGE_PAGE_MIN_BYTES = 64 * 1024 * 1024
+
+
+def _empty_huge_paged(count: int, dtype) -> np.ndarray:
+    """``np.empty(count, dtype)``, asking the kernel for transparent huge pages when the array is large.
+
+    The store is written once, block by block, so every one of its pages is faulted in once: with 4 kB pages
+    that costs 2.4 s of CPU per GB here (0.18 s with huge pages, measured with THP in ``madvise`` mode, Debian's
+    default). On a 2-core machine those faults are CPU taken from the workers. Untouched pages still take no
+    memory. Falls back to ``np.empty`` where the kernel or the platform does not offer it.
+    """
+    dtype = np.dtype(dtype)
+    nbytes = int(count) * dtype.itemsize
+    advice = getattr(mmap, "MADV_HUGEPAGE", None)
+    if nbytes < HUGE_PAGE_MIN_BYTES or advice is None:
+        return np.empty(count, dtype=dtype)
+    mapping = mmap.mmap(-1, nbytes, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
+    try:
+        mapping.madvise(advice)
+    except OSError:  # THP disabled ("never"): ordinary pages
+        pass
+    return np.frombuffer(mapping, dtype=dtype, count=count)
+
+
 class _Store:
     """The kept measurability, filled in candidate order as blocks arrive. The entry arrays are allocated for the
-    pilot's projection with slack; untouched pages of ``np.empty`` take no memory, so the slack is free. A block
+    pilot's projection with slack; untouched pages take no memory, so the slack is free. A block
     beyond the capacity grows the arrays by half (one copy). The peak stays near the store's own size."""
 
     def __init__(self, n_points: int, capacity: int):
@@ -445,13 +471,13 @@ class _Store:
     def append(self, block: MeasurabilityResult, columns: np.ndarray) -> None:
         names = ("point_indices", "uncertainties", "trajectory_distances")
         if self.arrays is None:
-            self.arrays = [np.empty(self.capacity, dtype=getattr(block, n).dtype) for n in names]
+            self.arrays = [_empty_huge_paged(self.capacity, getattr(block, n).dtype) for n in names]
         end = self.nnz + block.nnz
         if end > self.capacity:
             self.capacity = max(end, int(1.5 * self.capacity))
             grown = []
             for array in self.arrays:
-                bigger = np.empty(self.capacity, dtype=array.dtype)
+                bigger = _empty_huge_paged(self.capacity, array.dtype)
                 bigger[: self.nnz] = array[: self.nnz]
                 grown.append(bigger)
             self.arrays = grown

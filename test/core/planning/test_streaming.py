@@ -10,12 +10,14 @@ import trimesh
 
 from agiprobot_measurement.planning.request import PlanRequest, PlanRequestError, WorkTooLarge
 from agiprobot_measurement.planning.streaming import (
+    HUGE_PAGE_MIN_BYTES,
     EvaluationSettings,
     StreamStats,
     chunk_block,
     dominated_columns,
     evaluate_in_chunks,
     evaluate_streaming,
+    _empty_huge_paged,
     redundant_columns_kept,
 )
 from agiprobot_measurement.planning.viewpoint import generate_viewpoint_poses
@@ -93,6 +95,11 @@ def test_stream_is_compact_consistent_in_extents_and_independent_of_chunking(poc
     np.testing.assert_array_equal(kept_again, kept)
     for name in ("indptr", "point_indices", "uncertainties", "trajectory_distances", "extent_min", "extent_max"):
         np.testing.assert_array_equal(getattr(again, name), getattr(store, name))
+    # a store in huge-page mappings (as large ones are) holds the same bytes
+    monkeypatch.setattr(streaming, "HUGE_PAGE_MIN_BYTES", 1)
+    mapped, _ = evaluate_streaming(model, poses, 0.1, 500.0, settings=EvaluationSettings(compact=True))
+    for name in ("indptr", "point_indices", "uncertainties", "trajectory_distances"):
+        np.testing.assert_array_equal(getattr(mapped, name), getattr(store, name))
     # a store this small keeps float64 by default: the exact values
     exact, _ = evaluate_streaming(model, poses, 0.1, 500.0, stats=small)
     assert not small.compact and exact.uncertainties.dtype == np.float64
@@ -106,6 +113,16 @@ def test_stream_is_compact_consistent_in_extents_and_independent_of_chunking(poc
     old = evaluate_in_chunks(model, poses, 0.1, 500.0)
     assert old.n_views == len(poses)
     np.testing.assert_array_equal(old.counts, full.counts)
+
+
+def test_large_store_arrays_are_writeable_huge_page_mappings_and_small_ones_ordinary():
+    large = _empty_huge_paged(HUGE_PAGE_MIN_BYTES // 4, np.float32)
+    assert large.dtype == np.float32 and large.size == HUGE_PAGE_MIN_BYTES // 4
+    assert isinstance(large.base, memoryview)  # of the anonymous mapping
+    large[-3:] = (1.0, 2.0, 3.0)
+    assert large[-3:].tolist() == [1.0, 2.0, 3.0]
+    small = _empty_huge_paged(1000, np.int32)
+    assert small.base is None and small.dtype == np.int32 and small.size == 1000
 
 
 def test_a_chunk_block_drops_empty_columns_only(pocket_part):
