@@ -33,6 +33,10 @@ IN_FLIGHT_PER_THREAD = 3
 CONNECT_TIMEOUT_S = 30.0
 
 
+#: Dask configuration of the workers of a local cluster (an existing cluster keeps its own)
+LOCAL_WORKER_CONFIG = {"distributed.worker.profile.enabled": False}
+
+
 class ClusterError(InputError):
     """The Dask cluster cannot be reached or has no workers (the address, the workers' state)."""
 
@@ -132,13 +136,18 @@ class DaskEvaluator:
                 except (OSError, TimeoutError) as exc:
                     raise ClusterError(f"cannot reach the Dask scheduler at {self.scheduler}: {exc}") from exc
             else:
-                self._cluster = LocalCluster(
-                    n_workers=self.workers,
-                    threads_per_worker=self.local_threads,
-                    processes=True,
-                    dashboard_address=None,
-                    silence_logs=logging.ERROR,
-                )
+                import dask.config
+
+                # without a dashboard nobody reads the workers' statistical profiler; it interrupts the chunk's
+                # thread 100 times a second (measured: chunks ~3 % faster without it)
+                with dask.config.set(LOCAL_WORKER_CONFIG):
+                    self._cluster = LocalCluster(
+                        n_workers=self.workers,
+                        threads_per_worker=self.local_threads,
+                        processes=True,
+                        dashboard_address=None,
+                        silence_logs=logging.ERROR,
+                    )
                 self._client = Client(self._cluster)
             try:
                 self._client.wait_for_workers(1, timeout=CONNECT_TIMEOUT_S)
