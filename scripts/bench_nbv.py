@@ -175,6 +175,9 @@ def main(argv=None) -> int:
                         help="ours stops at its stopping rule (default: it goes on to the budget, the rule's view is "
                              "noted, and the self-terminated run is the prefix: 'ours' = that prefix, "
                              "'ours@budget' = the whole run)")  # fmt: skip
+    parser.add_argument("--ours-option", action="append", default=[], metavar="FIELD=NUMBER",
+                        help="a numeric ReconstructionRequest field for 'ours' only (repeatable), e.g. "
+                             "cost_weight=0.15")  # fmt: skip
     parser.add_argument("--pixel-step", type=int, default=2)
     parser.add_argument("--gt-spacing", type=float, default=0.002, help="ground-truth point spacing (m)")
     parser.add_argument("--gt-directions", type=int, default=200)
@@ -191,6 +194,27 @@ def main(argv=None) -> int:
         return 2
 
 
+def ours_overrides(options: list[str]) -> dict:
+    """``--ours-option FIELD=NUMBER`` as request overrides; a field that is not a numeric request field, or a value
+    that is not a number, is refused with its name (the request validates the range)."""
+    import dataclasses
+
+    from agiprobot_measurement.nbv.reconstruction import ReconstructionRequest
+
+    numeric = {f.name for f in dataclasses.fields(ReconstructionRequest) if f.type in ("float", "int", float, int)}
+    numeric -= {"seed", "max_views"}  # --seed / --seeds and --max-views set them for every method
+    out = {}
+    for option in options:
+        name, sep, text = option.partition("=")
+        if not sep or name not in numeric:
+            raise InputError(f"--ours-option {option!r}: expected FIELD=NUMBER, FIELD one of {', '.join(sorted(numeric))}")
+        try:
+            out[name] = float(text)
+        except ValueError:
+            raise InputError(f"--ours-option {option!r}: {text!r} is not a number") from None
+    return out
+
+
 def run(args) -> int:
     from agiprobot_measurement.nbv.ground_truth import GroundTruth, oracle_views, simulate
     from agiprobot_measurement.nbv.reconstruction import METHODS, ReconstructionRequest
@@ -202,6 +226,7 @@ def run(args) -> int:
             raise InputError(f"unknown method {m!r}; known: {', '.join([*METHODS, 'oracle'])}")
     if args.json and not Path(args.json).expanduser().parent.is_dir():
         raise InputError(f"--json: folder {Path(args.json).parent} does not exist")
+    ours_options = ours_overrides(args.ours_option)
     specs = [resolve_object(o) for o in objects]
     results = {"max_views": args.max_views, "pixel_step": args.pixel_step, "objects": {}}
     for name, (part, units, extent) in zip(objects, specs, strict=True):
@@ -231,6 +256,8 @@ def run(args) -> int:
                 overrides = {"gain": method, "max_views": args.max_views, "seed": seed}
                 if method in VOLUMETRIC:
                     overrides["cost_weight"] = 0.0  # rpg's default
+                if method == "ours":
+                    overrides.update(ours_options)
                 request = ReconstructionRequest.with_config_defaults(**overrides)
                 summary = simulate(station, request, truth, chamfer=not args.no_chamfer, budget_run=budget)
                 if budget:
