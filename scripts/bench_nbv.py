@@ -346,7 +346,11 @@ def targets(results: dict) -> dict:
             "ours_final": ours["final_coverage"],
         }
         if "ours@budget" in m:
-            losses = [(r.get("budget_final_coverage") or 0.0) - (r.get("coverage") or 0.0) for r in m["ours"]["runs"]]
+            # a run whose rule never fired is its budget run: it lost nothing
+            losses = [
+                (r["budget_final_coverage"] or 0.0) - (r.get("coverage") or 0.0) if "budget_final_coverage" in r else 0.0
+                for r in m["ours"]["runs"]
+            ]
             row["ours_budget_final"] = m["ours@budget"]["summary"]["final_coverage"]
             row["ours_stop_loss_max"] = float(max(losses))
             row["ours_stopped_before_budget"] = float(

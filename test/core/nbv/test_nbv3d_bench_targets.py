@@ -104,6 +104,15 @@ def test_the_best_volumetric_metric_is_one_metric_over_the_objects(bench):
     assert median["ours_runs_stopped_before_budget"] == 1.0
 
 
+def test_a_run_whose_rule_never_fired_loses_nothing_against_its_budget(bench):
+    a = bench.VOLUMETRIC[0]
+    budget_only = {"view_log": [view(1.0, 0.9)], "coverage": 0.9, "views": 20, "termination_reason": "max_views"}
+    methods = {a: method(0.7, 0.7), "ours": method(0.8, 0.8, runs=[budget_only]), "ours@budget": method(0.8, 0.8)}
+    row = bench.targets({"max_views": 20, "objects": {"x": {"methods": methods}}})["per_object"]["x"]
+    assert row["ours_stop_loss_max"] == 0.0  # not 0 - 0.9
+    assert row["ours_stopped_before_budget"] == 0.0
+
+
 def test_a_budget_run_is_the_stopping_run_up_to_where_the_rule_fired(bench):
     from agiprobot_measurement.nbv.station3d import SimulatedNBVStation
 
