@@ -80,6 +80,10 @@ def _choice(recon, cands, i: int, gain: float, utility: float, new_area: float):
                    np.zeros(0, int), int(i), target)  # fmt: skip
 
 
+#: how ours applies its motion weight lambda over a run (config/nbv.yaml planning.cost_schedule)
+COST_SCHEDULES = ("constant", "remaining_surface")
+
+
 class Policy:
     """Base: the candidate pool and the bookkeeping every policy shares."""
 
@@ -135,7 +139,8 @@ class OursPolicy(Policy):
     """The report's method in 3D: frontier targets (growth / candidate voxels with the PCA predicted surface),
     candidate views perpendicular to it filtered by the sphere of visibility, scored by the weighted terms of
     config/nbv.yaml ``planning.ours_weights`` (each normalised by its best candidate; the default mixes rpg's
-    proximity count with the report's gain), times the motion factor Pohyb ``exp(-lambda C)``. The expected newly
+    proximity count with the report's gain), times the motion factor Pohyb ``exp(-lambda C)`` (lambda scaled by
+    :meth:`cost_factor`, config ``planning.cost_schedule``). The expected newly
     seen surface of the predicted-surface model (:func:`~.gains.expected_surface`: camera and projector rays clear
     and in range, perpendicularity) ranks the fallbacks and drives the stopping rule; it is a score term only when
     the weights name it (as the only term it chose worse views on the benchmark objects)."""
@@ -157,6 +162,25 @@ class OursPolicy(Policy):
                 f"planning.ours_weights: unknown gain(s) {unknown}; known: expected_surface, {', '.join(GAIN_NAMES)}"
             )
         self.model = ExpectedSurfaceModel.from_config(planning.get("expected_surface"))
+        self.cost_schedule = str(planning.get("cost_schedule", "constant"))
+        if self.cost_schedule not in COST_SCHEDULES:
+            raise InputError(
+                f"planning.cost_schedule: unknown {self.cost_schedule!r}; known: {', '.join(COST_SCHEDULES)}"
+            )
+        self.first_expected_area_m2 = None
+
+    def cost_factor(self, expected_area_m2: float) -> float:
+        """The share of lambda applied now. ``constant``: 1. ``remaining_surface``: 1 - A / A1, with A the most
+        new surface any candidate is expected to see and A1 that at the first planned view (clipped to [0, 1]):
+        while most of the part is still unseen, the view that sees most is worth its motion; the motion counts
+        fully once little is left to gain."""
+        if self.cost_schedule == "constant":
+            return 1.0
+        if self.first_expected_area_m2 is None:
+            self.first_expected_area_m2 = expected_area_m2
+        if self.first_expected_area_m2 <= 0:
+            return 1.0
+        return float(np.clip(1.0 - expected_area_m2 / self.first_expected_area_m2, 0.0, 1.0))
 
     def choose(self, q):
         from agiprobot_measurement.nbv.gains import expected_surface
@@ -176,7 +200,8 @@ class OursPolicy(Policy):
             values = terms[name]
             score += float(weight) * values / max(float(values.max()), 1e-12)
         cost = _motion_cost(r, q, cands.joints[idx])
-        utilities = score * np.exp(-r.request.cost_weight * cost)
+        factor = self.cost_factor(float(exp_area.max()))
+        utilities = score * np.exp(-r.request.cost_weight * factor * cost)
         self.remember(cands, utilities)
         if not np.any(exp_area > 0):
             return None, "frontier_exhausted", stats

@@ -160,3 +160,27 @@ def test_reconstruct_cli_refuses_bad_input_before_any_work(tmp_path, capsys, loa
     assert "does not exist" in capsys.readouterr().err
     assert cli.main(["cup", "--resolution", "0", "--out", str(tmp_path / "new2")]) == 2
     assert "resolution_m" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------------------------- ours' motion weight
+def ours_policy(**planning):
+    from types import SimpleNamespace
+
+    from agiprobot_measurement.nbv.baselines import OursPolicy
+
+    return OursPolicy(SimpleNamespace(station=SimpleNamespace(config={"planning": planning})))
+
+
+def test_ours_counts_motion_fully_by_default_and_as_the_surface_runs_out_with_the_schedule():
+    constant = ours_policy()
+    assert [constant.cost_factor(a) for a in (0.02, 0.01, 0.0)] == [1.0, 1.0, 1.0]
+    ramp = ours_policy(cost_schedule="remaining_surface")
+    assert ramp.cost_factor(0.02) == 0.0  # the first planned view: the most to gain, motion does not count
+    assert ramp.cost_factor(0.03) == 0.0  # more surface expected than at first: clipped
+    assert ramp.cost_factor(0.005) == pytest.approx(0.75)
+    assert ramp.cost_factor(0.0) == 1.0
+
+
+def test_an_unknown_cost_schedule_is_named():
+    with pytest.raises(InputError, match="planning.cost_schedule: unknown 'sometimes'"):
+        ours_policy(cost_schedule="sometimes")
