@@ -207,7 +207,9 @@ def ours_overrides(options: list[str]) -> dict:
     for option in options:
         name, sep, text = option.partition("=")
         if not sep or name not in numeric:
-            raise InputError(f"--ours-option {option!r}: expected FIELD=NUMBER, FIELD one of {', '.join(sorted(numeric))}")
+            raise InputError(
+                f"--ours-option {option!r}: expected FIELD=NUMBER, FIELD one of {', '.join(sorted(numeric))}"
+            )
         try:
             out[name] = float(text)
         except ValueError:
@@ -348,7 +350,9 @@ def targets(results: dict) -> dict:
         if "ours@budget" in m:
             # a run whose rule never fired is its budget run: it lost nothing
             losses = [
-                (r["budget_final_coverage"] or 0.0) - (r.get("coverage") or 0.0) if "budget_final_coverage" in r else 0.0
+                (r["budget_final_coverage"] or 0.0) - (r.get("coverage") or 0.0)
+                if "budget_final_coverage" in r
+                else 0.0
                 for r in m["ours"]["runs"]
             ]
             row["ours_budget_final"] = m["ours@budget"]["summary"]["final_coverage"]

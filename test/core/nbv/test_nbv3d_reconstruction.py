@@ -182,5 +182,5 @@ def test_ours_counts_motion_fully_by_default_and_as_the_surface_runs_out_with_th
 
 
 def test_an_unknown_cost_schedule_is_named():
-    with pytest.raises(InputError, match="planning.cost_schedule: unknown 'sometimes'"):
+    with pytest.raises(InputError, match=r"planning\.cost_schedule: unknown 'sometimes'"):
         ours_policy(cost_schedule="sometimes")

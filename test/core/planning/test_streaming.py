@@ -13,11 +13,11 @@ from agiprobot_measurement.planning.streaming import (
     HUGE_PAGE_MIN_BYTES,
     EvaluationSettings,
     StreamStats,
+    _empty_huge_paged,
     chunk_block,
     dominated_columns,
     evaluate_in_chunks,
     evaluate_streaming,
-    _empty_huge_paged,
     redundant_columns_kept,
 )
 from agiprobot_measurement.planning.viewpoint import generate_viewpoint_poses
