@@ -438,10 +438,12 @@ HUGE_PAGE_MIN_BYTES = 64 * 1024 * 1024
 def _empty_huge_paged(count: int, dtype) -> np.ndarray:
     """``np.empty(count, dtype)``, asking the kernel for transparent huge pages when the array is large.
 
-    The store is written once, block by block, so every one of its pages is faulted in once: with 4 kB pages
-    that costs 2.4 s of CPU per GB here (0.18 s with huge pages, measured with THP in ``madvise`` mode, Debian's
-    default). On a 2-core machine those faults are CPU taken from the workers. Untouched pages still take no
-    memory. Falls back to ``np.empty`` where the kernel or the platform does not offer it.
+    The store is written once, block by block, so every one of its pages is faulted in once. Writing recently
+    freed memory took 2.4 s of CPU per GB with 4 kB pages and 0.18 s with huge pages (THP in ``madvise`` mode,
+    Debian's default); on a 2-core machine those faults are CPU taken from the workers. Memory the machine has
+    not used for a while cost ~2.4 s per GB at first touch on this VM with either page size (the host backs it
+    then). Untouched pages still take no memory. Falls back to ``np.empty`` where the kernel or the platform
+    does not offer huge pages.
     """
     dtype = np.dtype(dtype)
     nbytes = int(count) * dtype.itemsize
