@@ -178,6 +178,16 @@ def main(argv=None) -> int:
     parser.add_argument("--ours-option", action="append", default=[], metavar="FIELD=NUMBER",
                         help="a numeric ReconstructionRequest field for 'ours' only (repeatable), e.g. "
                              "cost_weight=0.15")  # fmt: skip
+    parser.add_argument("--ours-weight", action="append", default=[], metavar="TERM=WEIGHT",
+                        help="a term of ours' score (repeatable; together they replace config/nbv.yaml "
+                             "planning.ours_weights for this run), e.g. proximity_count=1 average_entropy=2")  # fmt: skip
+    parser.add_argument("--config-option", action="append", default=[], metavar="SECTION.KEY=NUMBER",
+                        help="override a numeric entry of config/nbv.yaml for every method of this run (repeatable), "
+                             "e.g. motion.opening_elevation_deg=55")  # fmt: skip
+    parser.add_argument("--gain-quality", action="store_true",
+                        help="instead of the benchmark: run 'ours' once per object and measure, at each of its first "
+                             "8 decisions below 97 %% coverage, how much of the truly best candidate's new coverage "
+                             "each gain's best candidate gets (1 = it picks the truly best view)")  # fmt: skip
     parser.add_argument("--pixel-step", type=int, default=2)
     parser.add_argument("--gt-spacing", type=float, default=0.002, help="ground-truth point spacing (m)")
     parser.add_argument("--gt-directions", type=int, default=200)
@@ -188,6 +198,8 @@ def main(argv=None) -> int:
     try:
         if args.merge:
             return merge(args)
+        if args.gain_quality:
+            return gain_quality(args)
         return run(args)
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
@@ -217,23 +229,116 @@ def ours_overrides(options: list[str]) -> dict:
     return out
 
 
+def ours_weights(options: list[str]) -> dict | None:
+    """``--ours-weight TERM=WEIGHT`` as ours' score weights (None: the configured ones); an unknown term or a weight
+    that is not a finite number >= 0 is refused with its name."""
+    if not options:
+        return None
+    known = ("expected_surface", *GAIN_NAMES)
+    out = {}
+    for option in options:
+        name, sep, text = option.partition("=")
+        if not sep or name not in known:
+            raise InputError(f"--ours-weight {option!r}: expected TERM=WEIGHT, TERM one of {', '.join(known)}")
+        try:
+            weight = float(text)
+        except ValueError:
+            raise InputError(f"--ours-weight {option!r}: {text!r} is not a number") from None
+        if not (math.isfinite(weight) and weight >= 0):
+            raise InputError(f"--ours-weight {option!r}: the weight must be a finite number >= 0")
+        out[name] = weight
+    if not any(out.values()):
+        raise InputError("--ours-weight: at least one weight must be positive")
+    return out
+
+
+def config_overrides(options: list[str], config: dict) -> dict:
+    """``--config-option SECTION.KEY=NUMBER`` as {(section, key): number}; the entry must exist in ``config`` (the
+    loaded config/nbv.yaml) and be a number there, the value must be a finite number."""
+    out = {}
+    for option in options:
+        path, sep, text = option.partition("=")
+        section, dot, key = path.partition(".")
+        if not sep or not dot:
+            raise InputError(f"--config-option {option!r}: expected SECTION.KEY=NUMBER")
+        current = config.get(section, {}).get(key) if isinstance(config.get(section), dict) else None
+        if isinstance(current, bool) or not isinstance(current, (int, float)):
+            raise InputError(f"--config-option {option!r}: config/nbv.yaml has no numeric entry {section}.{key}")
+        try:
+            value = float(text)
+        except ValueError:
+            raise InputError(f"--config-option {option!r}: {text!r} is not a number") from None
+        if not math.isfinite(value):
+            raise InputError(f"--config-option {option!r}: the value must be finite")
+        out[(section, key)] = value
+    return out
+
+
+def _setup(args):
+    """(objects, their specs, the config with the command line's overrides, ours' request overrides)."""
+    from agiprobot_measurement.nbv.station3d import load_nbv_config
+
+    objects = [*PARTS, *SHAPE_NAMES] if args.objects == ["all"] else args.objects
+    ours_options = ours_overrides(args.ours_option)
+    weights = ours_weights(args.ours_weight)
+    config = load_nbv_config()
+    config_options = config_overrides(args.config_option, config)
+    for (section, key), value in config_options.items():
+        config[section][key] = value
+    if weights is not None:
+        config.setdefault("planning", {})["ours_weights"] = dict(weights)
+    if args.json and not Path(args.json).expanduser().parent.is_dir():
+        raise InputError(f"--json: folder {Path(args.json).parent} does not exist")
+    specs = [resolve_object(o) for o in objects]
+    options = {"ours_weights": weights, "config_options": {f"{a}.{b}": v for (a, b), v in config_options.items()}}
+    return objects, specs, config, ours_options, options
+
+
+def gain_quality(args) -> int:
+    """``--gain-quality``: per object one 'ours' run with a :class:`~.ground_truth.GainQuality` hook."""
+    from agiprobot_measurement.common.files import atomic_write_text
+    from agiprobot_measurement.nbv.ground_truth import GainQuality, GroundTruth, simulate
+    from agiprobot_measurement.nbv.reconstruction import ReconstructionRequest
+    from agiprobot_measurement.nbv.station3d import SimulatedNBVStation
+
+    objects, specs, config, ours_options, options = _setup(args)
+    results = {"max_views": args.max_views, "pixel_step": args.pixel_step, **options, "gain_quality": {}}
+    for name, (part, units, extent) in zip(objects, specs, strict=True):
+        station = SimulatedNBVStation(part, units, extent, seed=args.seed, pixel_step=args.pixel_step, config=config)
+        truth = GroundTruth(station, spacing_m=args.gt_spacing, directions=args.gt_directions)
+        hook = GainQuality(truth)
+        request = ReconstructionRequest.with_config_defaults(
+            gain="ours", max_views=args.max_views, seed=args.seed, **ours_options
+        )
+        simulate(station, request, truth, chamfer=False, on_scored=hook)
+        results["gain_quality"][name] = {"decisions": len(hook.decisions), **hook.summary()}
+        print(f"[{name}] {len(hook.decisions)} decisions scored", file=sys.stderr)
+    rows = results["gain_quality"]
+    names = sorted({k for r in rows.values() for k in r if k != "decisions"})
+    medians = {n: float(np.median([r[n] for r in rows.values() if n in r])) for n in names}
+    results["gain_quality_median"] = medians
+    print(f"{'object':12s} " + " ".join(f"{n[:10]:>10s}" for n in names))
+    for obj, r in rows.items():
+        print(f"{obj:12s} " + " ".join(f"{fmt(r.get(n)):>10s}" for n in names))
+    print(f"{'median':12s} " + " ".join(f"{medians[n]:10.3f}" for n in names))
+    if args.json:
+        atomic_write_text(Path(args.json).expanduser(), json.dumps(results, indent=1, default=float))
+    return 0
+
+
 def run(args) -> int:
     from agiprobot_measurement.nbv.ground_truth import GroundTruth, oracle_views, simulate
     from agiprobot_measurement.nbv.reconstruction import METHODS, ReconstructionRequest
     from agiprobot_measurement.nbv.station3d import SimulatedNBVStation
 
-    objects = [*PARTS, *SHAPE_NAMES] if args.objects == ["all"] else args.objects
     for m in args.methods:
         if m != "oracle" and m not in METHODS:
             raise InputError(f"unknown method {m!r}; known: {', '.join([*METHODS, 'oracle'])}")
-    if args.json and not Path(args.json).expanduser().parent.is_dir():
-        raise InputError(f"--json: folder {Path(args.json).parent} does not exist")
-    ours_options = ours_overrides(args.ours_option)
-    specs = [resolve_object(o) for o in objects]
-    results = {"max_views": args.max_views, "pixel_step": args.pixel_step, "objects": {}}
+    objects, specs, config, ours_options, options = _setup(args)
+    results = {"max_views": args.max_views, "pixel_step": args.pixel_step, **options, "objects": {}}
     for name, (part, units, extent) in zip(objects, specs, strict=True):
         t = time.perf_counter()
-        station = SimulatedNBVStation(part, units, extent, seed=args.seed, pixel_step=args.pixel_step)
+        station = SimulatedNBVStation(part, units, extent, seed=args.seed, pixel_step=args.pixel_step, config=config)
         truth = GroundTruth(station, spacing_m=args.gt_spacing, directions=args.gt_directions)
         entry = {
             "extent_mm": float(station.part_mesh.extents.max() * 1000),

@@ -120,6 +120,8 @@ class Policy:
         utilities = np.full(len(cands), np.nan)
         if utilities_feasible is not None:
             utilities[cands.feasible] = utilities_feasible
+            if self.recon.on_scored is not None:
+                self.recon.on_scored(self.recon, cands, np.asarray(utilities_feasible, dtype=float))
         self.recon.candidates_last = [cands.poses, utilities, cands.reason.copy()]
 
     def ranked(self, cands, idx, gains, utilities, new_area) -> tuple:

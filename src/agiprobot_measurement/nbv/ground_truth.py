@@ -27,7 +27,7 @@ import numpy as np
 
 from agiprobot_measurement.errors import InputError
 
-__all__ = ["GroundTruth", "auc", "oracle_views", "simulate", "views_to"]
+__all__ = ["GainQuality", "GroundTruth", "auc", "oracle_views", "simulate", "views_to"]
 
 
 @dataclass
@@ -268,6 +268,53 @@ def oracle_views(truth: GroundTruth, time_limit_s: float = 20.0) -> dict:
     return out
 
 
+class GainQuality:
+    """How well each gain ranks a run's candidates against the truth (a :meth:`Reconstructor.on_scored` hook).
+
+    At each scored pool -- the first ``max_decisions`` while the coverage is below ``max_coverage`` -- every
+    feasible candidate's *true gain* is the share of the observable points it would newly measure (seen validly
+    from its pose, not yet covered). Per gain (the policy's own utility, every metric of :data:`.gains.GAIN_NAMES`
+    on the planning map and the predicted-surface gain) the decision scores the true gain of that gain's best
+    candidate over the best true gain of the pool: 1 when it would pick the truly best view. ``summary()`` is the
+    mean over the decisions."""
+
+    def __init__(self, truth: GroundTruth, max_decisions: int = 8, max_coverage: float = 0.97):
+        from agiprobot_measurement.sensors.phoxi.renderer import RayCaster, SceneGeometry
+
+        self.truth = truth
+        self.max_decisions = int(max_decisions)
+        self.max_coverage = float(max_coverage)
+        st = truth.station
+        self._caster = RayCaster(SceneGeometry.concatenate([st.static_geometry, st.part_geometry]))
+        self.decisions: list[dict[str, float]] = []
+
+    def __call__(self, recon, cands, utilities: np.ndarray) -> None:
+        from agiprobot_measurement.nbv.gains import ExpectedSurfaceModel, expected_surface
+
+        truth = self.truth
+        if len(self.decisions) >= self.max_decisions or truth.coverage() >= self.max_coverage:
+            return
+        idx = np.nonzero(cands.feasible)[0]
+        todo = truth.observable & ~truth.covered
+        true_gain = np.array([(truth.visible_from(cands.poses[i], self._caster) & todo).sum() for i in idx], float)
+        best = float(true_gain.max()) if len(true_gain) else 0.0
+        if best <= 0:
+            return
+        gains, _ = recon.evaluate(cands, "report")
+        model = getattr(recon.policy, "model", None) or ExpectedSurfaceModel()
+        scores = {"utility": utilities, **gains.all_gains}
+        scores["expected_surface"], _ = expected_surface(recon.planning_map, cands.poses[idx], recon.view_model, model)
+        self.decisions.append(
+            {name: float(true_gain[int(np.argmax(values))]) / best for name, values in scores.items()}
+        )
+
+    def summary(self) -> dict[str, float]:
+        """Mean share of the best true gain per gain over the decisions (empty without decisions)."""
+        if not self.decisions:
+            return {}
+        return {name: float(np.mean([d[name] for d in self.decisions])) for name in self.decisions[0]}
+
+
 def simulate(
     station,
     request,
@@ -276,9 +323,11 @@ def simulate(
     should_cancel=None,
     chamfer: bool = True,
     budget_run: bool = False,
+    on_scored=None,
 ) -> dict:
     """One reconstruction on the simulated station (a fresh robot at the home pose and camera; the ground truth's
-    coverage is reset): the result plus the benchmark's metrics as a JSON-ready summary."""
+    coverage is reset): the result plus the benchmark's metrics as a JSON-ready summary. ``on_scored``: the
+    reconstructor's hook called with every scored candidate pool (e.g. a :class:`GainQuality`)."""
     from agiprobot_measurement.nbv.reconstruction import Reconstructor
     from agiprobot_measurement.nbv.station3d import SimulatedPhoXiCamera, SimulatedRobot
 
@@ -287,6 +336,7 @@ def simulate(
     if ground_truth is not None:
         ground_truth.reset()
     recon = Reconstructor(robot, camera, request, station=station, ground_truth=ground_truth)
+    recon.on_scored = on_scored
     stop = {}
     if budget_run:
         # the stopping rule only notes where it fired (the self-terminated run is the prefix up to there)

@@ -3,8 +3,8 @@
 :class:`Reconstructor` runs, with any :class:`~.interfaces.NBVRobot` and :class:`~.interfaces.NBVCamera` (the
 simulation of :mod:`.station3d` or the ROS node's):
 
-1. the home pose (config/nbv.yaml ``motion.home_rad``); the opening view: the most top-down feasible pose of the
-   global view sphere around the ROI; if the ROI is still empty, an a-priori search of ``motion.search_views``
+1. the home pose (config/nbv.yaml ``motion.home_rad``); the opening view: the feasible pose of the global view
+   sphere around the ROI nearest ``motion.opening_elevation_deg`` (90: the most top-down one); if the ROI is still empty, an a-priori search of ``motion.search_views``
    hemisphere views; if still nothing, the result is ``nothing_found``;
 2. per view: capture, fuse into the output map (``resolution_m``) and the planning map (``planning_resolution_m``,
    fused from the same frames so that its free space is carved at its own resolution), update the labels, generate
@@ -57,6 +57,18 @@ __all__ = [
 ]
 
 LOG = logging.getLogger(__name__)
+
+#: a move through a via pose at most this times the straight joint distance is taken without asking OMPL
+VIA_ACCEPT_RATIO = 1.5
+#: joint step (rad) at which the via moves are collision-checked (as the straight move's)
+VIA_CHECK_STEP_RAD = 0.02
+
+
+def _path_length_rad(trajectory) -> float:
+    """Joint path of a trajectory: sum of |dq| over its samples (rad), as the run's ``joint_path_rad``."""
+    positions = np.asarray(trajectory.positions, dtype=float)
+    return float(np.abs(np.diff(positions, axis=0)).sum()) if len(positions) >= 2 else 0.0
+
 
 TERMINATION_REASONS = (
     "gain_below_threshold",
@@ -383,7 +395,11 @@ class Reconstructor:
         self.planning_time_s = float(motion.get("planning_time_s", 0.5))
         self.simplify_time_s = float(motion.get("simplify_time_s", 0.5))
         self.search_views = int(motion.get("search_views", 4))
+        self.via_poses = int(motion.get("via_poses", 8))
         self.opening_height = float(motion.get("opening_height", 0.25))
+        self.opening_elevation_deg = float(motion.get("opening_elevation_deg", 90.0))
+        if not (math.isfinite(self.opening_elevation_deg) and 0.0 <= self.opening_elevation_deg <= 90.0):
+            raise InputError(f"motion.opening_elevation_deg must be in [0, 90], got {self.opening_elevation_deg!r}")
         self.home_rad = np.asarray(self.station.home_rad, dtype=float)
         self.rng = np.random.default_rng(request.seed)
         self.policy = make_policy(request.method, self)
@@ -415,6 +431,9 @@ class Reconstructor:
         #: on to the budget (so one run gives the self-terminated run as its prefix and the budget run); the view
         #: count at that moment is ``stop_view``
         self.on_stop: Callable | None = None
+        #: benchmark hook: when set, every scored candidate pool calls ``on_scored(self, candidates, utilities)``
+        #: (utilities of the feasible ones, in their order) before the choice
+        self.on_scored: Callable | None = None
         self.stop_view: int | None = None
 
     # ------------------------------------------------------------------------------------ fusion
@@ -529,9 +548,11 @@ class Reconstructor:
         return choice.pose, choice.joints, float(choice.gain), ""
 
     def _opening_choice(self, q: np.ndarray, source: str = "sphere") -> _Choice | None:
-        """The most top-down feasible pose of the view sphere (the report's a-priori opening view), aimed at a quarter
-        of the ROI's height: from above, the scanning range (136 mm for model S) then spans the fixture's top up to
-        about 13 cm, where most parts have their top; taller ones are found by the search aimed higher."""
+        """The feasible pose of the view sphere whose elevation is nearest ``motion.opening_elevation_deg`` (90: the
+        most top-down one), the cheapest move among equals (the report's a-priori opening view), aimed at
+        ``motion.opening_height`` of the ROI's height: from above, the scanning range (136 mm for model S) then spans
+        the fixture's top up to about 13 cm, where most parts have their top; taller ones are found by the search
+        aimed higher."""
         aim = self.roi_center_m.copy()
         aim[2] = self.roi_min_m[2] + self.opening_height * (self.roi_max_m[2] - self.roi_min_m[2])
         cands = self.generator.sphere(aim)
@@ -539,9 +560,12 @@ class Reconstructor:
         idx = np.nonzero(cands.feasible)[0]
         if not len(idx):
             return None
-        down = -cands.poses[idx, 2, 2]  # camera z . (-world z)
+        # camera z . (-world z) = sin(elevation of the viewing direction below the horizon); within 0.01 of the
+        # best, the cheaper move wins
+        down = -cands.poses[idx, 2, 2]
+        off = np.round(np.abs(down - math.sin(math.radians(self.opening_elevation_deg))), 2)
         cost = motion_time_s(q, cands.joints[idx], self.station.limits, self.velocity_scaling)
-        order = np.lexsort((cost, -np.round(down, 2)))
+        order = np.lexsort((cost, off))
         i = idx[order[0]]
         return _Choice(cands.poses[i], cands.joints[i], 0.0, 0.0, 0.0, source, idx[order], int(order[0]))
 
@@ -558,20 +582,70 @@ class Reconstructor:
         return self._planner
 
     def plan_motion(self, q_from: np.ndarray, q_to: np.ndarray):
-        """A collision-free trajectory (straight joint move when free, OMPL otherwise) against the scene and the
-        not-yet-known-free region, or None."""
+        """A collision-free trajectory against the scene and the not-yet-known-free region, or None: the straight
+        joint move when it is free; otherwise the shorter (joint path, rad) of OMPL's simplified path and a straight
+        move through a via pose (:meth:`_via_path`). OMPL's paths around the unknown region were twice the straight
+        distance on average and up to 10 times (2278 vs 1137 rad over 12 objects x 20 views), mostly detours a
+        move through the home pose or an earlier view pose avoids."""
         from agiprobot_measurement.motion.motion_planning import collision_free_trajectory
 
-        return collision_free_trajectory(
+        limits = self.station.limits
+        checker = self.generator.checker
+        straight = collision_free_trajectory(q_from, q_to, limits, checker, planner=None,
+                                             velocity_scaling=self.velocity_scaling)  # fmt: skip
+        if straight is not None:
+            return straight
+        via = self._via_path(q_from, q_to)
+        direct_rad = float(np.abs(np.asarray(q_to) - np.asarray(q_from)).sum())
+        if via is not None and via[1] <= VIA_ACCEPT_RATIO * direct_rad:
+            return via[0]
+        planned = collision_free_trajectory(
             q_from,
             q_to,
-            self.station.limits,
-            self.generator.checker,
+            limits,
+            checker,
             planner=self._planner_factory,
             velocity_scaling=self.velocity_scaling,
             planning_time_s=self.planning_time_s,
             attempts=2,
         )
+        if via is None:
+            return planned
+        if planned is None:
+            return via[0]
+        return via[0] if via[1] < _path_length_rad(planned) else planned
+
+    def _via_path(self, q_from: np.ndarray, q_to: np.ndarray):
+        """(trajectory, joint path rad) of the shortest free two-segment straight move through one of the poses the
+        robot has already been at without collision (the home pose and the views so far; the known-free region only
+        grows, so they stay free), trying the ``motion.via_poses`` shortest; or None."""
+        from agiprobot_measurement.motion.time_parameterization import time_optimal_trajectory
+
+        if self.via_poses <= 0:
+            return None
+        q_from, q_to = np.asarray(q_from, dtype=float), np.asarray(q_to, dtype=float)
+        vias = np.asarray([self.home_rad, *(v.joints for v in self.views)], dtype=float)
+        lengths = np.abs(vias - q_from).sum(axis=1) + np.abs(q_to - vias).sum(axis=1)
+        checker = self.generator.checker
+        for i in np.argsort(lengths, kind="stable")[: self.via_poses]:
+            q_via = vias[i]
+            segments = []
+            for a, b in ((q_from, q_via), (q_via, q_to)):
+                steps = max(2, int(np.ceil(np.abs(b - a).max() / VIA_CHECK_STEP_RAD)) + 1)
+                segments.append(np.linspace(a, b, steps))
+            if not checker.check_states(np.concatenate(segments)).all():
+                continue
+            trajectory = time_optimal_trajectory(
+                np.asarray([q_from, q_via, q_to]),
+                self.station.limits,
+                velocity_scaling_factor=self.velocity_scaling,
+                acceleration_scaling_factor=self.velocity_scaling,
+                max_waypoint_step_rad=0.01,
+            )
+            samples, _, _ = trajectory.sample(trajectory.dense_times(step_s=0.02, per_segment=2))
+            if checker.check_states(samples).all():
+                return trajectory, _path_length_rad(trajectory)
+        return None
 
     # ------------------------------------------------------------------------------------ loop
     def run(
@@ -792,7 +866,7 @@ class Reconstructor:
         self.robot.execute(trajectory)
         self._execution_s += time.perf_counter() - t
         if len(positions) >= 2:
-            self._joint_path += float(np.abs(np.diff(positions, axis=0)).sum())
+            self._joint_path += _path_length_rad(trajectory)
             tcp = self.station.sensor_pose(positions)[:, :3, 3]
             self._tcp_path += float(np.linalg.norm(np.diff(tcp, axis=0), axis=1).sum())
         return float(trajectory.duration)

@@ -1,4 +1,5 @@
-"""scripts/bench_nbv.py's --ours-option: numeric request fields for 'ours', bad items named."""
+"""scripts/bench_nbv.py's --ours-option (numeric request fields for 'ours') and --ours-weight (its score terms):
+bad items named."""
 
 from __future__ import annotations
 
@@ -32,3 +33,53 @@ def test_bad_items_are_refused_with_their_text(bench, item, named):
     with pytest.raises(InputError, match=named) as error:
         bench.ours_overrides([item])
     assert repr(item) in str(error.value)
+
+
+def test_score_weights_replace_the_configured_ones(bench):
+    assert bench.ours_weights([]) is None
+    assert bench.ours_weights(["proximity_count=1", "average_entropy=2", "expected_surface=0"]) == {
+        "proximity_count": 1.0,
+        "average_entropy": 2.0,
+        "expected_surface": 0.0,
+    }
+
+
+@pytest.mark.parametrize(
+    ("items", "named"),
+    [
+        (["curiosity=1"], "expected TERM=WEIGHT"),
+        (["proximity_count"], "expected TERM=WEIGHT"),
+        (["proximity_count=lots"], "is not a number"),
+        (["proximity_count=-1"], "finite number >= 0"),
+        (["proximity_count=nan"], "finite number >= 0"),
+        (["proximity_count=0"], "at least one weight must be positive"),
+    ],
+)
+def test_bad_score_weights_are_refused(bench, items, named):
+    with pytest.raises(InputError, match=named):
+        bench.ours_weights(items)
+
+
+def test_config_options_override_numeric_entries(bench):
+    config = {"motion": {"opening_elevation_deg": 90.0, "via_poses": 8}, "planning": {"cost_schedule": "constant"}}
+    assert bench.config_overrides(["motion.opening_elevation_deg=55", "motion.via_poses=0"], config) == {
+        ("motion", "opening_elevation_deg"): 55.0,
+        ("motion", "via_poses"): 0.0,
+    }
+
+
+@pytest.mark.parametrize(
+    ("item", "named"),
+    [
+        ("motion.opening_elevation_deg", "expected SECTION.KEY=NUMBER"),
+        ("opening_elevation_deg=55", "expected SECTION.KEY=NUMBER"),
+        ("motion.warp_speed=9", "no numeric entry motion.warp_speed"),
+        ("planning.cost_schedule=1", "no numeric entry planning.cost_schedule"),  # a string entry
+        ("motion.opening_elevation_deg=steep", "is not a number"),
+        ("motion.opening_elevation_deg=inf", "must be finite"),
+    ],
+)
+def test_bad_config_options_are_refused(bench, item, named):
+    config = {"motion": {"opening_elevation_deg": 90.0}, "planning": {"cost_schedule": "constant"}}
+    with pytest.raises(InputError, match=named):
+        bench.config_overrides([item], config)

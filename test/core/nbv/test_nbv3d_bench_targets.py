@@ -135,3 +135,23 @@ def test_a_budget_run_is_the_stopping_run_up_to_where_the_rule_fired(bench):
         np.testing.assert_allclose(a["camera_pose"], b["camera_pose"], atol=1e-6)
         assert a["points"] == b["points"]
     assert budget["coverage"] >= stopping["coverage"]
+
+
+def test_gain_quality_scores_each_gain_against_the_truly_best_view(bench):
+    from agiprobot_measurement.nbv.ground_truth import GainQuality
+    from agiprobot_measurement.nbv.station3d import SimulatedNBVStation
+
+    station = SimulatedNBVStation(pixel_step=8)
+    truth = GroundTruth(station, spacing_m=0.005, directions=16, standoffs=1, rolls=1)
+    hook = GainQuality(truth, max_decisions=2)
+    simulate(station, ReconstructionRequest.with_config_defaults(max_views=4), truth, chamfer=False, on_scored=hook)
+    assert len(hook.decisions) == 2  # the first two scored pools of three
+    for decision in hook.decisions:
+        assert {"utility", "expected_surface", "proximity_count", "report"} <= set(decision)
+        assert all(0.0 <= v <= 1.0 for v in decision.values())
+    summary = hook.summary()
+    assert summary["utility"] == pytest.approx(np.mean([d["utility"] for d in hook.decisions]))
+    # past the coverage bound nothing is scored
+    late = GainQuality(truth, max_coverage=0.0)
+    simulate(station, ReconstructionRequest.with_config_defaults(max_views=2), truth, chamfer=False, on_scored=late)
+    assert late.decisions == [] and late.summary() == {}

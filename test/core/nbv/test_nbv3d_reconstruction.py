@@ -184,3 +184,85 @@ def test_ours_counts_motion_fully_by_default_and_as_the_surface_runs_out_with_th
 def test_an_unknown_cost_schedule_is_named():
     with pytest.raises(InputError, match=r"planning\.cost_schedule: unknown 'sometimes'"):
         ours_policy(cost_schedule="sometimes")
+
+
+# --------------------------------------------------------------------------------------------- via-pose motions
+class _BandChecker:
+    """Joint-space obstacle: joint 0 within ``home0 + [0.4, 0.6]`` and joint 1 within ``home1 +- 0.1`` collide."""
+
+    def __init__(self, home):
+        self.home = np.asarray(home, dtype=float)
+        self.calls = 0
+
+    def check_states(self, states):
+        self.calls += 1
+        d = np.atleast_2d(states) - self.home
+        return ~((d[:, 0] > 0.4) & (d[:, 0] < 0.6) & (np.abs(d[:, 1]) < 0.1))
+
+
+class _Seen:
+    def __init__(self, joints):
+        self.joints = np.asarray(joints, dtype=float)
+
+
+def _via_setup(station, via_offset):
+    recon, _ = make(station)
+    home = recon.home_rad
+    recon.generator.checker = _BandChecker(home)
+    recon.views.append(_Seen(home + np.asarray(via_offset)))
+
+    def no_ompl():
+        raise AssertionError("OMPL must not be asked when a short via move is free")
+
+    recon._planner_factory = no_ompl
+    return recon, home
+
+
+def test_a_blocked_straight_move_goes_through_an_earlier_view_pose(station):
+    recon, home = _via_setup(station, [0.5, 0.2, 0, 0, 0, 0])
+    goal = home + np.array([1.0, 0, 0, 0, 0, 0])
+    trajectory = recon.plan_motion(home, goal)
+    positions = np.asarray(trajectory.positions)
+    assert np.allclose(positions[0], home) and np.allclose(positions[-1], goal)
+    assert recon.generator.checker.check_states(positions).all()
+    # through the view pose: joint 1 rises to it and comes back, the path is the two segments' (1.4 rad)
+    assert positions[:, 1].max() == pytest.approx(home[1] + 0.2, abs=0.01)
+    assert np.abs(np.diff(positions, axis=0)).sum() == pytest.approx(1.4, abs=0.02)
+
+
+def test_no_via_move_when_switched_off_or_every_via_is_blocked(station):
+    recon, home = _via_setup(station, [0.5, 0.2, 0, 0, 0, 0])
+    goal = home + np.array([1.0, 0, 0, 0, 0, 0])
+    recon.via_poses = 0
+    assert recon._via_path(home, goal) is None
+    recon, home = _via_setup(station, [0.5, 0.05, 0, 0, 0, 0])  # the view pose itself lies in the band
+    assert recon._via_path(home, goal) is None
+
+
+# --------------------------------------------------------------------------------------------- the opening view
+def _opening_elevation_deg(station, elevation_deg):
+    motion = station.config.setdefault("motion", {})
+    saved = motion.get("opening_elevation_deg")
+    motion["opening_elevation_deg"] = elevation_deg
+    try:
+        recon, _ = make(station)
+        choice = recon._opening_choice(recon.home_rad)
+    finally:
+        if saved is None:
+            motion.pop("opening_elevation_deg")
+        else:
+            motion["opening_elevation_deg"] = saved
+    return math.degrees(math.asin(-choice.pose[2, 2]))
+
+
+def test_the_opening_view_comes_from_the_configured_elevation(station):
+    top = _opening_elevation_deg(station, 90.0)
+    oblique = _opening_elevation_deg(station, 50.0)
+    assert top > 80.0
+    assert abs(oblique - 50.0) < 15.0
+
+
+@pytest.mark.parametrize("value", [120.0, -5.0, math.nan])
+def test_a_bad_opening_elevation_is_named(station, value):
+    with pytest.raises(InputError, match="opening_elevation_deg"):
+        _opening_elevation_deg(station, value)
