@@ -738,11 +738,16 @@ class Reconstructor:
                 self._progress("search")
                 q = self.current_joints()
                 search = aims[searched % 2]
-                # filter afresh from the current joints; views already taken stay out
-                search.feasible = search.reason != "visited"
-                search.reason[search.feasible] = ""
-                self.generator.filter(search, self.planning_map, self.roi_min_m, self.roi_max_m, q, self.tabu)
-                idx = np.nonzero(search.feasible)[0]
+                # filter afresh from the current joints, and from the home pose when no view is reachable from here
+                # (IK takes the branch nearest the seed joints: from an oblique opening view that branch can hit the
+                # scene where the home pose's does not); views already taken stay out
+                for seed in (q, self.home_rad):
+                    search.feasible = search.reason != "visited"
+                    search.reason[search.feasible] = ""
+                    self.generator.filter(search, self.planning_map, self.roi_min_m, self.roi_max_m, seed, self.tabu)
+                    idx = np.nonzero(search.feasible)[0]
+                    if len(idx):
+                        break
                 searched += 1
                 if not len(idx):
                     continue
