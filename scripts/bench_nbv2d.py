@@ -186,8 +186,10 @@ def main(argv=None) -> int:
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--json", type=Path, default=Path("bench_nbv2d.json"), help="where to write the summaries")
     p.add_argument("--table", type=Path, default=None, help="also write the printed table and targets to this file")
-    p.add_argument("--s2-orbit-budget", default=None, help="stratpix orbit budget: s1_jump, predicted or none")
-    p.add_argument("--s2-orbit-budget-factor", type=float, default=None, help="orbit budget in S1 jumps")
+    p.add_argument(
+        "--s2-orbit-budget", default=None, help="stratpix orbit budget: s1_view (default), s1_jump, predicted or none"
+    )
+    p.add_argument("--s2-orbit-budget-factor", type=float, default=None, help="s1_jump orbit budget in S1 jumps")
     p.add_argument(
         "--run-option", action="append", default=[], metavar="NAME=VALUE",
         help="any RunConfig field for every run, e.g. noise_laser_margin_sigmas=1 (value read as JSON, else text)",

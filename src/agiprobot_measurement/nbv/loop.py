@@ -38,22 +38,35 @@ Documented choices where the report is silent:
   candidates of a contour end (beyond an apex the outer side of the continuation is not known yet).
 - A candidate is unmeasurable only once every planning strategy has failed to plan it. In ``fullpix`` (recovery
   S0 <-> S1 only) a strategy that planned before may plan again when the other finds no view, its failed
-  configurations being forbidden (``retry_planned_strategies``); in ``stratpix`` a strategy is not re-entered.
+  configurations being forbidden (``retry_planned_strategies``); in ``stratpix`` a strategy is not re-entered
+  after it found no view, but strategy 0 re-plans when strategy 1 has no view for an orbit (below).
 - ``stratpix`` switches E0 -> S2 and D1 -> S2 (``fullpix``: E0 -> S1, D1 -> S0). Strategy 2 cannot tell an
   unmeasurable candidate (the report), strategy 1's circle of visibility can: before an orbit starts, strategy 1's
   planner is asked, without measuring, for a look-through view; if it has none, the candidate is unmeasurable and
   no orbit is flown (``s2_feasibility_check``; U-shape short path 30102 -> 10876 cells).
 - ``stratpix``'s orbit budget (``s2_orbit_budget``; the report claims a smoother path for S2, not a shorter one,
-  and gives no rule): the same probe's planned look-through view is strategy 1's alternative, and its source
-  motion from the sensor (the motion that the Pohyb term scores) prices it. ``"s1_jump"`` (default): the orbit's
-  accumulated source motion, lead-in included, may reach ``s2_orbit_budget_factor`` times that jump; the step that
-  would exceed it is not flown and strategy 1 takes over. Should that jump fail too (D1), strategy 2 flies its full
-  orbit unprobed and unbudgeted for this candidate. ``"predicted"``: decided once before the orbit, by the motion
-  until the orbit's laser aims at ``cc`` (:func:`.strategies.orbit_motion_to`). ``"none"``: the full turn.
-  Measured (noise-free, centre aim, stratpix paths vs fullpix over the six objects, short / long baseline): none
-  3/6 and 2/6; s1_jump with factor 1 5/6 and 4/6, but the long-baseline triangle's coverage fell 0.988 -> 0.842
-  (leaving the orbit round the acute apex left later candidates without a look-through view); factor 2 5/6 and
-  2/6; factor 3 5/6 and 3/6 with every coverage unchanged, so 3 is the default; predicted 4/6 and 2/6.
+  and gives no rule): the same probe's planned look-through view is strategy 1's alternative. ``"s1_view"``
+  (default), a path-aware strategy switch: the probe is asked before every orbit, also after a failed jump (D1,
+  that configuration forbidden), and an orbit step is flown only if it brings the source nearer to the source of
+  strategy 1's planned view, i.e. while the orbit lies on the way to that jump and each of its short moves replaces
+  part of it; the first step that does not (the lead-in to the orbit's start included) is not flown and strategy 1
+  jumps from where the sensor is. With no switch left for the candidate, that step ends it as unmeasurable instead
+  of flying the rest of the turn. ``"s1_jump"``: the orbit's accumulated source motion, lead-in included, may reach
+  ``s2_orbit_budget_factor`` times strategy 1's jump from the sensor (the motion that the Pohyb term scores); the
+  step that would exceed it is not flown and strategy 1 takes over; should that jump fail too (D1), strategy 2
+  flies its full orbit unprobed and unbudgeted. ``"predicted"``: decided once before the orbit, by the motion until
+  the orbit's laser aims at ``cc`` (:func:`.strategies.orbit_motion_to`). ``"none"``: the full turn. Measured
+  (noise-free, centre aim, stratpix paths <= fullpix over the six objects, short / long baseline): none 3/6 and 2/6;
+  predicted 4/6 and 2/6; s1_jump factor 1 5/6 and 4/6 (but the long-baseline triangle's coverage fell 0.988 ->
+  0.842), factor 2 5/6 and 2/6, factor 3 5/6 and 3/6; s1_view 6/6 and 6/6, every coverage >= 0.95 (the
+  long-baseline disc 1.000 -> 0.982, the lowest). Without the "no switch left" end, s1_view gives 5/6 short (the
+  triangle's orbits after D1, flown unchecked once the switches are used up, lead in from across the body and
+  return a seen cell) and stratpix's short-baseline transfers exceed its long-baseline ones.
+- ``s2_no_s1_view_back_to_s0`` (on): when the probe before an orbit finds no look-through view and strategy 0
+  planned the candidate before, strategy 0 re-plans it (its failed configurations forbidden, a switch counted)
+  instead of the candidate being marked unmeasurable, the recovery ``fullpix`` has by S1 -> S0. Leaving orbits
+  early makes this matter: with s1_view and the option off, the long-baseline triangle's hypotenuse chain breaks at
+  two E0 candidates that strategy 1 cannot plan and the coverage falls to 0.842; on, it is 0.990.
 - Strategy 2 flies its orbit blind, as in the report. Option ``s2_skip_predicted_d2`` (off): an orbit step whose
   laser can only return an already seen cell (its first cell not known empty is known full) is passed over without
   measuring, so the source goes straight to the next step that may teach something. Measured: noise-free it
@@ -118,7 +131,7 @@ from .visibility import N_SECTORS, make_circle_of_visibility, update_circ
 
 __all__ = ["TERMINATION_REASONS", "MeasurementRecord", "RunConfig", "RunResult", "run"]
 
-S2_ORBIT_BUDGETS = ("predicted", "s1_jump", "none")
+S2_ORBIT_BUDGETS = ("s1_view", "s1_jump", "predicted", "none")
 
 TERMINATION_REASONS = (
     "growth_points_exhausted",
@@ -214,12 +227,18 @@ class RunConfig:
     s2_general_candidates: bool = True
     # how far strategy 2 orbits before it gives up (degrees; the report: a full turn, 360)
     s2_max_turn_deg: float = 360.0
-    # stratpix: strategy 2's orbit may cost at most the source motion of strategy 1's planned jump (``"s1_jump"``),
-    # else the orbit is left for that jump; ``"none"``: the orbit runs its full turn (see the module docstring)
-    s2_orbit_budget: str = "s1_jump"
-    # the budget is this multiple of strategy 1's jump (measured: 1 cuts the long-baseline triangle to 0.842
-    # coverage, 2 and 3 keep every coverage; 3 gives the most stratpix <= fullpix wins, see the module docstring)
+    # stratpix: how strategy 2's orbit is priced against strategy 1's planned jump (see the module docstring).
+    # ``"s1_view"`` (default): an orbit step is flown only while it brings the source nearer to strategy 1's planned
+    # view, else strategy 1 jumps from there; ``"s1_jump"``: the orbit may cost ``s2_orbit_budget_factor`` times
+    # that jump; ``"predicted"``: decided once, by the motion until the orbit aims at cc; ``"none"``: the full turn
+    s2_orbit_budget: str = "s1_view"
+    # the ``"s1_jump"`` budget is this multiple of strategy 1's jump (measured: 1 cuts the long-baseline triangle to
+    # 0.842 coverage, 2 and 3 keep every coverage; 3 gives the most stratpix <= fullpix wins of that mode)
     s2_orbit_budget_factor: float = 3.0
+    # stratpix: when strategy 1's planner finds no look-through view before an orbit and strategy 0 planned this
+    # candidate before, strategy 0 re-plans it (its failed configurations forbidden), as fullpix's S1 -> S0
+    # recovery does, instead of the candidate being marked unmeasurable (see the module docstring)
+    s2_no_s1_view_back_to_s0: bool = True
 
     def __post_init__(self) -> None:
         if self.script not in SCRIPTS:
@@ -503,6 +522,7 @@ class _Engine:
         orbit = None
         orbit_budget, orbit_spent = math.inf, 0.0  # strategy 2's motion budget (s2_orbit_budget) and its use
         orbit_left = False  # an orbit of this candidate was left for strategy 1's jump
+        orbit_goal = None  # s1_view: the source position of strategy 1's planned view, which the orbit must approach
         tried: set[Strategy] = set()
         planned: set[Strategy] = set()
         self.circles = {}
@@ -529,26 +549,42 @@ class _Engine:
                     self.forbid_array(strategy, cc, len(aims)), cfg.s1_reach_cells,
                 )  # fmt: skip
             else:
-                # once an orbit of this candidate was left for strategy 1's jump and that jump failed too, strategy 2
-                # runs its full orbit unprobed: strategy 1 was tried for real, and orbiting is what remains
-                mode = "none" if orbit_left or Strategy.S1 in tried else cfg.s2_orbit_budget
+                # s1_view: strategy 1's planner is asked before every orbit (after a failed jump too, that
+                # configuration forbidden), and the orbit is steered by it. The other budgets: once an orbit of this
+                # candidate was left for strategy 1's jump and that jump failed too, strategy 2 runs its full orbit
+                # unprobed: strategy 1 was tried for real, and orbiting is what remains
+                s1_view = cfg.s2_orbit_budget == "s1_view"
+                mode = "none" if not s1_view and (orbit_left or Strategy.S1 in tried) else cfg.s2_orbit_budget
                 probe = None
-                if orbit is None and not orbit_left and (cfg.s2_feasibility_check or mode != "none"):
+                if orbit is None and (s1_view or not orbit_left) and (cfg.s2_feasibility_check or mode != "none"):
                     # strategy 2 cannot tell an unmeasurable candidate (the report): strategy 1's circle-of-visibility
-                    # test, which can, is asked first, without measuring; no look-through view -> unmeasurable
+                    # test, which can, is asked first, without measuring; no look-through view -> unmeasurable (or,
+                    # with s2_no_s1_view_back_to_s0, strategy 0 re-plans a candidate it planned before)
                     probe = plan_s1(
                         self.m, self.w, self.rf, cc, aims, self.circles_for(aims), normal, self.current_source,
                         cfg.score, self.forbid_array(Strategy.S1, cc, len(aims)), cfg.s1_reach_cells,
                     )  # fmt: skip
                     if isinstance(probe, NoView) and cfg.s2_feasibility_check:
+                        if (
+                            cfg.s2_no_s1_view_back_to_s0
+                            and Strategy.S0 in planned
+                            and switches < cfg.max_switches_per_candidate
+                        ):
+                            # strategy 0 planned cc before: it re-plans, its failed configurations forbidden
+                            self.outcomes["S2 not started: S1 finds no view, back to S0"] += 1
+                            strategy, switches = Strategy.S0, switches + 1
+                            continue
                         self.outcomes["S2 not started: S1 finds no view"] += 1
                         return self._unmeasurable(cc, pp)
-                    orbit_budget, orbit_spent = math.inf, 0.0
+                    orbit_budget, orbit_spent, orbit_goal = math.inf, 0.0, None
                     if mode != "none" and not isinstance(probe, NoView) and self.current_source is not None:
-                        # the orbit's motion budget: the source motion of strategy 1's planned jump
-                        orbit_budget = cfg.s2_orbit_budget_factor * float(
-                            np.hypot(*(probe.pos[0] - self.current_source))
-                        )
+                        if s1_view:
+                            orbit_goal = np.array(probe.pos[0], dtype=float)
+                        else:
+                            # the orbit's motion budget: the source motion of strategy 1's planned jump
+                            orbit_budget = cfg.s2_orbit_budget_factor * float(
+                                np.hypot(*(probe.pos[0] - self.current_source))
+                            )
                 if orbit is None:
                     orbit = start_orbit(
                         pp, normal, direction, cc, self.current_source, cfg.s2_step_deg, cfg.s2_start,
@@ -567,6 +603,19 @@ class _Engine:
                             continue
                         orbit_budget = math.inf
                 plan = plan_s2(self.rf, orbit, self.m if cfg.s2_skip_predicted_d2 else None)
+                if not isinstance(plan, NoView) and orbit_goal is not None:
+                    # s1_view: the step is flown only if it brings the source nearer to strategy 1's planned view,
+                    # i.e. while the orbit is on the way to that jump; else strategy 1 jumps from here
+                    d_now = float(np.hypot(*(self.current_source - orbit_goal)))
+                    if float(np.hypot(*(plan.pos[0] - orbit_goal))) >= d_now:
+                        if switches >= cfg.max_switches_per_candidate:
+                            # no switch left for the jump: the candidate ends here instead of flying the rest of the
+                            # turn away from the only other view
+                            self.outcomes["S2 orbit ended: leads away from S1's view, no switch left"] += 1
+                            return self._unmeasurable(cc, pp)
+                        self.outcomes["S2 orbit left for S1: step leads away from S1's view"] += 1
+                        strategy, switches, orbit, orbit_left, orbit_goal = Strategy.S1, switches + 1, None, True, None
+                        continue
                 if not isinstance(plan, NoView) and mode == "s1_jump":
                     step = float(np.hypot(*(plan.pos[0] - self.current_source)))
                     if orbit_spent + step > orbit_budget and switches < cfg.max_switches_per_candidate:

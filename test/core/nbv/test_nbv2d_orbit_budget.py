@@ -69,3 +69,42 @@ def test_stratpix_leaves_an_orbit_that_outgrows_strategy_1s_jump():
     assert budget.outcomes["S2 orbit left for S1: longer than S1's jump"] > 0
     assert free.outcomes["S2 orbit left for S1: longer than S1's jump"] == 0
     assert budget.outcomes["D2"] < free.outcomes["D2"]
+
+
+def _orbit_outcomes(result):
+    return {k: v for k, v in result.outcomes.items() if k.startswith("S2")}
+
+
+def test_s1_view_is_the_default_and_a_known_budget():
+    assert RunConfig().s2_orbit_budget == "s1_view"
+    assert RunConfig(script="stratpix", s2_orbit_budget="s1_view").s2_orbit_budget == "s1_view"
+
+
+def test_stratpix_leaves_an_orbit_whose_step_leads_away_from_strategy_1s_view():
+    rf = _rf()
+    truth = _triangle()
+    steered = run(truth, rf, RunConfig(script="stratpix", s2_orbit_budget="s1_view"))
+    free = run(truth, rf, RunConfig(script="stratpix", s2_orbit_budget="none"))
+    assert steered.termination == free.termination == "growth_points_exhausted"
+    assert steered.outcomes["S2 orbit left for S1: step leads away from S1's view"] > 0
+    assert _orbit_outcomes(free).get("S2 orbit left for S1: step leads away from S1's view", 0) == 0
+    assert steered.outcomes["D2"] < free.outcomes["D2"]
+
+
+def test_s1_view_ends_the_candidate_when_no_switch_is_left():
+    # with one switch per candidate the step leading away cannot hand over to strategy 1: cc is unmeasurable
+    result = run(_triangle(), _rf(), RunConfig(script="stratpix", max_switches_per_candidate=1))
+    assert result.termination == "growth_points_exhausted"
+    assert result.outcomes["S2 orbit ended: leads away from S1's view, no switch left"] > 0
+
+
+def test_stratpix_goes_back_to_strategy_0_when_strategy_1_has_no_view():
+    rf = _rf()
+    truth = _triangle()
+    back = run(truth, rf, RunConfig(script="stratpix", s2_no_s1_view_back_to_s0=True))
+    off = run(truth, rf, RunConfig(script="stratpix", s2_no_s1_view_back_to_s0=False))
+    assert back.termination == off.termination == "growth_points_exhausted"
+    assert back.outcomes["S2 not started: S1 finds no view, back to S0"] > 0
+    assert off.outcomes["S2 not started: S1 finds no view, back to S0"] == 0
+    # each candidate sent back is one that would otherwise have been marked unmeasurable on the spot
+    assert off.outcomes["S2 not started: S1 finds no view"] > back.outcomes["S2 not started: S1 finds no view"]

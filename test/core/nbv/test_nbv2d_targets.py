@@ -151,8 +151,9 @@ def test_circpix_strict_check_refuses_a_candidate_with_known_full_cells_behind_i
 def test_stratpix_does_not_orbit_for_a_candidate_strategy_1_cannot_plan():
     rf = RangeFinder2D(12.0, math.pi / 2, math.atan2(30.0, 12.0), 0.45)
     truth = _u_shape()
-    on = run(truth, rf, RunConfig(script="stratpix"))
-    off = run(truth, rf, RunConfig(script="stratpix", s2_feasibility_check=False))
+    # without strategy 0's re-plan, so that a candidate strategy 1 cannot plan ends unmeasurable on the spot
+    on = run(truth, rf, RunConfig(script="stratpix", s2_no_s1_view_back_to_s0=False))
+    off = run(truth, rf, RunConfig(script="stratpix", s2_feasibility_check=False, s2_no_s1_view_back_to_s0=False))
     assert on.termination == off.termination == "growth_points_exhausted"
     assert on.outcomes["S2 not started: S1 finds no view"] > 0
     assert on.outcomes["D2"] < off.outcomes["D2"]
