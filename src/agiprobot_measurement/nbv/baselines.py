@@ -141,7 +141,8 @@ class OursPolicy(Policy):
     """The report's method in 3D: frontier targets (growth / candidate voxels with the PCA predicted surface),
     candidate views perpendicular to it filtered by the sphere of visibility, scored by the weighted terms of
     config/nbv.yaml ``planning.ours_weights`` (each normalised by its best candidate; the default mixes rpg's
-    proximity count with the report's gain), times the motion factor Pohyb ``exp(-lambda C)`` (lambda scaled by
+    proximity count, average entropy and rear side voxel, the mix whose best candidate came closest to the truly
+    best view, ``bench_nbv.py --gain-quality``), times the motion factor Pohyb ``exp(-lambda C)`` (lambda scaled by
     :meth:`cost_factor`, config ``planning.cost_schedule``). The expected newly
     seen surface of the predicted-surface model (:func:`~.gains.expected_surface`: camera and projector rays clear
     and in range, perpendicularity) ranks the fallbacks and drives the stopping rule; it is a score term only when

@@ -548,11 +548,11 @@ class Reconstructor:
         return choice.pose, choice.joints, float(choice.gain), ""
 
     def _opening_choice(self, q: np.ndarray, source: str = "sphere") -> _Choice | None:
-        """The feasible pose of the view sphere whose elevation is nearest ``motion.opening_elevation_deg`` (90: the
-        most top-down one), the cheapest move among equals (the report's a-priori opening view), aimed at
-        ``motion.opening_height`` of the ROI's height: from above, the scanning range (136 mm for model S) then spans
-        the fixture's top up to about 13 cm, where most parts have their top; taller ones are found by the search
-        aimed higher."""
+        """The feasible pose of the view sphere whose elevation is nearest ``motion.opening_elevation_deg``, the
+        cheapest move among equals (the report's a-priori opening view), aimed at ``motion.opening_height`` of the
+        ROI's height. At 55 degrees it sees the top and the sides facing it (12 objects: median coverage after the
+        first view 0.47, straight down 0.27); the scanning range (136 mm for model S) spans the ROI's lower part,
+        where most parts are; taller ones are found by the search aimed higher."""
         aim = self.roi_center_m.copy()
         aim[2] = self.roi_min_m[2] + self.opening_height * (self.roi_max_m[2] - self.roi_min_m[2])
         cands = self.generator.sphere(aim)
