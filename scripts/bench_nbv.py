@@ -188,6 +188,9 @@ def main(argv=None) -> int:
                         help="instead of the benchmark: run 'ours' once per object and measure, at each of its first "
                              "8 decisions below 97 %% coverage, how much of the truly best candidate's new coverage "
                              "each gain's best candidate gets (1 = it picks the truly best view)")  # fmt: skip
+    parser.add_argument("--compare-weights", action="append", default=[], metavar="TERM=W,TERM=W",
+                        help="with --gain-quality: also score this mix of ours' terms on the same decisions "
+                             "(repeatable), e.g. proximity_count=1,report=0.3")  # fmt: skip
     parser.add_argument("--pixel-step", type=int, default=2)
     parser.add_argument("--gt-spacing", type=float, default=0.002, help="ground-truth point spacing (m)")
     parser.add_argument("--gt-directions", type=int, default=200)
@@ -302,11 +305,16 @@ def gain_quality(args) -> int:
     from agiprobot_measurement.nbv.station3d import SimulatedNBVStation
 
     objects, specs, config, ours_options, options = _setup(args)
-    results = {"max_views": args.max_views, "pixel_step": args.pixel_step, **options, "gain_quality": {}}
+    # the configured score without its motion cost, and the mixes to compare, on the same decisions
+    mixes = {"score": dict(config.get("planning", {}).get("ours_weights", {}))}
+    for i, text in enumerate(args.compare_weights, start=1):
+        mixes[f"mix{i}"] = ours_weights(text.split(","))
+    results = {"max_views": args.max_views, "pixel_step": args.pixel_step, **options, "gain_quality": {},
+               "mixes": mixes}  # fmt: skip
     for name, (part, units, extent) in zip(objects, specs, strict=True):
         station = SimulatedNBVStation(part, units, extent, seed=args.seed, pixel_step=args.pixel_step, config=config)
         truth = GroundTruth(station, spacing_m=args.gt_spacing, directions=args.gt_directions)
-        hook = GainQuality(truth)
+        hook = GainQuality(truth, mixes=mixes)
         request = ReconstructionRequest.with_config_defaults(
             gain="ours", max_views=args.max_views, seed=args.seed, **ours_options
         )

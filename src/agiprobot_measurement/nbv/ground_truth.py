@@ -275,10 +275,14 @@ class GainQuality:
     feasible candidate's *true gain* is the share of the observable points it would newly measure (seen validly
     from its pose, not yet covered). Per gain (the policy's own utility, every metric of :data:`.gains.GAIN_NAMES`
     on the planning map and the predicted-surface gain) the decision scores the true gain of that gain's best
-    candidate over the best true gain of the pool: 1 when it would pick the truly best view. ``summary()`` is the
-    mean over the decisions."""
+    candidate over the best true gain of the pool: 1 when it would pick the truly best view. ``mixes`` ({name:
+    {gain: weight}}) are scored on the same pools too, each as ours' score (the sum of the weighted gains, each
+    divided by its best candidate's, without the motion cost), so that mixes compare on the same decisions.
+    ``summary()`` is the mean over the decisions."""
 
-    def __init__(self, truth: GroundTruth, max_decisions: int = 8, max_coverage: float = 0.97):
+    def __init__(
+        self, truth: GroundTruth, max_decisions: int = 8, max_coverage: float = 0.97, mixes: dict | None = None
+    ):
         from agiprobot_measurement.sensors.phoxi.renderer import RayCaster, SceneGeometry
 
         self.truth = truth
@@ -286,6 +290,7 @@ class GainQuality:
         self.max_coverage = float(max_coverage)
         st = truth.station
         self._caster = RayCaster(SceneGeometry.concatenate([st.static_geometry, st.part_geometry]))
+        self.mixes = {str(k): dict(v) for k, v in (mixes or {}).items()}
         self.decisions: list[dict[str, float]] = []
 
     def __call__(self, recon, cands, utilities: np.ndarray) -> None:
@@ -304,6 +309,12 @@ class GainQuality:
         model = getattr(recon.policy, "model", None) or ExpectedSurfaceModel()
         scores = {"utility": utilities, **gains.all_gains}
         scores["expected_surface"], _ = expected_surface(recon.planning_map, cands.poses[idx], recon.view_model, model)
+        for name, weights in self.mixes.items():
+            mix = np.zeros(len(idx))
+            for gain, weight in weights.items():
+                values = np.asarray(scores[gain], dtype=float)
+                mix += float(weight) * values / max(float(values.max()), 1e-12)
+            scores[name] = mix
         self.decisions.append(
             {name: float(true_gain[int(np.argmax(values))]) / best for name, values in scores.items()}
         )

@@ -143,12 +143,16 @@ def test_gain_quality_scores_each_gain_against_the_truly_best_view(bench):
 
     station = SimulatedNBVStation(pixel_step=8)
     truth = GroundTruth(station, spacing_m=0.005, directions=16, standoffs=1, rolls=1)
-    hook = GainQuality(truth, max_decisions=2)
+    mixes = {"prox": {"proximity_count": 1.0}, "report_only": {"report": 2.0, "proximity_count": 0.0}}
+    hook = GainQuality(truth, max_decisions=2, mixes=mixes)
     simulate(station, ReconstructionRequest.with_config_defaults(max_views=4), truth, chamfer=False, on_scored=hook)
     assert len(hook.decisions) == 2  # the first two scored pools of three
     for decision in hook.decisions:
-        assert {"utility", "expected_surface", "proximity_count", "report"} <= set(decision)
+        assert {"utility", "expected_surface", "proximity_count", "report", "prox", "report_only"} <= set(decision)
         assert all(0.0 <= v <= 1.0 for v in decision.values())
+        # a mix of one term picks what that term picks
+        assert decision["prox"] == decision["proximity_count"]
+        assert decision["report_only"] == decision["report"]
     summary = hook.summary()
     assert summary["utility"] == pytest.approx(np.mean([d["utility"] for d in hook.decisions]))
     # past the coverage bound nothing is scored
