@@ -505,10 +505,14 @@ def targets(results: dict) -> dict:
         per[obj] = row
 
     def median(key):
-        values = [r[key] for r in per.values() if r.get(key) is not None]
+        if key.endswith(("_n90", "_n95")):
+            # views to a level: an object where it was not reached (in some run) counts as never, not as absent
+            values = [math.inf if r[key] is None else r[key] for r in per.values() if key in r]
+        else:
+            values = [r[key] for r in per.values() if r.get(key) is not None]
         return float(np.median(values)) if values else None
 
-    keys = sorted({k for r in per.values() for k, v in r.items() if isinstance(v, (int, float)) and v is not None})
+    keys = sorted({k for r in per.values() for k, v in r.items() if isinstance(v, (int, float)) or k.endswith("_n95")})
     all_runs = [r for m in objects.values() for r in m["ours"]["runs"]]
     summary = {k: median(k) for k in keys}
     if all_runs:

@@ -4,6 +4,8 @@ coverage; the targets' "best volumetric metric" picked once over the objects, no
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -159,3 +161,18 @@ def test_gain_quality_scores_each_gain_against_the_truly_best_view(bench):
     late = GainQuality(truth, max_coverage=0.0)
     simulate(station, ReconstructionRequest.with_config_defaults(max_views=2), truth, chamfer=False, on_scored=late)
     assert late.decisions == [] and late.summary() == {}
+
+
+def test_views_to_95_not_reached_on_an_object_count_as_never_in_the_median(bench):
+    a = bench.VOLUMETRIC[0]
+    objects = {}
+    for name, ours_n95, random_n95 in (("x", 3, 10), ("y", 4, None), ("z", None, None)):
+        run = {"view_log": [view(1.0, 0.9)], "coverage": 0.9, "views": 5, "termination_reason": "max_views"}
+        ours = method(0.85, 0.80, runs=[run])
+        ours["summary"]["n95"] = ours_n95
+        rnd = method(0.6, 0.5)
+        rnd["summary"]["n95"] = random_n95
+        objects[name] = {"methods": {a: method(0.7, 0.7), "ours": ours, "random": rnd}}
+    median = bench.targets({"max_views": 20, "objects": objects})["median"]
+    assert median["ours_n95"] == 4.0  # 3, 4, never; not the mean of 3 and 4
+    assert median["random_n95"] == math.inf  # reached on one object of three
