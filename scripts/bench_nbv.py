@@ -13,6 +13,9 @@ examples:
   bench_nbv.py --objects all --methods ours occlusion_aware unobserved_voxel rear_side_voxel rear_side_entropy \\
       proximity_count average_entropy area_factor report3d random hemisphere6 hemisphere12 hemisphere24 oracle \\
       --max-views 20 --json nbv_full.json
+  bench_nbv.py --objects all --methods ours --seeds 2 --ours-weight proximity_count=1 --ours-weight report=0.3 \\
+      --config-option motion.opening_elevation_deg=90 --json variant.json     # then --merge nbv_full.json variant.json
+  bench_nbv.py --gain-quality --objects all --max-views 10 --compare-weights proximity_count=1,report=0.3
 
 Objects: cube, cylinder, featuretype, fandisk, angle_block, idler_riser, plate_holes (shared parts), u_channel,
 cup, two_towers, l_bracket, torus (procedural), or a mesh path (mm); "all" = every named one.
