@@ -367,6 +367,7 @@ def collision_free_trajectory(
     planning_time_s: float = 0.2,
     attempts: int = 3,
     max_step_rad: float = 0.02,
+    straight_first: bool = True,
 ):
     """Collision-free, time-parameterised joint trajectory (rad, s) from ``start`` to ``goal``, or None.
 
@@ -375,13 +376,13 @@ def collision_free_trajectory(
     ``attempts`` tries, each with twice the previous time budget; its path is time-parameterised within the
     limits (scaled by ``velocity_scaling``) and the sampled trajectory is checked once more. ``planner``: a
     :class:`MotionPlanner`, or a function returning one (called only when the straight move is blocked).
+    ``straight_first=False`` skips the straight move (the caller found it blocked already).
     """
     start = np.asarray(start, dtype=float)
     goal = np.asarray(goal, dtype=float)
     if np.abs(goal - start).max() < 1e-9:
         return JointTrajectory(list(limits.names), [0.0], start[None], np.zeros((1, len(start))))
-    steps = max(2, int(np.ceil(np.abs(goal - start).max() / max_step_rad)) + 1)
-    if checker.check_states(np.linspace(start, goal, steps)).all():
+    if straight_first and checker.check_states(interpolate_path(np.array([start, goal]), max_step_rad)).all():
         return point_to_point(start, goal, limits, velocity_scaling, velocity_scaling)
     if callable(planner):
         planner = planner()

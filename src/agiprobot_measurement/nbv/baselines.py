@@ -80,6 +80,16 @@ def _choice(recon, cands, i: int, gain: float, utility: float, new_area: float):
                    np.zeros(0, int), int(i), target)  # fmt: skip
 
 
+def weighted_score(terms: dict, weights: dict, n: int) -> np.ndarray:
+    """Ours' score of ``n`` candidates: the sum of ``weight x term / the term's best candidate's`` over ``weights``
+    ({term name: weight}), each term an (n,) array of ``terms``."""
+    score = np.zeros(n)
+    for name, weight in weights.items():
+        values = np.asarray(terms[name], dtype=float)
+        score += float(weight) * values / max(float(values.max()), 1e-12)
+    return score
+
+
 #: how ours applies its motion weight lambda over a run (config/nbv.yaml planning.cost_schedule)
 COST_SCHEDULES = ("constant", "remaining_surface")
 
@@ -198,10 +208,7 @@ class OursPolicy(Policy):
         if set(self.weights) - {"expected_surface"}:
             g, _ = r.evaluate(cands, "report")
             terms.update(g.all_gains)
-        score = np.zeros(len(idx))
-        for name, weight in self.weights.items():
-            values = terms[name]
-            score += float(weight) * values / max(float(values.max()), 1e-12)
+        score = weighted_score(terms, self.weights, len(idx))
         cost = _motion_cost(r, q, cands.joints[idx])
         factor = self.cost_factor(float(exp_area.max()))
         utilities = score * np.exp(-r.request.cost_weight * factor * cost)

@@ -294,6 +294,7 @@ class GainQuality:
         self.decisions: list[dict[str, float]] = []
 
     def __call__(self, recon, cands, utilities: np.ndarray) -> None:
+        from agiprobot_measurement.nbv.baselines import weighted_score
         from agiprobot_measurement.nbv.gains import ExpectedSurfaceModel, expected_surface
 
         truth = self.truth
@@ -310,11 +311,7 @@ class GainQuality:
         scores = {"utility": utilities, **gains.all_gains}
         scores["expected_surface"], _ = expected_surface(recon.planning_map, cands.poses[idx], recon.view_model, model)
         for name, weights in self.mixes.items():
-            mix = np.zeros(len(idx))
-            for gain, weight in weights.items():
-                values = np.asarray(scores[gain], dtype=float)
-                mix += float(weight) * values / max(float(values.max()), 1e-12)
-            scores[name] = mix
+            scores[name] = weighted_score(scores, weights, len(idx))
         self.decisions.append(
             {name: float(true_gain[int(np.argmax(values))]) / best for name, values in scores.items()}
         )

@@ -4,8 +4,9 @@
 simulation of :mod:`.station3d` or the ROS node's):
 
 1. the home pose (config/nbv.yaml ``motion.home_rad``); the opening view: the feasible pose of the global view
-   sphere around the ROI nearest ``motion.opening_elevation_deg`` (90: the most top-down one); if the ROI is still empty, an a-priori search of ``motion.search_views``
-   hemisphere views; if still nothing, the result is ``nothing_found``;
+   sphere around the ROI nearest ``motion.opening_elevation_deg`` (90: the most top-down one); if the ROI is still
+   empty, an a-priori search of ``motion.search_views`` hemisphere views; if still nothing, the result is
+   ``nothing_found``;
 2. per view: capture, fuse into the output map (``resolution_m``) and the planning map (``planning_resolution_m``,
    fused from the same frames so that its free space is carved at its own resolution), update the labels, generate
    and filter candidates (:mod:`.candidates`), score them (:mod:`.gains`), weigh the estimated joint-move time,
@@ -578,6 +579,7 @@ class Reconstructor:
                 time_budget_s=max(self.planning_time_s, 0.2),
                 simplify_time_s=self.simplify_time_s,
                 seed=self.request.seed + 1,
+                try_direct=False,  # plan_motion asks OMPL only once the straight move is found blocked
             )
         return self._planner
 
@@ -608,6 +610,7 @@ class Reconstructor:
             velocity_scaling=self.velocity_scaling,
             planning_time_s=self.planning_time_s,
             attempts=2,
+            straight_first=False,
         )
         if via is None:
             return planned
@@ -619,6 +622,7 @@ class Reconstructor:
         """(trajectory, joint path rad) of the shortest free two-segment straight move through one of the poses the
         robot has already been at without collision (the home pose and the views so far; the known-free region only
         grows, so they stay free), trying the ``motion.via_poses`` shortest; or None."""
+        from agiprobot_measurement.motion.motion_planning import interpolate_path
         from agiprobot_measurement.motion.time_parameterization import time_optimal_trajectory
 
         if self.via_poses <= 0:
@@ -628,15 +632,11 @@ class Reconstructor:
         lengths = np.abs(vias - q_from).sum(axis=1) + np.abs(q_to - vias).sum(axis=1)
         checker = self.generator.checker
         for i in np.argsort(lengths, kind="stable")[: self.via_poses]:
-            q_via = vias[i]
-            segments = []
-            for a, b in ((q_from, q_via), (q_via, q_to)):
-                steps = max(2, int(np.ceil(np.abs(b - a).max() / VIA_CHECK_STEP_RAD)) + 1)
-                segments.append(np.linspace(a, b, steps))
-            if not checker.check_states(np.concatenate(segments)).all():
+            waypoints = np.asarray([q_from, vias[i], q_to])
+            if not checker.check_states(interpolate_path(waypoints, VIA_CHECK_STEP_RAD)).all():
                 continue
             trajectory = time_optimal_trajectory(
-                np.asarray([q_from, q_via, q_to]),
+                waypoints,
                 self.station.limits,
                 velocity_scaling_factor=self.velocity_scaling,
                 acceleration_scaling_factor=self.velocity_scaling,
