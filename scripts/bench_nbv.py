@@ -235,9 +235,9 @@ def ours_overrides(options: list[str]) -> dict:
     return out
 
 
-def ours_weights(options: list[str]) -> dict | None:
-    """``--ours-weight TERM=WEIGHT`` as ours' score weights (None: the configured ones); an unknown term or a weight
-    that is not a finite number >= 0 is refused with its name."""
+def ours_weights(options: list[str], flag: str = "--ours-weight") -> dict | None:
+    """``--ours-weight TERM=WEIGHT`` (or ``flag``'s items) as ours' score weights (None: the configured ones); an
+    unknown term or a weight that is not a finite number >= 0 is refused with its name."""
     if not options:
         return None
     known = ("expected_surface", *GAIN_NAMES)
@@ -245,16 +245,16 @@ def ours_weights(options: list[str]) -> dict | None:
     for option in options:
         name, sep, text = option.partition("=")
         if not sep or name not in known:
-            raise InputError(f"--ours-weight {option!r}: expected TERM=WEIGHT, TERM one of {', '.join(known)}")
+            raise InputError(f"{flag} {option!r}: expected TERM=WEIGHT, TERM one of {', '.join(known)}")
         try:
             weight = float(text)
         except ValueError:
-            raise InputError(f"--ours-weight {option!r}: {text!r} is not a number") from None
+            raise InputError(f"{flag} {option!r}: {text!r} is not a number") from None
         if not (math.isfinite(weight) and weight >= 0):
-            raise InputError(f"--ours-weight {option!r}: the weight must be a finite number >= 0")
+            raise InputError(f"{flag} {option!r}: the weight must be a finite number >= 0")
         out[name] = weight
     if not any(out.values()):
-        raise InputError("--ours-weight: at least one weight must be positive")
+        raise InputError(f"{flag}: at least one weight must be positive")
     return out
 
 
@@ -311,7 +311,7 @@ def gain_quality(args) -> int:
     # the configured score without its motion cost, and the mixes to compare, on the same decisions
     mixes = {"score": dict(config.get("planning", {}).get("ours_weights", {}))}
     for i, text in enumerate(args.compare_weights, start=1):
-        mixes[f"mix{i}"] = ours_weights(text.split(","))
+        mixes[f"mix{i}"] = ours_weights(text.split(","), flag="--compare-weights")
     results = {"max_views": args.max_views, "pixel_step": args.pixel_step, **options, "gain_quality": {},
                "mixes": mixes}  # fmt: skip
     for name, (part, units, extent) in zip(objects, specs, strict=True):

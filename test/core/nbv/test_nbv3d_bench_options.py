@@ -83,3 +83,12 @@ def test_bad_config_options_are_refused(bench, item, named):
     config = {"motion": {"opening_elevation_deg": 90.0}, "planning": {"cost_schedule": "constant"}}
     with pytest.raises(InputError, match=named):
         bench.config_overrides([item], config)
+
+
+def test_compared_mixes_are_refused_under_their_own_option(bench):
+    assert bench.ours_weights(["proximity_count=1", "report=0.3"], flag="--compare-weights") == {
+        "proximity_count": 1.0,
+        "report": 0.3,
+    }
+    with pytest.raises(InputError, match="--compare-weights 'report=much'"):
+        bench.ours_weights(["report=much"], flag="--compare-weights")
