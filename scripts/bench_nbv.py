@@ -161,6 +161,19 @@ def path_to(run: dict, level: float) -> tuple[float, bool]:
     return total, False
 
 
+def straight_path_to(run: dict, level: float, home_rad) -> float:
+    """Straight joint distance (rad, summed over the joints) from ``home_rad`` through a run's views until its
+    coverage first reaches ``level`` (inf if never): its path without the detours around obstacles."""
+    total, q = 0.0, np.asarray(home_rad, dtype=float)
+    for v in run.get("view_log", []):
+        joints = np.asarray(v["joints_rad"], dtype=float)
+        total += float(np.abs(joints - q).sum())
+        q = joints
+        if v.get("coverage") is not None and v["coverage"] >= level - 1e-9:
+            return total
+    return math.inf
+
+
 def fmt(v, spec=".3f"):
     return "-" if v is None or (isinstance(v, float) and not np.isfinite(v)) else format(v, spec)
 
@@ -499,6 +512,24 @@ def targets(results: dict) -> dict:
             row["ours_path_at_equal_coverage_rad"] = float(np.mean(ours_paths))
             row["best_volumetric_path_at_equal_coverage_rad"] = float(np.mean(vol_paths))
             row["path_ratio_at_equal_coverage"] = float(np.mean(ratios))
+            oracle = m.get("oracle", {})
+            if "path_curves" in oracle:
+                # the same comparison on straight joint distances, for ours and for the truth-aware planners:
+                # what a planner that knew the part could save (gains exact, moves straight)
+                straight = {"ours": []} | {name: [] for name in oracle["path_curves"]}
+                for a, b in zip(m["ours"]["runs"], m[best_auc]["runs"] * len(m["ours"]["runs"]), strict=False):
+                    level = min(a.get("coverage") or 0.0, b.get("coverage") or 0.0)
+                    pb = straight_path_to(b, level, oracle["home_rad"])
+                    if not pb > 0 or not math.isfinite(pb):
+                        continue
+                    straight["ours"].append(straight_path_to(a, level, oracle["home_rad"]) / pb)
+                    for name, curve in oracle["path_curves"].items():
+                        reached = [path for coverage, path in curve if coverage >= level - 1e-9]
+                        straight[name].append((reached[0] if reached else math.inf) / pb)
+                for name, values in straight.items():
+                    if values:
+                        key = "ours" if name == "ours" else f"oracle_{name}"
+                        row[f"{key}_straight_path_ratio"] = float(np.mean(values))
         if "random" in m:
             rnd = m["random"]["summary"]
             row.update({"random_c4": rnd["c4"], "random_auc10": rnd["auc10"], "random_n95": rnd["n95"]})

@@ -180,6 +180,10 @@ class OursPolicy(Policy):
             raise InputError(
                 f"planning.cost_schedule: unknown {self.cost_schedule!r}; known: {', '.join(COST_SCHEDULES)}"
             )
+        # (1 - A / A1)^power: a higher power lets the motion count later in the run
+        self.cost_schedule_power = _planning_number(planning, "cost_schedule_power", 1.0, positive=True)
+        # seconds of motion cost per rad of straight joint path (summed over the joints), added to the move time
+        self.cost_s_per_rad = _planning_number(planning, "cost_joint_path_s_per_rad", 0.0, positive=False)
         self.first_expected_area_m2 = None
 
     def cost_factor(self, expected_area_m2: float) -> float:
@@ -193,7 +197,8 @@ class OursPolicy(Policy):
             self.first_expected_area_m2 = expected_area_m2
         if self.first_expected_area_m2 <= 0:
             return 1.0
-        return float(np.clip(1.0 - expected_area_m2 / self.first_expected_area_m2, 0.0, 1.0))
+        share_seen = float(np.clip(1.0 - expected_area_m2 / self.first_expected_area_m2, 0.0, 1.0))
+        return share_seen**self.cost_schedule_power
 
     def choose(self, q):
         from agiprobot_measurement.nbv.gains import expected_surface
@@ -210,6 +215,8 @@ class OursPolicy(Policy):
             terms.update(g.all_gains)
         score = weighted_score(terms, self.weights, len(idx))
         cost = _motion_cost(r, q, cands.joints[idx])
+        if self.cost_s_per_rad > 0:
+            cost = cost + self.cost_s_per_rad * np.abs(cands.joints[idx] - q).sum(axis=1)
         factor = self.cost_factor(float(exp_area.max()))
         utilities = score * np.exp(-r.request.cost_weight * factor * cost)
         self.remember(cands, utilities)
@@ -373,6 +380,18 @@ def _replace(config, **changes):
     import dataclasses
 
     return dataclasses.replace(config, **changes)
+
+
+def _planning_number(planning: dict, key: str, default: float, positive: bool) -> float:
+    """A finite number of config/nbv.yaml ``planning.<key>``, > 0 (``positive``) or >= 0, else InputError."""
+    value = planning.get(key, default)
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"planning.{key} must be a number, got {value!r}") from None
+    if not math.isfinite(number) or number < 0 or (positive and number == 0):
+        raise InputError(f"planning.{key} must be a finite number {'> 0' if positive else '>= 0'}, got {value!r}")
+    return number
 
 
 def _motion_cost(recon, q, joints) -> np.ndarray:

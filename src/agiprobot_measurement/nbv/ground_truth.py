@@ -27,7 +27,7 @@ import numpy as np
 
 from agiprobot_measurement.errors import InputError
 
-__all__ = ["GainQuality", "GroundTruth", "auc", "oracle_views", "simulate", "views_to"]
+__all__ = ["GainQuality", "GroundTruth", "auc", "oracle_path_curve", "oracle_views", "simulate", "views_to"]
 
 
 @dataclass
@@ -265,7 +265,56 @@ def oracle_views(truth: GroundTruth, time_limit_s: float = 20.0) -> dict:
     out["curve"] = curve
     out["n90"] = views_to(curve, 0.90)
     out["n95"] = views_to(curve, 0.95)
+    out["home_rad"] = [float(v) for v in truth.station.home_rad]
+    out["path_curves"] = {
+        name: oracle_path_curve(truth, per_rad_offset_rad=offset) for name, offset in ORACLE_PATH_PLANNERS.items()
+    }
     return out
+
+
+#: the truth-aware path planners of :func:`oracle_path_curve`: name -> per_rad_offset_rad (None: coverage first)
+ORACLE_PATH_PLANNERS = {"coverage_first": None, "per_rad": 2.0}
+
+
+def oracle_path_curve(truth: GroundTruth, per_rad_offset_rad: float | None = None, max_views: int = 30) -> list:
+    """The coverage a planner that knows the truth reaches over the straight joint path (rad, summed over the
+    joints) from the home pose: each step it takes the feasible ground-truth pose that newly covers the most
+    observable points (``per_rad_offset_rad`` None; ties to the shorter move), or the most per rad of the move
+    plus that offset. Poses are solved nearest the joints of the step before (the ground truth's own solution where
+    that one collides). A bound, not a plan: the moves are straight (no detour around obstacles) and the gains
+    exact. Returns [(coverage, path rad), ...] per view."""
+    st = truth.station
+    vis = truth.visibility
+    matrix = vis.matrix.tocsc()[truth.observable].tocsc()
+    n = matrix.shape[0]
+    if n == 0 or matrix.shape[1] == 0:
+        return []
+    rows = matrix.tocsr()
+    covered = np.zeros(n, dtype=bool)
+    q = np.asarray(st.home_rad, dtype=float)
+    path = 0.0
+    curve = []
+    checker = st.collision_checker(with_part=True)
+    for _ in range(int(max_views)):
+        joints, ok = st.ik.solve_nearest(vis.poses, np.broadcast_to(q, (len(vis.poses), 6)))
+        ok[ok] = checker.check_states(joints[ok])
+        # where the solution nearest q collides, the pose's own (checked) solution
+        joints = np.where(ok[:, None], joints, vis.joints)
+        move = np.abs(joints - q).sum(axis=1)
+        gain = np.asarray(rows[~covered].sum(axis=0), dtype=float).reshape(-1)
+        if gain.max() <= 0:
+            break
+        if per_rad_offset_rad is None:
+            best = int(np.lexsort((move, -gain))[0])
+        else:
+            best = int(np.argmax(gain / (move + float(per_rad_offset_rad))))
+        path += float(move[best])
+        q = joints[best]
+        covered[matrix[:, best].indices] = True
+        curve.append((float(covered.mean()), path))
+        if covered.all():
+            break
+    return curve
 
 
 class GainQuality:

@@ -129,6 +129,38 @@ def _number(value, name: str, low: float | None = None, high: float | None = Non
     return v
 
 
+def _number_list(values, name: str, low: float, high: float) -> tuple[float, ...]:
+    """A config list of numbers in [low, high] (a single number is a list of one)."""
+    if isinstance(values, (int, float)):
+        values = [values]
+    if not isinstance(values, (list, tuple)):
+        raise InputError(f"{name} must be a list of numbers, got {values!r}")
+    return tuple(_number(v, name, low, high) for v in values)
+
+
+def _slerp(u: np.ndarray, v: np.ndarray, t: float) -> np.ndarray:
+    """The unit vector at ``t`` of the great circle from unit ``u`` to unit ``v`` (straight up when they are
+    opposite, where the circle is not defined)."""
+    angle = math.acos(float(np.clip(np.dot(u, v), -1.0, 1.0)))
+    if angle < 1e-9:
+        return np.asarray(u, dtype=float)
+    if math.pi - angle < 1e-3:
+        return np.array([0.0, 0.0, 1.0])
+    w = (math.sin((1 - t) * angle) * u + math.sin(t * angle) * v) / math.sin(angle)
+    return w / np.linalg.norm(w)
+
+
+def _lifted(direction: np.ndarray, lift_deg: float) -> np.ndarray:
+    """``direction`` (unit) with its elevation raised by ``lift_deg``, at most to 89 deg."""
+    horizontal = math.hypot(direction[0], direction[1])
+    if lift_deg == 0.0 or horizontal < 1e-6:
+        return np.asarray(direction, dtype=float)
+    elevation = min(math.atan2(direction[2], horizontal) + math.radians(lift_deg), math.radians(89.0))
+    azimuth = math.atan2(direction[1], direction[0])
+    return np.array([math.cos(elevation) * math.cos(azimuth), math.cos(elevation) * math.sin(azimuth),
+                     math.sin(elevation)])  # fmt: skip
+
+
 @dataclass
 class ReconstructionRequest:
     """One reconstruction; every field is validated here (InputError naming the field). Lengths m, angles rad."""
@@ -397,6 +429,13 @@ class Reconstructor:
         self.simplify_time_s = float(motion.get("simplify_time_s", 0.5))
         self.search_views = int(motion.get("search_views", 4))
         self.via_poses = int(motion.get("via_poses", 8))
+        self.orbit_retract_m = _number_list(
+            motion.get("orbit_retract_m", [0.1, 0.2]), "motion.orbit_retract_m", 0.0, 1.0
+        )
+        self.orbit_radius_extra_m = _number_list(
+            motion.get("orbit_radius_extra_m", [0.05, 0.15]), "motion.orbit_radius_extra_m", 0.0, 1.0
+        )
+        self.orbit_lift_deg = _number_list(motion.get("orbit_lift_deg", [25.0]), "motion.orbit_lift_deg", 0.0, 90.0)
         self.opening_height = float(motion.get("opening_height", 0.25))
         self.opening_elevation_deg = float(motion.get("opening_elevation_deg", 90.0))
         if not (math.isfinite(self.opening_elevation_deg) and 0.0 <= self.opening_elevation_deg <= 90.0):
@@ -619,9 +658,10 @@ class Reconstructor:
         return via[0] if via[1] < _path_length_rad(planned) else planned
 
     def _via_path(self, q_from: np.ndarray, q_to: np.ndarray):
-        """(trajectory, joint path rad) of the shortest free two-segment straight move through one of the poses the
-        robot has already been at without collision (the home pose and the views so far; the known-free region only
-        grows, so they stay free), trying the ``motion.via_poses`` shortest; or None."""
+        """(trajectory, joint path rad) of the shortest free straight move through via poses, or None. The vias are
+        the poses the robot has already been at without collision (the home pose and the views so far; the
+        known-free region only grows, so they stay free) and the moves around the ROI of :meth:`_orbit_waypoints`;
+        the ``motion.via_poses`` shortest of the former and all of the latter are tried, shortest first."""
         from agiprobot_measurement.motion.motion_planning import interpolate_path
         from agiprobot_measurement.motion.time_parameterization import time_optimal_trajectory
 
@@ -630,9 +670,11 @@ class Reconstructor:
         q_from, q_to = np.asarray(q_from, dtype=float), np.asarray(q_to, dtype=float)
         vias = np.asarray([self.home_rad, *(v.joints for v in self.views)], dtype=float)
         lengths = np.abs(vias - q_from).sum(axis=1) + np.abs(q_to - vias).sum(axis=1)
+        routes = [np.asarray([q_from, vias[i], q_to]) for i in np.argsort(lengths, kind="stable")[: self.via_poses]]
+        routes += self._orbit_waypoints(q_from, q_to)
+        routes.sort(key=lambda w: float(np.abs(np.diff(w, axis=0)).sum()))
         checker = self.generator.checker
-        for i in np.argsort(lengths, kind="stable")[: self.via_poses]:
-            waypoints = np.asarray([q_from, vias[i], q_to])
+        for waypoints in routes:
             if not checker.check_states(interpolate_path(waypoints, VIA_CHECK_STEP_RAD)).all():
                 continue
             trajectory = time_optimal_trajectory(
@@ -646,6 +688,60 @@ class Reconstructor:
             if checker.check_states(samples).all():
                 return trajectory, _path_length_rad(trajectory)
         return None
+
+    def _orbit_waypoints(self, q_from: np.ndarray, q_to: np.ndarray) -> list[np.ndarray]:
+        """Joint waypoints (rad) of moves around the ROI rather than through it, which the straight joint move
+        between two views on opposite sides usually crosses:
+
+        - retract the sensor along its optical axis by each of ``motion.orbit_retract_m``, move, approach;
+        - pass one pose on the great circle between the two views (directions seen from the ROI centre) at its
+          middle, or two at its thirds, at the larger standoff plus each of ``motion.orbit_radius_extra_m``, also
+          raised by each of ``motion.orbit_lift_deg``, looking at the centre (the middle pose at each of four
+          rolls, the thirds at the roll whose joints are nearest the move's).
+
+        IK is taken nearest the move's ends, resp. the joint interpolation at the pose's place on the move;
+        unreachable poses are left out."""
+        st = self.station
+        ends = np.asarray([q_from, q_to], dtype=float)
+        pose_a, pose_b = st.sensor_pose(ends)
+        routes = []
+        for d in self.orbit_retract_m:
+            retracted = np.array([pose_a, pose_b])
+            retracted[:, :3, 3] -= d * retracted[:, :3, 2]
+            q, ok = st.ik.solve_nearest(retracted, ends)
+            if np.all(ok):
+                routes.append(np.asarray([q_from, q[0], q[1], q_to]))
+        centre = 0.5 * (self.roi_min_m + self.roi_max_m)
+        offsets = np.array([pose_a[:3, 3] - centre, pose_b[:3, 3] - centre])
+        radii = np.linalg.norm(offsets, axis=1)
+        if not self.orbit_radius_extra_m or np.any(radii < 1e-6):
+            return routes
+        u_a, u_b = offsets / radii[:, None]
+        for extra in self.orbit_radius_extra_m:
+            radius = float(radii.max()) + extra
+            for lift in (0.0, *self.orbit_lift_deg):
+                mid = self._orbit_joints(centre, _lifted(_slerp(u_a, u_b, 0.5), lift), radius, ends.mean(axis=0))
+                routes += [np.asarray([q_from, q, q_to]) for q in mid]
+                thirds = [
+                    self._orbit_joints(
+                        centre, _lifted(_slerp(u_a, u_b, t), lift), radius, (1 - t) * ends[0] + t * ends[1]
+                    )
+                    for t in (1.0 / 3.0, 2.0 / 3.0)
+                ]
+                if thirds[0] and thirds[1]:
+                    nearest = [min(qs, key=lambda q, s=seed: float(np.abs(q - s).sum()))
+                               for qs, seed in zip(thirds, ((2 * ends[0] + ends[1]) / 3, (ends[0] + 2 * ends[1]) / 3), strict=True)]  # fmt: skip
+                    routes.append(np.asarray([q_from, nearest[0], nearest[1], q_to]))
+        return routes
+
+    def _orbit_joints(self, centre: np.ndarray, direction: np.ndarray, radius_m: float, seed: np.ndarray) -> list:
+        """Joints (rad) of the sensor at ``centre + radius * direction`` looking at the centre, at four rolls, each
+        the IK solution nearest ``seed``; the unreachable rolls are left out."""
+        from agiprobot_measurement.nbv.candidates import poses_from_directions
+
+        poses = poses_from_directions(centre, direction[None], radius_m, np.arange(4) * (math.pi / 2.0))
+        q, ok = self.station.ik.solve_nearest(poses, np.broadcast_to(seed, (len(poses), 6)))
+        return list(q[ok])
 
     # ------------------------------------------------------------------------------------ loop
     def run(

@@ -176,3 +176,48 @@ def test_views_to_95_not_reached_on_an_object_count_as_never_in_the_median(bench
     median = bench.targets({"max_views": 20, "objects": objects})["median"]
     assert median["ours_n95"] == 4.0  # 3, 4, never; not the mean of 3 and 4
     assert median["random_n95"] == math.inf  # reached on one object of three
+
+
+def test_straight_paths_and_the_truth_aware_planners_are_compared_at_equal_coverage(bench):
+    a = bench.VOLUMETRIC[0]
+    home = [0.0] * 6
+
+    def run(joints, coverages):
+        log = [{"joints_rad": q, "coverage": c, "joint_path_rad": 9.0} for q, c in zip(joints, coverages, strict=True)]
+        return {"view_log": log, "coverage": coverages[-1]}
+
+    ours_run = run([[1, 0, 0, 0, 0, 0], [1, 1, 0, 0, 0, 0]], [0.5, 0.9])  # straight: 1 + 1 rad to 0.9
+    metric_run = run([[0, 0, 2, 0, 0, 0], [0, 0, 2, 2, 0, 0]], [0.6, 0.9])  # 2 + 2 rad
+    assert bench.straight_path_to(metric_run, 0.9, home) == 4.0
+    assert bench.straight_path_to(metric_run, 0.95, home) == math.inf
+    methods = {
+        "ours": method(0.8, 0.8, runs=[{**ours_run, "views": 2, "termination_reason": "gain_below_threshold"}]),
+        a: method(0.7, 0.7, runs=[metric_run]),
+        "oracle": {
+            "home_rad": home,
+            "path_curves": {"coverage_first": [(0.7, 1.0), (0.95, 3.0)], "per_rad": [(0.8, 0.5)]},
+        },
+    }
+    row = bench.targets({"max_views": 20, "objects": {"x": {"methods": methods}}})["per_object"]["x"]
+    assert row["path_ratio_at_equal_coverage"] == pytest.approx(1.0)  # executed: 18 rad each
+    assert row["ours_straight_path_ratio"] == pytest.approx(0.5)
+    assert row["oracle_coverage_first_straight_path_ratio"] == pytest.approx(3.0 / 4.0)
+    assert row["oracle_per_rad_straight_path_ratio"] == math.inf  # it never reached 0.9
+
+
+def test_the_truth_aware_planners_take_the_best_pose_and_trade_it_for_path(bench):
+    from agiprobot_measurement.nbv.ground_truth import oracle_path_curve
+    from agiprobot_measurement.nbv.station3d import SimulatedNBVStation
+
+    station = SimulatedNBVStation(pixel_step=8)  # the 100 mm cube of config/scene.yaml
+    truth = GroundTruth(station, spacing_m=0.005, directions=24, standoffs=1, rolls=1)
+    first = oracle_path_curve(truth)
+    per_rad = oracle_path_curve(truth, per_rad_offset_rad=0.5)
+    observable = truth.visibility.matrix.tocsr()[truth.observable]
+    best_single = np.asarray(observable.sum(axis=0)).max() / observable.shape[0]
+    assert first[0][0] == pytest.approx(best_single)  # coverage first: the pose seeing most
+    for curve in (first, per_rad):
+        coverages, paths = np.array(curve).T
+        assert np.all(np.diff(coverages) > 0) and np.all(np.diff(paths) >= 0)
+        assert coverages[-1] == pytest.approx(1.0)  # on to every observable point
+    assert per_rad[0][1] <= first[0][1]  # per rad: a first move no longer than coverage first's

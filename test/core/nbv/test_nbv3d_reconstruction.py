@@ -181,6 +181,29 @@ def test_ours_counts_motion_fully_by_default_and_as_the_surface_runs_out_with_th
     assert ramp.cost_factor(0.0) == 1.0
 
 
+def test_a_higher_schedule_power_lets_motion_count_later():
+    squared = ours_policy(cost_schedule="remaining_surface", cost_schedule_power=2.0)
+    assert squared.cost_factor(0.02) == 0.0
+    assert squared.cost_factor(0.005) == pytest.approx(0.75**2)
+    assert squared.cost_factor(0.0) == 1.0
+
+
+@pytest.mark.parametrize(
+    ("key", "value"),
+    [
+        ("cost_schedule_power", 0.0),
+        ("cost_schedule_power", math.nan),
+        ("cost_schedule_power", "steep"),
+        ("cost_joint_path_s_per_rad", -1.0),
+        ("cost_joint_path_s_per_rad", math.inf),
+        ("cost_joint_path_s_per_rad", None),
+    ],
+)
+def test_bad_motion_weight_settings_are_named(key, value):
+    with pytest.raises(InputError, match=rf"planning\.{key}"):
+        ours_policy(cost_schedule="remaining_surface", **{key: value})
+
+
 def test_an_unknown_cost_schedule_is_named():
     with pytest.raises(InputError, match=r"planning\.cost_schedule: unknown 'sometimes'"):
         ours_policy(cost_schedule="sometimes")
@@ -207,6 +230,7 @@ class _Seen:
 
 def _via_setup(station, via_offset):
     recon, _ = make(station)
+    recon.orbit_retract_m = recon.orbit_radius_extra_m = ()  # only the earlier poses are vias here
     home = recon.home_rad
     recon.generator.checker = _BandChecker(home)
     recon.views.append(_Seen(home + np.asarray(via_offset)))
@@ -237,6 +261,81 @@ def test_no_via_move_when_switched_off_or_every_via_is_blocked(station):
     assert recon._via_path(home, goal) is None
     recon, home = _via_setup(station, [0.5, 0.05, 0, 0, 0, 0])  # the view pose itself lies in the band
     assert recon._via_path(home, goal) is None
+
+
+# --------------------------------------------------------------------------------------------- moves around the ROI
+def _opposite_views(recon, station):
+    """Joints of two reachable views of the ROI centre from opposite sides (azimuths 180 deg apart), 55 deg up."""
+    from agiprobot_measurement.nbv.candidates import poses_from_directions
+
+    centre = 0.5 * (recon.roi_min_m + recon.roi_max_m)
+    elevation = math.radians(55.0)
+    for azimuth in np.radians(np.arange(0.0, 180.0, 15.0)):
+        directions = [[math.cos(elevation) * math.cos(a), math.cos(elevation) * math.sin(a), math.sin(elevation)]
+                      for a in (azimuth, azimuth + math.pi)]  # fmt: skip
+        poses = poses_from_directions(centre, np.asarray(directions), 0.5, [0.0])
+        q, ok = station.ik.solve_nearest(poses, np.broadcast_to(recon.home_rad, (2, 6)))
+        if np.all(ok) and recon.generator.checker.check_states(q).all():
+            return q[0], q[1], centre
+    raise AssertionError("no pair of opposite views is reachable")
+
+
+def test_orbit_waypoints_retract_along_the_optical_axis_or_pass_the_great_circle(station):
+    recon, _ = make(station)
+    q_from, q_to, centre = _opposite_views(recon, station)
+    routes = recon._orbit_waypoints(q_from, q_to)
+    n_retract = len(recon.orbit_retract_m)
+    retracts, arcs = routes[:n_retract], routes[n_retract:]
+    assert all(len(w) == 4 for w in retracts)
+    assert {len(w) for w in arcs} == {3, 4}  # through the middle, and through the thirds
+    for w in routes:
+        assert np.allclose(w[0], q_from) and np.allclose(w[-1], q_to)
+    start, end = station.sensor_pose(np.asarray([q_from, q_to]))
+    for d, w in zip(recon.orbit_retract_m, retracts, strict=True):
+        back = station.sensor_pose(w[1])
+        assert np.allclose(back[:3, 3], start[:3, 3] - d * start[:3, 2], atol=1e-6)
+        assert np.allclose(back[:3, :3], start[:3, :3], atol=1e-6)
+        assert np.allclose(station.sensor_pose(w[2])[:3, 3], end[:3, 3] - d * end[:3, 2], atol=1e-6)
+    radius = max(np.linalg.norm(start[:3, 3] - centre), np.linalg.norm(end[:3, 3] - centre))
+    for via in station.sensor_pose(np.concatenate([w[1:-1] for w in arcs])):
+        offset = via[:3, 3] - centre
+        assert np.linalg.norm(offset) >= radius + min(recon.orbit_radius_extra_m) - 1e-6
+        assert np.dot(via[:3, 2], -offset / np.linalg.norm(offset)) == pytest.approx(1.0, abs=1e-6)  # looks at it
+    recon.orbit_retract_m = recon.orbit_radius_extra_m = ()
+    assert recon._orbit_waypoints(q_from, q_to) == []
+
+
+def test_great_circle_points_and_lifts():
+    from agiprobot_measurement.nbv.reconstruction import _lifted, _slerp
+
+    east, north = np.array([1.0, 0, 0]), np.array([0, 1.0, 0])
+    assert np.allclose(_slerp(east, north, 0.5), np.array([1, 1, 0]) / math.sqrt(2))
+    assert np.allclose(_slerp(east, north, 1 / 3), [math.cos(math.pi / 6), math.sin(math.pi / 6), 0])
+    assert np.allclose(_slerp(east, -east, 0.5), [0, 0, 1])  # opposite: over the top
+    raised = _lifted(east, 30.0)
+    assert np.allclose(raised, [math.cos(math.radians(30)), 0, math.sin(math.radians(30))])
+    assert math.degrees(math.asin(_lifted(raised, 80.0)[2])) == pytest.approx(89.0)
+
+
+def test_a_move_across_the_unknown_roi_goes_around_it(station):
+    from agiprobot_measurement.motion.motion_planning import interpolate_path
+
+    recon, _ = make(station)
+    recon.generator.update_unknown_obstacle(recon.planning_map)  # before any view: the whole ROI is unknown
+    q_from, q_to, _ = _opposite_views(recon, station)
+    checker = recon.generator.checker
+    assert not checker.check_states(interpolate_path(np.asarray([q_from, q_to]), 0.02)).all()
+
+    def no_ompl():
+        raise AssertionError("the move around the ROI is short enough: OMPL is not asked")
+
+    recon._planner_factory = no_ompl
+    trajectory = recon.plan_motion(q_from, q_to)
+    positions = np.asarray(trajectory.positions)
+    assert np.allclose(positions[0], q_from) and np.allclose(positions[-1], q_to)
+    assert checker.check_states(positions).all()
+    straight = np.abs(q_to - q_from).sum()
+    assert np.abs(np.diff(positions, axis=0)).sum() <= 1.5 * straight
 
 
 # --------------------------------------------------------------------------------------------- the opening view
