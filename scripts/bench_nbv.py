@@ -6,7 +6,11 @@ path) it builds the observable ground truth once, then runs every method on the 
 filters with the scanner noise on: C(k) (coverage of the observable surface after k views), AUC over 10 views,
 views to 90 / 95 %, joint path, motion time, planning time per view (median, p95), Chamfer distance of the fused
 cloud, the termination reason. ``random`` runs over --random-seeds seeds (mean). ``oracle`` is the set cover of
-the observable truth over the ground truth's feasible poses (the project's set cover; a lower bound on views).
+the observable truth over the ground truth's feasible poses (the project's set cover; a lower bound on views),
+and the coverage over the straight joint path of two planners that know the truth (each view the pose seeing the
+most new points, or the most per rad of the move): in the targets, ``*_straight_path_ratio`` compares their
+straight joint distance, and ours', with the best volumetric metric's at equal coverage (what exact gains could
+save; the executed paths add the detours around obstacles).
 
 examples:
   bench_nbv.py --objects cube cup two_towers --methods ours random hemisphere12 oracle --json /tmp/nbv.json

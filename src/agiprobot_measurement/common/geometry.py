@@ -19,15 +19,12 @@ __all__ = [
     "pose_matrix",
     "pose_to_quaternion",
     "quaternion_to_matrix",
+    "raise_elevation",
     "rpy_to_matrix",
+    "slerp_unit",
     "transform_points",
     "wrap_to_pi",
     "yaw_quaternion",
-]
-
-__all__ = [
-    "pose_matrix",
-    "rpy_to_matrix",
 ]
 
 
@@ -158,3 +155,27 @@ def invert_pose(pose: np.ndarray) -> np.ndarray:
     inverse[:3, :3] = pose[:3, :3].T
     inverse[:3, 3] = -pose[:3, :3].T @ pose[:3, 3]
     return inverse
+
+
+def slerp_unit(u: np.ndarray, v: np.ndarray, t: float) -> np.ndarray:
+    """The unit vector at ``t`` in [0, 1] along the great circle from unit ``u`` to unit ``v`` (straight up, +z,
+    when they are opposite, where the circle is not defined)."""
+    angle = math.acos(float(np.clip(np.dot(u, v), -1.0, 1.0)))
+    if angle < 1e-9:
+        return np.asarray(u, dtype=float)
+    if math.pi - angle < 1e-3:
+        return np.array([0.0, 0.0, 1.0])
+    w = (math.sin((1 - t) * angle) * np.asarray(u) + math.sin(t * angle) * np.asarray(v)) / math.sin(angle)
+    return w / np.linalg.norm(w)
+
+
+def raise_elevation(direction: np.ndarray, lift_rad: float, max_elevation_rad: float = math.radians(89.0)):
+    """Unit ``direction`` with its elevation above the xy-plane raised by ``lift_rad`` (at most to
+    ``max_elevation_rad``), its azimuth kept; a vertical direction is returned as it is."""
+    horizontal = math.hypot(direction[0], direction[1])
+    if lift_rad == 0.0 or horizontal < 1e-6:
+        return np.asarray(direction, dtype=float)
+    elevation = min(math.atan2(direction[2], horizontal) + lift_rad, max_elevation_rad)
+    azimuth = math.atan2(direction[1], direction[0])
+    return np.array([math.cos(elevation) * math.cos(azimuth), math.cos(elevation) * math.sin(azimuth),
+                     math.sin(elevation)])  # fmt: skip

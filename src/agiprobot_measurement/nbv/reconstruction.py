@@ -39,6 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
+from agiprobot_measurement.common.geometry import raise_elevation, slerp_unit
 from agiprobot_measurement.errors import InputError, InternalError
 from agiprobot_measurement.nbv.baselines import ViewChoice as _Choice
 from agiprobot_measurement.nbv.baselines import motion_time_s
@@ -136,29 +137,6 @@ def _number_list(values, name: str, low: float, high: float) -> tuple[float, ...
     if not isinstance(values, (list, tuple)):
         raise InputError(f"{name} must be a list of numbers, got {values!r}")
     return tuple(_number(v, name, low, high) for v in values)
-
-
-def _slerp(u: np.ndarray, v: np.ndarray, t: float) -> np.ndarray:
-    """The unit vector at ``t`` of the great circle from unit ``u`` to unit ``v`` (straight up when they are
-    opposite, where the circle is not defined)."""
-    angle = math.acos(float(np.clip(np.dot(u, v), -1.0, 1.0)))
-    if angle < 1e-9:
-        return np.asarray(u, dtype=float)
-    if math.pi - angle < 1e-3:
-        return np.array([0.0, 0.0, 1.0])
-    w = (math.sin((1 - t) * angle) * u + math.sin(t * angle) * v) / math.sin(angle)
-    return w / np.linalg.norm(w)
-
-
-def _lifted(direction: np.ndarray, lift_deg: float) -> np.ndarray:
-    """``direction`` (unit) with its elevation raised by ``lift_deg``, at most to 89 deg."""
-    horizontal = math.hypot(direction[0], direction[1])
-    if lift_deg == 0.0 or horizontal < 1e-6:
-        return np.asarray(direction, dtype=float)
-    elevation = min(math.atan2(direction[2], horizontal) + math.radians(lift_deg), math.radians(89.0))
-    azimuth = math.atan2(direction[1], direction[0])
-    return np.array([math.cos(elevation) * math.cos(azimuth), math.cos(elevation) * math.sin(azimuth),
-                     math.sin(elevation)])  # fmt: skip
 
 
 @dataclass
@@ -430,12 +408,14 @@ class Reconstructor:
         self.search_views = int(motion.get("search_views", 4))
         self.via_poses = int(motion.get("via_poses", 8))
         self.orbit_retract_m = _number_list(
-            motion.get("orbit_retract_m", [0.1, 0.2]), "motion.orbit_retract_m", 0.0, 1.0
+            motion.get("orbit_retract_m", [0.1, 0.2, 0.3]), "motion.orbit_retract_m", 0.0, 1.0
         )
         self.orbit_radius_extra_m = _number_list(
-            motion.get("orbit_radius_extra_m", [0.05, 0.15]), "motion.orbit_radius_extra_m", 0.0, 1.0
+            motion.get("orbit_radius_extra_m", [0.05, 0.15, 0.3]), "motion.orbit_radius_extra_m", 0.0, 1.0
         )
-        self.orbit_lift_deg = _number_list(motion.get("orbit_lift_deg", [25.0]), "motion.orbit_lift_deg", 0.0, 90.0)
+        self.orbit_lift_deg = _number_list(
+            motion.get("orbit_lift_deg", [25.0, 50.0]), "motion.orbit_lift_deg", 0.0, 90.0
+        )
         self.opening_height = float(motion.get("opening_height", 0.25))
         self.opening_elevation_deg = float(motion.get("opening_elevation_deg", 90.0))
         if not (math.isfinite(self.opening_elevation_deg) and 0.0 <= self.opening_elevation_deg <= 90.0):
@@ -665,12 +645,10 @@ class Reconstructor:
         from agiprobot_measurement.motion.motion_planning import interpolate_path
         from agiprobot_measurement.motion.time_parameterization import time_optimal_trajectory
 
-        if self.via_poses <= 0:
-            return None
         q_from, q_to = np.asarray(q_from, dtype=float), np.asarray(q_to, dtype=float)
         vias = np.asarray([self.home_rad, *(v.joints for v in self.views)], dtype=float)
         lengths = np.abs(vias - q_from).sum(axis=1) + np.abs(q_to - vias).sum(axis=1)
-        routes = [np.asarray([q_from, vias[i], q_to]) for i in np.argsort(lengths, kind="stable")[: self.via_poses]]
+        routes = [np.asarray([q_from, vias[i], q_to]) for i in np.argsort(lengths, kind="stable")[: max(self.via_poses, 0)]]
         routes += self._orbit_waypoints(q_from, q_to)
         routes.sort(key=lambda w: float(np.abs(np.diff(w, axis=0)).sum()))
         checker = self.generator.checker
@@ -697,7 +675,7 @@ class Reconstructor:
         - pass one pose on the great circle between the two views (directions seen from the ROI centre) at its
           middle, or two at its thirds, at the larger standoff plus each of ``motion.orbit_radius_extra_m``, also
           raised by each of ``motion.orbit_lift_deg``, looking at the centre (the middle pose at each of four
-          rolls, the thirds at the roll whose joints are nearest the move's).
+          rolls, the thirds at the roll whose joints are nearest the joint interpolation there).
 
         IK is taken nearest the move's ends, resp. the joint interpolation at the pose's place on the move;
         unreachable poses are left out."""
@@ -720,28 +698,26 @@ class Reconstructor:
         for extra in self.orbit_radius_extra_m:
             radius = float(radii.max()) + extra
             for lift in (0.0, *self.orbit_lift_deg):
-                mid = self._orbit_joints(centre, _lifted(_slerp(u_a, u_b, 0.5), lift), radius, ends.mean(axis=0))
-                routes += [np.asarray([q_from, q, q_to]) for q in mid]
-                thirds = [
-                    self._orbit_joints(
-                        centre, _lifted(_slerp(u_a, u_b, t), lift), radius, (1 - t) * ends[0] + t * ends[1]
-                    )
-                    for t in (1.0 / 3.0, 2.0 / 3.0)
-                ]
-                if thirds[0] and thirds[1]:
-                    nearest = [min(qs, key=lambda q, s=seed: float(np.abs(q - s).sum()))
-                               for qs, seed in zip(thirds, ((2 * ends[0] + ends[1]) / 3, (ends[0] + 2 * ends[1]) / 3), strict=True)]  # fmt: skip
-                    routes.append(np.asarray([q_from, nearest[0], nearest[1], q_to]))
+
+                def around(t, lift=lift, radius=radius):
+                    direction = raise_elevation(slerp_unit(u_a, u_b, t), math.radians(lift))
+                    return self._orbit_joints(centre, direction, radius, (1 - t) * ends[0] + t * ends[1])
+
+                routes += [np.asarray([q_from, q, q_to]) for q in around(0.5)]
+                first, second = around(1.0 / 3.0), around(2.0 / 3.0)
+                if first and second:
+                    routes.append(np.asarray([q_from, first[0], second[0], q_to]))
         return routes
 
     def _orbit_joints(self, centre: np.ndarray, direction: np.ndarray, radius_m: float, seed: np.ndarray) -> list:
         """Joints (rad) of the sensor at ``centre + radius * direction`` looking at the centre, at four rolls, each
-        the IK solution nearest ``seed``; the unreachable rolls are left out."""
+        the IK solution nearest ``seed``, nearest first (L1); the unreachable rolls are left out."""
         from agiprobot_measurement.nbv.candidates import poses_from_directions
 
         poses = poses_from_directions(centre, direction[None], radius_m, np.arange(4) * (math.pi / 2.0))
         q, ok = self.station.ik.solve_nearest(poses, np.broadcast_to(seed, (len(poses), 6)))
-        return list(q[ok])
+        q = q[ok]
+        return list(q[np.argsort(np.abs(q - seed).sum(axis=1), kind="stable")])
 
     # ------------------------------------------------------------------------------------ loop
     def run(

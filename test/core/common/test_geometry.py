@@ -71,3 +71,17 @@ def test_wrap_yaw_and_plane():
     points = np.column_stack([RNG.uniform(size=(30, 2)), np.full(30, 2.0)])
     centroid, normal = g.fit_plane(points)
     assert np.isclose(centroid[2], 2.0) and np.isclose(abs(normal[2]), 1.0)
+
+
+def test_great_circle_points_and_raised_elevations():
+    from agiprobot_measurement.common.geometry import raise_elevation, slerp_unit
+
+    east, north = np.array([1.0, 0, 0]), np.array([0, 1.0, 0])
+    assert np.allclose(slerp_unit(east, north, 0.5), np.array([1, 1, 0]) / math.sqrt(2))
+    assert np.allclose(slerp_unit(east, north, 1 / 3), [math.cos(math.pi / 6), math.sin(math.pi / 6), 0])
+    assert np.allclose(slerp_unit(east, north, 0.0), east) and np.allclose(slerp_unit(east, north, 1.0), north)
+    assert np.allclose(slerp_unit(east, -east, 0.5), [0, 0, 1])  # opposite: over the top
+    raised = raise_elevation(east, math.radians(30))
+    assert np.allclose(raised, [math.cos(math.radians(30)), 0, math.sin(math.radians(30))])
+    assert math.degrees(math.asin(raise_elevation(raised, math.radians(80))[2])) == pytest.approx(89.0)
+    assert np.allclose(raise_elevation(np.array([0, 0, 1.0]), 0.5), [0, 0, 1])

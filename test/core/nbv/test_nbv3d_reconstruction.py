@@ -305,18 +305,6 @@ def test_orbit_waypoints_retract_along_the_optical_axis_or_pass_the_great_circle
     assert recon._orbit_waypoints(q_from, q_to) == []
 
 
-def test_great_circle_points_and_lifts():
-    from agiprobot_measurement.nbv.reconstruction import _lifted, _slerp
-
-    east, north = np.array([1.0, 0, 0]), np.array([0, 1.0, 0])
-    assert np.allclose(_slerp(east, north, 0.5), np.array([1, 1, 0]) / math.sqrt(2))
-    assert np.allclose(_slerp(east, north, 1 / 3), [math.cos(math.pi / 6), math.sin(math.pi / 6), 0])
-    assert np.allclose(_slerp(east, -east, 0.5), [0, 0, 1])  # opposite: over the top
-    raised = _lifted(east, 30.0)
-    assert np.allclose(raised, [math.cos(math.radians(30)), 0, math.sin(math.radians(30))])
-    assert math.degrees(math.asin(_lifted(raised, 80.0)[2])) == pytest.approx(89.0)
-
-
 def test_a_move_across_the_unknown_roi_goes_around_it(station):
     from agiprobot_measurement.motion.motion_planning import interpolate_path
 
