@@ -648,7 +648,9 @@ class Reconstructor:
         q_from, q_to = np.asarray(q_from, dtype=float), np.asarray(q_to, dtype=float)
         vias = np.asarray([self.home_rad, *(v.joints for v in self.views)], dtype=float)
         lengths = np.abs(vias - q_from).sum(axis=1) + np.abs(q_to - vias).sum(axis=1)
-        routes = [np.asarray([q_from, vias[i], q_to]) for i in np.argsort(lengths, kind="stable")[: max(self.via_poses, 0)]]
+        routes = [
+            np.asarray([q_from, vias[i], q_to]) for i in np.argsort(lengths, kind="stable")[: max(self.via_poses, 0)]
+        ]
         routes += self._orbit_waypoints(q_from, q_to)
         routes.sort(key=lambda w: float(np.abs(np.diff(w, axis=0)).sum()))
         checker = self.generator.checker
