@@ -171,7 +171,9 @@ class MotionPlanner:
     ``planner``: an OMPL geometric planner name (see :func:`available_planners`). ``resolution_rad``: largest
     joint step between checked states of a motion. ``time_budget_s``: the whole call's limit; it is shared
     by at most ``max_attempts`` fresh planner runs. ``simplify``: shorten the solution with PathSimplifier's
-    shortcuts (``"full"``: also its B-spline smoothing) for at most ``simplify_time_s``.
+    shortcuts (``"full"``: also its B-spline smoothing) for at most ``simplify_time_s``. ``best_of``: keep
+    planning (within the attempts and the budget) until this many solutions are found and return the shortest
+    (joint path, rad): RRTConnect's simplified paths for the same move differ by factors of 4.
     ``try_direct``: take the straight line when it is free (no OMPL call). Optimizing planners (RRTstar,
     BITstar, ...) use the whole time of an attempt. ``seed``: OMPL's global seed; it takes effect only
     for the first planner of a process (OMPL seeds once), later seeds are ignored.
@@ -190,6 +192,7 @@ class MotionPlanner:
         range_rad: float | None = None,
         seed: int | None = None,
         log_level=ou.LOG_WARN,
+        best_of: int = 1,
     ):
         _planner_class(planner)
         if simplify not in (True, False, "full"):
@@ -200,6 +203,8 @@ class MotionPlanner:
             raise ValueError(f"time_budget_s must be positive, got {time_budget_s}")
         if int(max_attempts) < 1:
             raise ValueError(f"max_attempts must be >= 1, got {max_attempts}")
+        if int(best_of) < 1:
+            raise ValueError(f"best_of must be >= 1, got {best_of}")
         self.checker = checker
         self.model = checker.model
         self.dof = self.model.dof
@@ -207,6 +212,7 @@ class MotionPlanner:
         self.resolution_rad = float(resolution_rad)
         self.time_budget_s = float(time_budget_s)
         self.max_attempts = int(max_attempts)
+        self.best_of = int(best_of)
         self.simplify = simplify
         self.simplify_time_s = float(simplify_time_s)
         self.try_direct = try_direct
@@ -314,7 +320,8 @@ class MotionPlanner:
         pdef = ob.ProblemDefinition(self.si)
         pdef.setStartAndGoalStates(self._to_state(start), self._to_state(goal))
         reasons = []
-        attempts = 0
+        attempts = solutions = 0
+        best = None  # (path, joint path rad) of the shortest solution so far
         while attempts < self.max_attempts:
             remaining = deadline - time.perf_counter()
             if remaining <= 0.0:
@@ -348,8 +355,18 @@ class MotionPlanner:
                 # OMPL's states are exact copies, but the caller gets exactly what it asked for
                 candidate[0], candidate[-1] = start, goal
                 if self.check_path(candidate) < 0:
-                    return result(True, candidate, "", attempts)
-            reasons.append(f"attempt {attempts}: the solution failed the dense re-check")
+                    length = float(np.abs(np.diff(candidate, axis=0)).sum())
+                    if best is None or length < best[1]:
+                        best = (candidate, length)
+                    solutions += 1
+                    break
+            else:
+                reasons.append(f"attempt {attempts}: the solution failed the dense re-check")
+            if solutions >= self.best_of:
+                break
+        if best is not None:
+            timing["solutions"] = solutions
+            return result(True, best[0], "", attempts)
         spent = time.perf_counter() - started
         detail = "; ".join(reasons) if reasons else "no time left"
         return result(

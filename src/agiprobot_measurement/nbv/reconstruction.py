@@ -407,6 +407,7 @@ class Reconstructor:
         self.simplify_time_s = float(motion.get("simplify_time_s", 0.5))
         self.search_views = int(motion.get("search_views", 4))
         self.via_poses = int(motion.get("via_poses", 8))
+        self.ompl_best_of = int(_number(motion.get("ompl_best_of", 4), "motion.ompl_best_of", 1.0, 50.0))
         self.orbit_retract_m = _number_list(
             motion.get("orbit_retract_m", [0.1, 0.2, 0.3]), "motion.orbit_retract_m", 0.0, 1.0
         )
@@ -599,6 +600,8 @@ class Reconstructor:
                 simplify_time_s=self.simplify_time_s,
                 seed=self.request.seed + 1,
                 try_direct=False,  # plan_motion asks OMPL only once the straight move is found blocked
+                best_of=self.ompl_best_of,
+                max_attempts=self.ompl_best_of + 2,
             )
         return self._planner
 

@@ -213,3 +213,27 @@ def test_collision_free_trajectory_goes_straight_when_free_and_around_when_block
     # a free straight move never sets up the planner
     collision_free_trajectory(start, start + 0.05, limits, checker, make_planner)
     assert len(created) == 1
+
+
+def test_best_of_returns_the_shortest_of_its_solutions(checker, hard_pairs, monkeypatch):
+    planner = MotionPlanner(checker, try_direct=False, time_budget_s=10.0, max_attempts=6, best_of=4, seed=11)
+    accepted = []
+    check_path = MotionPlanner.check_path
+
+    def recording(self, path, resolution_rad=None):
+        first_invalid = check_path(self, path, resolution_rad)
+        if first_invalid < 0 and len(path) > 2:  # a collision-free OMPL solution (not the straight line)
+            accepted.append(float(np.abs(np.diff(path, axis=0)).sum()))
+        return first_invalid
+
+    monkeypatch.setattr(MotionPlanner, "check_path", recording)
+    start, goal = hard_pairs[2]
+    result = planner.plan(start, goal)
+    _assert_valid_path(result, start, goal, checker, planner.resolution_rad)
+    assert result.stats["solutions"] == 4 and len(accepted) == 4
+    assert np.abs(np.diff(result.path, axis=0)).sum() == pytest.approx(min(accepted))
+
+
+def test_best_of_must_be_positive(checker):
+    with pytest.raises(ValueError, match="best_of"):
+        MotionPlanner(checker, best_of=0)
