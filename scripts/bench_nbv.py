@@ -506,6 +506,11 @@ def targets(results: dict) -> dict:
             row["best_volumetric_joint_path_rad"] = m[best_auc]["summary"]["joint_path_rad"]
             row["best_volumetric_final"] = m[best_auc]["summary"]["final_coverage"]
             ratios, ours_paths, vol_paths = [], [], []
+            # the same comparison on straight joint distances, for ours and the truth-aware planners (the oracle's
+            # path curves): what a planner that knew the part could save (gains exact, moves straight)
+            oracle = m.get("oracle", {})
+            curves = oracle.get("path_curves", {})
+            straight = {"ours": []} | {f"oracle_{name}": [] for name in curves}
             for a, b in zip(m["ours"]["runs"], m[best_auc]["runs"] * len(m["ours"]["runs"]), strict=False):
                 level = min(a.get("coverage") or 0.0, b.get("coverage") or 0.0)
                 pa, _ = path_to(a, level)
@@ -513,27 +518,21 @@ def targets(results: dict) -> dict:
                 ours_paths.append(pa)
                 vol_paths.append(pb)
                 ratios.append(pa / pb if pb > 0 else math.inf)
+                if not curves:
+                    continue
+                sb = straight_path_to(b, level, oracle["home_rad"])
+                if not (sb > 0 and math.isfinite(sb)):
+                    continue
+                straight["ours"].append(straight_path_to(a, level, oracle["home_rad"]) / sb)
+                for name, curve in curves.items():
+                    reached = [path for coverage, path in curve if coverage >= level - 1e-9]
+                    straight[f"oracle_{name}"].append((reached[0] if reached else math.inf) / sb)
             row["ours_path_at_equal_coverage_rad"] = float(np.mean(ours_paths))
             row["best_volumetric_path_at_equal_coverage_rad"] = float(np.mean(vol_paths))
             row["path_ratio_at_equal_coverage"] = float(np.mean(ratios))
-            oracle = m.get("oracle", {})
-            if "path_curves" in oracle:
-                # the same comparison on straight joint distances, for ours and for the truth-aware planners:
-                # what a planner that knew the part could save (gains exact, moves straight)
-                straight = {"ours": []} | {name: [] for name in oracle["path_curves"]}
-                for a, b in zip(m["ours"]["runs"], m[best_auc]["runs"] * len(m["ours"]["runs"]), strict=False):
-                    level = min(a.get("coverage") or 0.0, b.get("coverage") or 0.0)
-                    pb = straight_path_to(b, level, oracle["home_rad"])
-                    if not pb > 0 or not math.isfinite(pb):
-                        continue
-                    straight["ours"].append(straight_path_to(a, level, oracle["home_rad"]) / pb)
-                    for name, curve in oracle["path_curves"].items():
-                        reached = [path for coverage, path in curve if coverage >= level - 1e-9]
-                        straight[name].append((reached[0] if reached else math.inf) / pb)
-                for name, values in straight.items():
-                    if values:
-                        key = "ours" if name == "ours" else f"oracle_{name}"
-                        row[f"{key}_straight_path_ratio"] = float(np.mean(values))
+            for key, values in straight.items():
+                if values:
+                    row[f"{key}_straight_path_ratio"] = float(np.mean(values))
         if "random" in m:
             rnd = m["random"]["summary"]
             row.update({"random_c4": rnd["c4"], "random_auc10": rnd["auc10"], "random_n95": rnd["n95"]})

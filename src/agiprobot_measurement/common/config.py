@@ -19,6 +19,7 @@ __all__ = [
     "YAML_MAX_EXPANDED_NODES",
     "ConfigError",
     "load_yaml_text",
+    "non_negative",
     "positive",
     "read_yaml",
     "require",
@@ -159,4 +160,14 @@ def positive(value: object, where: str) -> float:
         raise ConfigError(f"{where}: expected a number, got {value!r}") from exc
     if not math.isfinite(number) or number <= 0.0:
         raise ConfigError(f"{where}: must be a positive number, got {value!r}")
+    return number
+
+
+def non_negative(value: object, where: str) -> float:
+    try:
+        number = float(value)
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"{where}: expected a number, got {value!r}") from exc
+    if not math.isfinite(number) or number < 0.0:
+        raise ConfigError(f"{where}: must be a finite number >= 0, got {value!r}")
     return number

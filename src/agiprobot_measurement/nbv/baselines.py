@@ -165,6 +165,7 @@ class OursPolicy(Policy):
 
     def __init__(self, recon):
         super().__init__(recon)
+        from agiprobot_measurement.common.config import non_negative, positive
         from agiprobot_measurement.nbv.gains import GAIN_NAMES, ExpectedSurfaceModel
 
         planning = recon.station.config.get("planning", {})
@@ -181,9 +182,11 @@ class OursPolicy(Policy):
                 f"planning.cost_schedule: unknown {self.cost_schedule!r}; known: {', '.join(COST_SCHEDULES)}"
             )
         # (1 - A / A1)^power: a higher power lets the motion count later in the run
-        self.cost_schedule_power = _planning_number(planning, "cost_schedule_power", 1.0, positive=True)
+        self.cost_schedule_power = positive(planning.get("cost_schedule_power", 1.0), "planning.cost_schedule_power")
         # seconds of motion cost per rad of straight joint path (summed over the joints), added to the move time
-        self.cost_s_per_rad = _planning_number(planning, "cost_joint_path_s_per_rad", 0.0, positive=False)
+        self.cost_s_per_rad = non_negative(
+            planning.get("cost_joint_path_s_per_rad", 0.0), "planning.cost_joint_path_s_per_rad"
+        )
         self.first_expected_area_m2 = None
 
     def cost_factor(self, expected_area_m2: float) -> float:
@@ -380,18 +383,6 @@ def _replace(config, **changes):
     import dataclasses
 
     return dataclasses.replace(config, **changes)
-
-
-def _planning_number(planning: dict, key: str, default: float, positive: bool) -> float:
-    """A finite number of config/nbv.yaml ``planning.<key>``, > 0 (``positive``) or >= 0, else InputError."""
-    value = planning.get(key, default)
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"planning.{key} must be a number, got {value!r}") from None
-    if not math.isfinite(number) or number < 0 or (positive and number == 0):
-        raise InputError(f"planning.{key} must be a finite number {'> 0' if positive else '>= 0'}, got {value!r}")
-    return number
 
 
 def _motion_cost(recon, q, joints) -> np.ndarray:

@@ -407,7 +407,10 @@ class Reconstructor:
         self.simplify_time_s = float(motion.get("simplify_time_s", 0.5))
         self.search_views = int(motion.get("search_views", 4))
         self.via_poses = int(motion.get("via_poses", 8))
-        self.ompl_best_of = int(_number(motion.get("ompl_best_of", 4), "motion.ompl_best_of", 1.0, 50.0))
+        best_of = _number(motion.get("ompl_best_of", 4), "motion.ompl_best_of", 1.0, 50.0)
+        if best_of != int(best_of):
+            raise InputError(f"motion.ompl_best_of must be a whole number, got {best_of!r}")
+        self.ompl_best_of = int(best_of)
         self.orbit_retract_m = _number_list(
             motion.get("orbit_retract_m", [0.1, 0.2, 0.3]), "motion.orbit_retract_m", 0.0, 1.0
         )

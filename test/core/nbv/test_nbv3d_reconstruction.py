@@ -353,3 +353,28 @@ def test_the_opening_view_comes_from_the_configured_elevation(station):
 def test_a_bad_opening_elevation_is_named(station, value):
     with pytest.raises(InputError, match="opening_elevation_deg"):
         _opening_elevation_deg(station, value)
+
+
+@pytest.mark.parametrize(
+    ("key", "value"),
+    [
+        ("ompl_best_of", 0),
+        ("ompl_best_of", 2.5),
+        ("ompl_best_of", "many"),
+        ("orbit_retract_m", [0.1, math.nan]),
+        ("orbit_radius_extra_m", "far"),
+        ("orbit_lift_deg", [120.0]),
+    ],
+)
+def test_bad_motion_settings_are_named(station, key, value):
+    motion = station.config.setdefault("motion", {})
+    saved = motion.get(key)
+    motion[key] = value
+    try:
+        with pytest.raises(InputError, match=rf"motion\.{key}"):
+            make(station)
+    finally:
+        if saved is None:
+            motion.pop(key)
+        else:
+            motion[key] = saved
