@@ -20,10 +20,13 @@ __all__ = [
     "ConfigError",
     "load_yaml_text",
     "non_negative",
+    "number",
+    "number_list",
     "positive",
     "read_yaml",
     "require",
     "vector",
+    "whole",
 ]
 
 
@@ -141,33 +144,90 @@ def require(mapping: object, key: str, where: str) -> object:
     return mapping[key]
 
 
-def vector(value: object, length: int, where: str) -> np.ndarray:
+def vector(value: object, length: int, where: str, positive: bool = False) -> np.ndarray:
+    """``length`` finite numbers as a float array (all > 0 when ``positive``); a :class:`ConfigError` names ``where``."""
     try:
         vec = np.asarray(value, dtype=float)
     except (TypeError, ValueError) as exc:
-        raise ConfigError(f"{where}: expected {length} numbers, got {value!r}") from exc
+        raise ConfigError(f"{where}: expected {length} numbers, got {_short(value)}") from exc
     if vec.shape != (length,):
-        raise ConfigError(f"{where}: expected {length} numbers, got {value!r}")
+        raise ConfigError(f"{where}: expected {length} numbers, got {_short(value)}")
     if not np.all(np.isfinite(vec)):
-        raise ConfigError(f"{where}: values must be finite, got {value!r}")
+        raise ConfigError(f"{where}: values must be finite, got {_short(value)}")
+    if positive and not np.all(vec > 0.0):
+        raise ConfigError(f"{where}: values must be positive, got {_short(value)}")
     return vec
 
 
-def positive(value: object, where: str) -> float:
+def _short(value: object, limit: int = 80) -> str:
+    """``repr(value)`` cut to ``limit`` characters, so a hostile value cannot flood a message."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[: limit - 3]}..."
+
+
+def number(
+    value: object,
+    where: str,
+    low: float | None = None,
+    high: float | None = None,
+    low_inclusive: bool = True,
+    high_inclusive: bool = True,
+) -> float:
+    """A finite number (not a bool) within ``[low, high]`` (bounds optional, each inclusive unless told otherwise)."""
+    if isinstance(value, bool):
+        raise ConfigError(f"{where}: expected a number, got {_short(value)}")
     try:
-        number = float(value)
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(f"{where}: expected a number, got {value!r}") from exc
-    if not math.isfinite(number) or number <= 0.0:
-        raise ConfigError(f"{where}: must be a positive number, got {value!r}")
-    return number
+        result = float(value)
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise ConfigError(f"{where}: expected a number, got {_short(value)}") from exc
+    if not math.isfinite(result):
+        raise ConfigError(f"{where}: must be a finite number, got {_short(value)}")
+    if low is not None and (result < low or (not low_inclusive and result == low)):
+        relation = ">=" if low_inclusive else ">"
+        raise ConfigError(f"{where}: must be {relation} {low:g}, got {_short(value)}")
+    if high is not None and (result > high or (not high_inclusive and result == high)):
+        relation = "<=" if high_inclusive else "<"
+        raise ConfigError(f"{where}: must be {relation} {high:g}, got {_short(value)}")
+    return result
+
+
+def whole(value: object, where: str, low: int | None = None, high: int | None = None) -> int:
+    """A whole number (``3`` or ``3.0``, never ``2.5`` or a bool) within ``[low, high]``."""
+    result = number(value, where, low, high)
+    if result != int(result):
+        raise ConfigError(f"{where}: must be a whole number, got {_short(value)}")
+    return int(result)
+
+
+def number_list(
+    value: object,
+    where: str,
+    low: float | None = None,
+    high: float | None = None,
+    min_length: int = 1,
+    max_length: int | None = None,
+) -> list[float]:
+    """A list of finite numbers, each within ``[low, high]``, of ``min_length``..``max_length`` entries."""
+    if isinstance(value, (str, bytes, dict)) or not hasattr(value, "__iter__"):
+        raise ConfigError(f"{where}: expected a list of numbers, got {_short(value)}")
+    items = list(value)
+    if len(items) < min_length or (max_length is not None and len(items) > max_length):
+        span = f"{min_length}..{max_length}" if max_length is not None else f"at least {min_length}"
+        raise ConfigError(f"{where}: expected {span} numbers, got {len(items)}")
+    return [number(item, f"{where}[{i}]", low, high) for i, item in enumerate(items)]
+
+
+def positive(value: object, where: str) -> float:
+    """A finite number > 0."""
+    result = number(value, where)
+    if result <= 0.0:
+        raise ConfigError(f"{where}: must be a positive number, got {_short(value)}")
+    return result
 
 
 def non_negative(value: object, where: str) -> float:
-    try:
-        number = float(value)
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(f"{where}: expected a number, got {value!r}") from exc
-    if not math.isfinite(number) or number < 0.0:
-        raise ConfigError(f"{where}: must be a finite number >= 0, got {value!r}")
-    return number
+    """A finite number >= 0."""
+    result = number(value, where)
+    if result < 0.0:
+        raise ConfigError(f"{where}: must be a finite number >= 0, got {_short(value)}")
+    return result

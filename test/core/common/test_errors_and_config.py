@@ -83,3 +83,32 @@ def test_yaml_bounds_size_depth_and_encoding(tmp_path):
     with pytest.raises(config.ConfigError, match="is a directory"):
         config.read_yaml(tmp_path)
     assert config.load_yaml_text("") is None
+
+
+def test_number_whole_and_lists_refuse_by_name():
+    assert config.number("2.5", "k", low=0) == 2.5
+    assert config.whole(3.0, "k", low=1) == 3
+    assert config.number_list([1, 2], "k", low=0) == [1.0, 2.0]
+    np.testing.assert_array_equal(config.vector([1, 2, 3], 3, "k", positive=True), [1.0, 2.0, 3.0])
+    bad = [
+        (lambda: config.number(True, "a.b"), "a.b: expected a number"),
+        (lambda: config.number(float("nan"), "a.b"), "a.b: must be a finite"),
+        (lambda: config.number("1e999", "a.b"), "a.b: must be a finite"),
+        (lambda: config.number(0, "a.b", low=0, low_inclusive=False), "a.b: must be > 0"),
+        (lambda: config.number(5, "a.b", high=4), "a.b: must be <= 4"),
+        (lambda: config.whole(2.5, "a.b"), "a.b: must be a whole number"),
+        (lambda: config.number_list("abc", "a.b"), "a.b: expected a list"),
+        (lambda: config.number_list([], "a.b"), "a.b: expected at least 1"),
+        (lambda: config.number_list([1, "x"], "a.b"), r"a.b\[1\]: expected a number"),
+        (lambda: config.vector([1, -1, 1], 3, "a.b", positive=True), "a.b: values must be positive"),
+        (lambda: config.positive(float("inf"), "a.b"), "a.b: must be a finite"),
+    ]
+    for call, message in bad:
+        with pytest.raises(config.ConfigError, match=message):
+            call()
+
+
+def test_a_hostile_value_is_quoted_short():
+    with pytest.raises(config.ConfigError) as info:
+        config.number("x" * 100_000, "k")
+    assert len(str(info.value)) < 120
