@@ -20,8 +20,8 @@ try:
 except ImportError:  # run from a checkout without the catkin environment
     sys.path.insert(0, str(ROOT / "src"))
 
+from agiprobot_measurement.planning.candidates.viewpoint import TILT_MODES, generate_viewpoint_poses  # noqa: E402
 from agiprobot_measurement.planning.part_loading import load_part  # noqa: E402
-from agiprobot_measurement.planning.viewpoint import TILT_MODES, generate_viewpoint_poses  # noqa: E402
 from agiprobot_measurement.sensors.laser_line.model import SensorModel  # noqa: E402
 
 

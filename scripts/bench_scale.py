@@ -126,9 +126,9 @@ def evaluation_only(args, manager, out: dict) -> None:
     """The evaluation stage alone (``--evaluation-only``): sampling, candidates, anchor reachability, then the
     streamed evaluation with a store headroom of 1 (no later stage holds copies); ``--share`` evaluates a
     contiguous middle share of the reachable candidates (whole samples' groups of orientations and tilts)."""
-    from agiprobot_measurement.planning.mechanics import reachable_anchors
-    from agiprobot_measurement.planning.streaming import StreamStats, evaluate_streaming
-    from agiprobot_measurement.planning.viewpoint import generate_viewpoint_poses
+    from agiprobot_measurement.planning.candidates.mechanics import reachable_anchors
+    from agiprobot_measurement.planning.candidates.streaming import StreamStats, evaluate_streaming
+    from agiprobot_measurement.planning.candidates.viewpoint import generate_viewpoint_poses
 
     part = manager.part
     started = time.perf_counter()
@@ -196,8 +196,8 @@ def child(args) -> dict:
     import logging
 
     logging.disable(logging.WARNING)
-    from agiprobot_measurement.planning.distributed import peak_rss_bytes
-    from agiprobot_measurement.planning.set_cover import solve_set_cover
+    from agiprobot_measurement.planning.candidates.distributed import peak_rss_bytes
+    from agiprobot_measurement.planning.cover.solve import solve_set_cover
     from agiprobot_measurement.planning.trajectory_manager import TrajectoryManager
 
     mesh_file = Path(args.mesh_dir) / f"panel_{args.area:g}.stl"

@@ -15,7 +15,7 @@ import argparse
 import sys
 import time
 
-from agiprobot_measurement.planning.set_cover import SOLVER_TYPES, solve_set_cover
+from agiprobot_measurement.planning.cover.solve import SOLVER_TYPES, solve_set_cover
 from agiprobot_measurement.testing.set_cover_instances import cube_instance
 
 PRESETS = {

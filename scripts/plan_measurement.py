@@ -50,8 +50,9 @@ from agiprobot_measurement.common.units import UNIT_SCALES_TO_M  # noqa: E402
 
 # Only light modules here: bad input is reported before trimesh, FCL and OMPL are loaded (about 1 s).
 from agiprobot_measurement.errors import InputError  # noqa: E402
-from agiprobot_measurement.planning.plan_io import plan_path  # noqa: E402
-from agiprobot_measurement.planning.progress import STAGES  # noqa: E402
+from agiprobot_measurement.planning.cover.solve import SOLVER_TYPES  # noqa: E402
+from agiprobot_measurement.planning.plan.plan_io import plan_path  # noqa: E402
+from agiprobot_measurement.planning.report.progress import STAGES  # noqa: E402
 from agiprobot_measurement.planning.request import (  # noqa: E402
     PLACEMENTS,
     REQUEST_TILT_MODES,
@@ -59,7 +60,6 @@ from agiprobot_measurement.planning.request import (  # noqa: E402
     PlanRequestError,
     load_work_budget,
 )
-from agiprobot_measurement.planning.set_cover import SOLVER_TYPES  # noqa: E402
 
 EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 #: how the request's fields are named in messages: by their options
@@ -497,7 +497,7 @@ def run(args: argparse.Namespace, request: PlanRequest, progress: StageProgress)
         manager.store_execution_plan(args.output, segments)
         outputs["plan"] = manager.last_plan_path
     if args.report is not None:
-        from agiprobot_measurement.planning.coverage_figure import plot_coverage
+        from agiprobot_measurement.planning.report.coverage_figure import plot_coverage
 
         title = (
             f"{Path(args.part).name}: {report.n_views} views ({args.solver}), "

@@ -11,8 +11,8 @@ import rospy
 import rostest
 from sensor_msgs.msg import JointState, PointCloud, PointCloud2
 
-from agiprobot_measurement.planning.execution import in_ros_process
 from agiprobot_measurement.planning.trajectory_manager import TrajectoryManager
+from agiprobot_measurement.ros.plugins import in_ros_process  # registers the station executor
 from agiprobot_measurement.station import PACKAGE_ROOT
 
 CUBE = str(PACKAGE_ROOT / "parts" / "objectA_wuerfel.stl")

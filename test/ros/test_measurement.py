@@ -25,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from station_test_utils import quick_goal
 
 from agiprobot_measurement.msg import ExecutePlanAction, ExecutePlanGoal, PlanMeasurementAction
-from agiprobot_measurement.planning.plan_io import load_execution_plan
+from agiprobot_measurement.planning.plan.plan_io import load_execution_plan
 from agiprobot_measurement.ros.action_client import ActionClient
 from agiprobot_measurement.ros.bag_coverage import coverage_from_bag
 from agiprobot_measurement.ros.rviz_snapshot import OffscreenRviz

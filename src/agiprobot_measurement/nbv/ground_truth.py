@@ -12,7 +12,7 @@ Metrics: coverage C (share of observable points with a fused point within ``tau_
 its AUC over the first 10 views (PC-NBV: the mean of C(1..10), the last value carried forward), views to 90 / 95 %,
 and the Chamfer distance of the fused cloud to the truth (accuracy: fused points to the true surface; completeness:
 observable points to the fused cloud; Chamfer = their mean). :func:`oracle_views` solves the set cover of the
-observable points over the feasible poses with the project's :func:`~agiprobot_measurement.planning.set_cover.
+observable points over the feasible poses with the project's :func:`~agiprobot_measurement.planning.cover.solve.
 solve_set_cover` (the lower bound on views) and gives the greedy max-coverage order for the 90 / 95 % counts.
 Metres in, mm in the metric names that say so.
 """
@@ -232,7 +232,7 @@ def oracle_views(truth: GroundTruth, time_limit_s: float = 20.0) -> dict:
     """The set-cover oracle on the known truth: the project's set cover of the observable points over the feasible
     poses (``greedy`` and, within ``time_limit_s``, ``IP_basic``), and the greedy max-coverage curve (C(k) of the
     best k poses chosen greedily) for N90 / N95."""
-    from agiprobot_measurement.planning.set_cover import solve_set_cover
+    from agiprobot_measurement.planning.cover.solve import solve_set_cover
 
     matrix = truth.visibility.matrix.tocsr()[truth.observable].tocsc()
     n = matrix.shape[0]

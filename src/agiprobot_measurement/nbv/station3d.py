@@ -115,7 +115,7 @@ def load_part_mesh(part, units: str = "mm", largest_extent_m: float | None = Non
 
 def _place_on_fixture(mesh, scene, fixture: str) -> np.ndarray:
     """world <- part (4x4): lowest point on the fixture's top, bounding-box centre over the fixture's centre."""
-    from agiprobot_measurement.planning.placement import fixture_placement
+    from agiprobot_measurement.station.placement import fixture_placement
 
     placement_mm = fixture_placement(np.asarray(mesh.vertices) * 1000.0, np.eye(3), scene, fixture)
     pose = placement_mm.copy()
@@ -181,7 +181,7 @@ class NBVStation:
 
     # ------------------------------------------------------------------------------------ geometry
     def _fixture_top(self, fixture: str) -> tuple[float, np.ndarray]:
-        from agiprobot_measurement.planning.placement import scene_object_top_m
+        from agiprobot_measurement.station.placement import scene_object_top_m
 
         for obj in self.scene.objects:
             if obj.name == fixture:
@@ -191,7 +191,7 @@ class NBVStation:
     @cached_property
     def table_top_m(self) -> float:
         """World z (m) of the highest box top under the fixture (the table)."""
-        from agiprobot_measurement.planning.placement import scene_object_top_m
+        from agiprobot_measurement.station.placement import scene_object_top_m
 
         tops = [scene_object_top_m(o)[0] for o in self.scene.objects if o.type == "box" and o.group is None]
         below = [t for t in tops if t <= self.fixture_top_m - 1e-6]

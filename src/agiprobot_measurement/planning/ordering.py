@@ -7,12 +7,19 @@ Joint values are rad, velocities rad/s, accelerations rad/s^2, durations s. ``li
 from __future__ import annotations
 
 import itertools
+import logging
+import time
 
 import numpy as np
 
 from agiprobot_measurement.motion.trajectory import JointTrajectory
+from agiprobot_measurement.planning.errors import PlanningError
+from agiprobot_measurement.planning.run import PlanningRun, PlanningTools
+from agiprobot_measurement.planning.selection.verify import finish_scan_trajectories, verify_mechanics
 
-__all__ = ["order_views", "p2p_durations", "unwrapped_towards", "wrapping_joints"]
+LOG = logging.getLogger(__name__)
+
+__all__ = ["connect_views", "order_views", "p2p_durations", "unwrapped_towards", "wrapping_joints"]
 
 
 def p2p_durations(
@@ -111,3 +118,45 @@ def order_views(current: np.ndarray, starts: np.ndarray, ends: np.ndarray, limit
                 if value < best - 1e-9:
                     tour, best, improved = candidate, value, True
     return [v for v, _ in tour], [bool(d) for _, d in tour]
+
+
+def connect_views(run: PlanningRun, tools: PlanningTools, unordered_viewpoints, min_planning_time=0.2) -> list:
+    """Order the views for a fast execution and connect them (the facade's ``connect_viewpoints``): greedy by
+    connection time from the current state, either scan direction, then 2-opt; the run's ``last_ordered`` and
+    ``unconnected_views`` are set. Returns the ordered list."""
+    views = [v for v in unordered_viewpoints]
+    t0 = time.perf_counter()
+    finish_scan_trajectories(run, tools, views)
+    for view in views:
+        if not view.mechanics_verified or view.get_trajectory_for_measurement() is None:
+            if not verify_mechanics(run, tools, view):
+                raise PlanningError(f"{view} has no executable measurement trajectory")
+    if not views:
+        return []
+    starts = np.array([v.get_trajectory_for_measurement().start for v in views])
+    ends = np.array([v.get_trajectory_for_measurement().end for v in views])
+    order, flips = order_views(tools.current_state, starts, ends, tools.limits)
+    ordered, unconnected = [], []
+    state = tools.current_state.copy()
+    for k, (i, flip) in enumerate(zip(order, flips, strict=True)):
+        view = views[i]
+        if flip != view.reversed:
+            view.reverse_trajectory_for_measurement()
+        view.set_trajectory_for_measurement(
+            unwrapped_towards(view.get_trajectory_for_measurement(), state, tools.limits)
+        )
+        entry = view.get_trajectory_for_measurement().start
+        tools.report("connection", k / len(order), f"connecting view {k + 1} of {len(order)}")
+        connection = tools.connect(state, entry, planning_time_s=min_planning_time)
+        if connection is None:
+            LOG.warning("view %d cannot be connected from the previous state: left out", i)
+            unconnected.append(view)
+            continue
+        view.set_trajectory_to_view(connection)
+        ordered.append(view)
+        state = view.get_trajectory_for_measurement().end.copy()
+    run.unconnected_views = unconnected
+    run.last_ordered = ordered
+    run.timings_s["connection"] = time.perf_counter() - t0
+    tools.report("connection", 1.0, f"{len(ordered)} views connected, {len(unconnected)} left out")
+    return ordered

@@ -24,6 +24,7 @@ from scipy.spatial import cKDTree
 
 from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.station import UNIT_SCALES_TO_M
+from agiprobot_measurement.station.placement import fixture_placement
 
 __all__ = [
     "MESH_SUFFIXES",
@@ -36,6 +37,8 @@ __all__ = [
     "SurfaceSamples",
     "downward_faces",
     "load_part",
+    "part_parameters",
+    "place_part",
     "sample_surface",
     "validate_rigid_transform",
 ]
@@ -117,14 +120,14 @@ def validate_rigid_transform(transform, tolerance: float = 1e-6) -> np.ndarray:
     """Check a 4x4 homogeneous rigid transform (rotation + translation in mm); returns it as float array."""
     matrix = np.asarray(transform, dtype=float)
     if matrix.shape != (4, 4):
-        raise ValueError(f"part transform must be a 4x4 matrix, got shape {matrix.shape}")
+        raise PartLoadError(f"part transform must be a 4x4 matrix, got shape {matrix.shape}")
     if not np.all(np.isfinite(matrix)):
-        raise ValueError("part transform contains NaN or infinite values")
+        raise PartLoadError("part transform contains NaN or infinite values")
     if not np.allclose(matrix[3], (0.0, 0.0, 0.0, 1.0), atol=tolerance):
-        raise ValueError(f"part transform's last row must be [0, 0, 0, 1], got {matrix[3].tolist()}")
+        raise PartLoadError(f"part transform's last row must be [0, 0, 0, 1], got {matrix[3].tolist()}")
     rotation = matrix[:3, :3]
     if not np.allclose(rotation.T @ rotation, np.eye(3), atol=tolerance) or np.linalg.det(rotation) < 0:
-        raise ValueError(
+        raise PartLoadError(
             "part transform is not rigid: its 3x3 block must be a rotation (orthonormal, det +1); "
             "give the unit with the units/scale argument instead of scaling in the transform"
         )
@@ -135,7 +138,7 @@ def downward_faces(mesh: trimesh.Trimesh, remove_threshold_angle_deg: float = 20
     """Boolean mask of the faces whose normal lies within ``remove_threshold_angle_deg`` of world -z."""
     threshold = float(remove_threshold_angle_deg)
     if not (math.isfinite(threshold) and 0.0 <= threshold <= 90.0):
-        raise ValueError(f"remove_threshold_angle_deg must lie in [0, 90] degrees, got {threshold}")
+        raise PartLoadError(f"remove_threshold_angle_deg must lie in [0, 90] degrees, got {threshold}")
     normals = np.asarray(mesh.face_normals)
     # a small slack so that exactly downward faces count at a threshold of 0
     return -normals[:, 2] >= math.cos(math.radians(threshold)) - 1e-9
@@ -145,10 +148,10 @@ def _scale_from(units: str | None, scale: float | None, path: Path) -> float:
     if scale is not None:
         value = float(scale)
         if not math.isfinite(value) or value <= 0.0:
-            raise ValueError(f"{path}: scale must be a positive number (mm per file unit), got {scale}")
+            raise PartLoadError(f"{path}: scale must be a positive number (mm per file unit), got {scale}")
         return value
     if units not in UNIT_SCALES_TO_MM:
-        raise ValueError(f"{path}: unknown unit {units!r}; valid units: {', '.join(UNIT_SCALES_TO_MM)}")
+        raise PartLoadError(f"{path}: unknown unit {units!r}; valid units: {', '.join(UNIT_SCALES_TO_MM)}")
     return UNIT_SCALES_TO_MM[units]
 
 
@@ -350,9 +353,9 @@ def sample_surface(
     """
     density = float(density)
     if not math.isfinite(density) or density <= 0.0:
-        raise ValueError(f"sampling density must be a positive number of points/mm^2, got {density}")
+        raise PartLoadError(f"sampling density must be a positive number of points/mm^2, got {density}")
     if int(oversampling) < 1:
-        raise ValueError("oversampling must be >= 1")
+        raise PartLoadError("oversampling must be >= 1")
     face_index = np.arange(len(mesh.faces)) if faces is None else np.asarray(faces, dtype=np.int64).reshape(-1)
     face_index = face_index[mesh.area_faces[face_index] > 0.0]
     area = float(mesh.area_faces[face_index].sum())
@@ -364,3 +367,63 @@ def sample_surface(
     normals = np.asarray(mesh.face_normals)[candidate_faces]
     keep = _eliminate(candidates, normals, count, area)
     return SurfaceSamples(candidates[keep], candidate_faces[keep], normals[keep])
+
+
+def place_part(
+    file_name,
+    scene,
+    transform: np.ndarray,
+    placement: str = "scene",
+    units: str = "mm",
+    remove_downside: bool = True,
+    remove_threshold_angle_deg: float = 20.0,
+    tessellation_tolerance_mm: float = 0.0,
+) -> LoadedPart:
+    """Load a part and place it on the station: at ``scene``'s part pose times ``transform`` (4x4, translation
+    mm), or (``placement='fixture'``) turned by that pose's rotation, its lowest point on the fixture's top and its
+    bounding box centred over the fixture, then shifted by ``transform``'s translation. The mesh is in world mm."""
+    transform = np.asarray(transform, dtype=float)
+    if transform.shape != (4, 4) or not np.all(np.isfinite(transform)):
+        raise PartLoadError(f"transform must be a finite 4x4 matrix, got shape {transform.shape}")
+    placement_mm = np.eye(4)
+    if scene.part is not None:
+        placement_mm = scene.part.pose.copy()
+        placement_mm[:3, 3] *= 1000.0
+    world = placement_mm @ transform
+    if placement == "fixture":
+        turned = np.eye(4)
+        turned[:3, :3] = world[:3, :3]
+        world = turned
+    part = load_part(
+        file_name,
+        units=units,
+        transform=world,
+        remove_downside=remove_downside,
+        remove_threshold_angle_deg=remove_threshold_angle_deg,
+        tessellation_tolerance_mm=tessellation_tolerance_mm,
+    )
+    if placement == "fixture":
+        centred = fixture_placement(part.mesh.vertices, np.eye(3), scene)
+        shift = centred[:3, 3] + placement_mm[:3, :3] @ transform[:3, 3]
+        part.mesh.apply_translation(shift)
+        moved = np.eye(4)
+        moved[:3, 3] = shift
+        part.transform = moved @ part.transform
+    return part
+
+
+def part_parameters(
+    part: LoadedPart, file_name, units: str, add_wbk_mirrors, remove_downside, angle_deg, placement, seed: int
+) -> dict:
+    """The parameters a stored plan names its placed ``part`` by (``part_transform_mm``: file coordinates -> world
+    mm, scale included) and the run's ``seed``."""
+    return dict(
+        part_file=str(Path(file_name).resolve()),
+        units=units,
+        add_wbk_mirrors=bool(add_wbk_mirrors),
+        remove_downside=bool(remove_downside),
+        remove_threshold_angle_deg=float(angle_deg),
+        placement=placement,
+        part_transform_mm=(part.transform @ np.diag([part.scale_to_mm] * 3 + [1.0])).reshape(-1).tolist(),
+        seed=seed,
+    )

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
-import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,11 +22,14 @@ from pathlib import Path
 import numpy as np
 
 from agiprobot_measurement._paths import CONFIG_DIR
+from agiprobot_measurement.common import config
 from agiprobot_measurement.common.config import ConfigError, read_yaml
 from agiprobot_measurement.common.units import UNIT_SCALES_TO_M
 from agiprobot_measurement.errors import InputError
-from agiprobot_measurement.planning.set_cover import SOLVER_TYPES
-from agiprobot_measurement.planning.viewpoint import TILT_MODES, TILT_STEPS
+from agiprobot_measurement.planning.candidates.viewpoint import TILT_MODES, TILT_STEPS
+from agiprobot_measurement.planning.cover.solve import SOLVER_TYPES
+from agiprobot_measurement.planning.errors import PlanningTypeError
+from agiprobot_measurement.station.placement import PLACEMENTS
 
 __all__ = [
     "DEFAULTS_FILE",
@@ -45,9 +47,6 @@ __all__ = [
     "load_work_budget",
 ]
 
-#: ``scene``: the part at the scene file's part pose times the request's transform; ``fixture``: its lowest point on
-#: the fixture's top, centred on it, turned by the transform's rotation (its translation shifts it from there)
-PLACEMENTS = ("scene", "fixture")
 #: the tilt modes of a request: the viewpoint generator's, and ``auto`` (tilt none first, then limited / full
 #: when the cover is large or coverage short; the choice is reported)
 REQUEST_TILT_MODES = (*TILT_MODES, "auto")
@@ -64,15 +63,19 @@ class PlanRequestError(InputError):
         self.field = field_name
 
 
+def _validated(check, field_name: str, message: str):
+    """``check()`` (a :mod:`~agiprobot_measurement.common.config` validator's call), its ConfigError turned into a
+    :class:`PlanRequestError` of ``field_name`` saying ``message``."""
+    try:
+        return check()
+    except ConfigError as exc:
+        raise PlanRequestError(field_name, message) from exc
+
+
 def check_positive(value, field_name: str, label: str | None = None) -> float:
     """``value`` as a finite positive float, else :class:`PlanRequestError` naming ``label`` (default: the field)."""
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        number = float("nan")
-    if not (math.isfinite(number) and number > 0):
-        raise PlanRequestError(field_name, f"{label or field_name} must be a positive number, got {value}")
-    return number
+    message = f"{label or field_name} must be a positive number, got {value}"
+    return _validated(lambda: config.positive(value, field_name), field_name, message)
 
 
 def check_choice(value, valid: Iterable[str], field_name: str, label: str | None = None) -> str:
@@ -130,7 +133,7 @@ class WorkEstimate:
     candidates x the samples one view can see) and ``memory_gb``, the dense arrays of samples and candidates.
     The measurability store is streamed: its size is projected from a pilot of the candidates and checked
     against the run's memory budget (``max_memory_gb``) before the evaluation
-    (:func:`~agiprobot_measurement.planning.streaming.evaluate_streaming`)."""
+    (:func:`~agiprobot_measurement.planning.candidates.streaming.evaluate_streaming`)."""
 
     area_mm2: float
     samples: float
@@ -184,13 +187,7 @@ class WorkBudget:
             raise ConfigError(f"{where}: unknown key(s) {', '.join(unknown)}; valid: {', '.join(sorted(names))}")
         values = {}
         for key, value in data.items():
-            try:
-                number = float(value)
-            except (TypeError, ValueError):
-                number = float("nan")
-            if not (math.isfinite(number) and number > 0):
-                raise ConfigError(f"{where}.{key} must be a positive number, got {value!r}")
-            values[key] = number
+            values[key] = config.positive(value, f"{where}.{key}")
         return cls(**values)
 
     def check(self, estimate: WorkEstimate) -> WorkEstimate:
@@ -218,6 +215,32 @@ def load_work_budget(path: str | Path | None = None) -> WorkBudget:
     if not isinstance(section, dict):
         raise ConfigError(f"{path}: 'budget' must be a mapping")
     return WorkBudget.from_mapping(section, f"{path}: budget")
+
+
+#: keyword argument of ``TrajectoryManager`` -> the request field that sets it
+MANAGER_ARGUMENTS = {
+    "scan_speed_mm_s": "scan_speed_mm_s",
+    "seed": "seed",
+    "workers": "workers",
+    "scheduler": "scheduler",
+}
+#: keyword argument of ``TrajectoryManager.load_target_mesh`` -> request field
+PART_ARGUMENTS = {
+    "transform": "part_transform_mm",
+    **{name: name for name in ("add_wbk_mirrors", "units", "placement", "tessellation_tolerance_mm")},
+}
+#: keyword argument of ``TrajectoryManager.plan`` -> request field
+PLAN_ARGUMENTS = {
+    **{name: name for name in ("sampling_density", "orientations_around_boresight", "viewpoint_tilt_mode")},
+    **{name: name for name in ("solver_type", "set_cover_time_limit_s", "time_limit_s", "min_reachable_share")},
+    "uncertainty_threshold": "uncertainty_threshold_mm",
+    "min_planning_time": "min_planning_time_s",
+    "minimum_trajectory_length": "minimum_trajectory_length_mm",
+    "trajectory_sample_step": "trajectory_sample_step_mm",
+    "minimum_required_overmeasure": "minimum_required_overmeasure_mm",
+    "joint_jump_threshold": "joint_jump_threshold_rad",
+    "mip_gap": "set_cover_mip_gap",
+}
 
 
 @dataclass
@@ -282,7 +305,7 @@ class PlanRequest:
         values = {k: v for k, v in dict(defaults).items() if k in names}
         for key, value in overrides.items():
             if key not in names:
-                raise TypeError(f"PlanRequest has no field {key!r}")
+                raise PlanningTypeError(f"PlanRequest has no field {key!r}")
             if value is None or (not isinstance(value, np.ndarray) and not value and value is not False):
                 continue
             values[key] = value
@@ -293,6 +316,22 @@ class PlanRequest:
         return estimate_work(
             area_mm2, self.sampling_density, self.orientations_around_boresight, self.viewpoint_tilt_mode
         )
+
+    def manager_settings(self) -> dict:
+        """The ``TrajectoryManager`` keyword arguments this (validated) request sets."""
+        memory = self.max_memory_gb * 1e9 if self.max_memory_gb else None
+        return {**self._arguments(MANAGER_ARGUMENTS), "max_memory_bytes": memory}
+
+    def part_arguments(self) -> dict:
+        """The ``TrajectoryManager.load_target_mesh`` keyword arguments of this (validated) request's part."""
+        return self._arguments(PART_ARGUMENTS)
+
+    def plan_arguments(self) -> dict:
+        """The ``TrajectoryManager.plan`` keyword arguments of this (validated) request."""
+        return self._arguments(PLAN_ARGUMENTS)
+
+    def _arguments(self, table: dict[str, str]) -> dict:
+        return {argument: getattr(self, field_name) for argument, field_name in table.items()}
 
     def validate(self, base_dir: str | Path | None = None, labels: Mapping[str, str] | None = None) -> PlanRequest:
         """Check every field; return a copy with typed values and ``part_file`` resolved against ``base_dir``
@@ -334,27 +373,18 @@ class PlanRequest:
                 "joint_jump_threshold_rad",
             )
         }
-        overmeasure = float(self.minimum_required_overmeasure_mm)
-        if not (math.isfinite(overmeasure) and overmeasure >= 0):
-            raise PlanRequestError(
-                "minimum_required_overmeasure_mm",
-                f"{label('minimum_required_overmeasure_mm')} must be a number >= 0, got {self.minimum_required_overmeasure_mm}",
-            )
+        key, value = "minimum_required_overmeasure_mm", self.minimum_required_overmeasure_mm
+        message = f"{label(key)} must be a number >= 0, got {value}"
+        overmeasure = _validated(lambda: config.non_negative(value, key), key, message)
         fractions = {}
         for name, low, high in (
             ("set_cover_mip_gap", 0.0, 0.5),
             ("min_reachable_share", 0.0, 1.0),
             ("tessellation_tolerance_mm", 0.0, 1000.0),
         ):
-            try:
-                number = float(getattr(self, name))
-            except (TypeError, ValueError):
-                number = float("nan")
-            if not (math.isfinite(number) and low <= number <= high):
-                raise PlanRequestError(
-                    name, f"{label(name)} must be a number in [{low:g}, {high:g}], got {getattr(self, name)}"
-                )
-            fractions[name] = number
+            value = getattr(self, name)
+            message = f"{label(name)} must be a number in [{low:g}, {high:g}], got {value}"
+            fractions[name] = _validated(lambda: config.number(value, name, low, high), name, message)  # noqa: B023
         orientations = self.orientations_around_boresight
         if isinstance(orientations, float) and orientations.is_integer():
             orientations = int(orientations)
@@ -381,15 +411,12 @@ class PlanRequest:
                 f"{label('scheduler')} must be a Dask scheduler address like tcp://host:8786 (or host:8786), got "
                 f"{self.scheduler!r}",
             )
-        try:
-            max_memory = float(self.max_memory_gb)
-        except (TypeError, ValueError):
-            max_memory = float("nan")
-        if not (math.isfinite(max_memory) and max_memory >= 0):
-            raise PlanRequestError(
-                "max_memory_gb",
-                f"{label('max_memory_gb')} must be a number of GB >= 0 (0 = from the machine), got {self.max_memory_gb}",
-            )
+        message = (
+            f"{label('max_memory_gb')} must be a number of GB >= 0 (0 = from the machine), got {self.max_memory_gb}"
+        )
+        max_memory = _validated(
+            lambda: config.non_negative(self.max_memory_gb, "max_memory_gb"), "max_memory_gb", message
+        )
         transform = np.asarray(self.part_transform_mm, dtype=float)
         if transform.shape != (4, 4) or not np.all(np.isfinite(transform)):
             raise PlanRequestError(

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import rosbag
 
-from agiprobot_measurement.planning.coverage import is_uncoverable_color
+from agiprobot_measurement.planning.report.coverage import is_uncoverable_color
 from agiprobot_measurement.ros.conversions import cloud_xyz
 from agiprobot_measurement.sensors.laser_line.simulator import measured_samples
 

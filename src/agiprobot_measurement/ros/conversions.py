@@ -17,7 +17,7 @@ from trajectory_msgs.msg import JointTrajectoryPoint
 from agiprobot_measurement.common.geometry import pose_from_quaternion, pose_to_quaternion
 from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.motion.trajectory import JointTrajectory, TrajectoryError, seconds_to_duration
-from agiprobot_measurement.planning.plan_io import ExecutionPlan, PlanError, PlanSegment, kind_at
+from agiprobot_measurement.planning.plan.plan_io import ExecutionPlan, PlanError, PlanSegment, kind_at
 
 __all__ = [
     "cloud_xyz",

@@ -1,12 +1,12 @@
 """Executing a plan in ROS: the robot controller's action and the simulated scanner behind the core's
-executor interface (:class:`~agiprobot_measurement.planning.execution.SegmentExecutor`).
+executor interface (:class:`~agiprobot_measurement.planning.plan.execution.SegmentExecutor`).
 
 :class:`ScannerClient` talks to the laser_scanner node (target, stitching, the measured cloud) and collects the
 profiles it publishes; :class:`RosSegmentExecutor` runs one segment through the controller's
 ExecuteJointTrajectory action, switches stitching on for measurement segments only and cancels the robot when
 the caller asks. :class:`ControllerWatch` tells whether the controller is alive (its ``/joint_states``
 heartbeat and its action server's status connection); a segment whose controller dies ends within
-``heartbeat_timeout_s`` + a poll with :class:`~agiprobot_measurement.planning.execution.ControllerLost`.
+``heartbeat_timeout_s`` + a poll with :class:`~agiprobot_measurement.planning.plan.execution.ControllerLost`.
 Points are mm in the core and m on the wire.
 """
 
@@ -23,7 +23,7 @@ from std_srvs.srv import Empty, Trigger
 
 from agiprobot_measurement.motion.trajectory import JointTrajectory
 from agiprobot_measurement.msg import ExecuteJointTrajectoryGoal
-from agiprobot_measurement.planning.execution import ControllerLost, ExecutionCancelled, ExecutionError, PlanPart
+from agiprobot_measurement.planning.plan.execution import ControllerLost, ExecutionCancelled, ExecutionError, PlanPart
 from agiprobot_measurement.ros.conversions import cloud_xyz, joint_trajectory_to_msg
 from agiprobot_measurement.ros.joint_states import JointStateCache
 from agiprobot_measurement.srv import SetScanTarget, SetStitching

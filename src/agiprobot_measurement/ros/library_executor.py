@@ -5,7 +5,8 @@ the scanner's stitching on for measurement segments only, and, when executing vi
 given, published the points each view measures as a latched ``sensor_msgs/PointCloud`` (frame ``world``, m) on
 ``/currently_measured_points``. :func:`station_executor` gives the same through this project's station: the
 simulated controller's ExecuteJointTrajectory action (``/robot_sim/execute_trajectory``) and the laser scanner's
-services (``/laser_scanner``). The core asks for it only when ``rospy`` is initialised in the process.
+services (``/laser_scanner``). :mod:`agiprobot_measurement.ros.plugins` registers it with the core's executor
+registry; the core asks for it only in a process where ``rospy`` is initialised.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from sensor_msgs.msg import PointCloud
 from std_msgs.msg import Header
 
 from agiprobot_measurement.msg import ExecuteJointTrajectoryAction
-from agiprobot_measurement.planning.execution import ExecutionError, PlanPart
+from agiprobot_measurement.planning.plan.execution import ExecutionError, PlanPart
 from agiprobot_measurement.ros.action_client import ActionClient
 from agiprobot_measurement.ros.conversions import xyz_point_cloud
 from agiprobot_measurement.ros.executor import ControllerWatch, RosSegmentExecutor, ScannerClient

@@ -45,7 +45,7 @@ def test_install_space_imports_every_subpackage_and_finds_its_data(install_prefi
         "import agiprobot_measurement, agiprobot_measurement._paths as p\n"
         "from agiprobot_measurement.station import Station\n"
         "from agiprobot_measurement.trajectory_manager import TrajectoryManager\n"
-        "import agiprobot_measurement.planning.set_cover, agiprobot_measurement.calibration.registration\n"
+        "import agiprobot_measurement.planning.cover.solve, agiprobot_measurement.calibration.registration\n"
         "Station.load()\n"
         "print(agiprobot_measurement.__file__)\n"
         "print(p.PACKAGE_ROOT)\n"

@@ -3,7 +3,8 @@
 - ROS (rospy, actionlib, rosbag, tf2_ros, dynamic_reconfigure, genpy, roslib, any ``*_msgs``, the package's own
   generated ``msg``/``srv`` and the interface packages ``phoxi_camera`` and ``asr_robot_model_services``) is imported
   only under ``agiprobot_measurement/ros/`` and ``nodes/``: every other module imports with those packages blocked, and
-  no import statement anywhere in it (also inside functions) names them.
+  no import statement anywhere in it (also inside functions), nor a string given to ``importlib.import_module`` or
+  ``__import__``, names them.
 - The core's import graph (every import statement, including those inside functions) has no cycle.
 - Every file in ``nodes/`` and in ``packages/*/nodes/`` (the interface packages' node types) is a launcher of at most
   40 lines that runs a class of ``agiprobot_measurement.ros.nodes``.
@@ -50,11 +51,28 @@ def is_ros_module(name: str) -> bool:
     )
 
 
+#: the functions that import a module named by a string: ``importlib.import_module(name)``, ``__import__(name)``
+IMPORT_FUNCTIONS = ("import_module", "__import__")
+
+
+def _imported_by_call(node: ast.Call) -> str | None:
+    """The module a call of :data:`IMPORT_FUNCTIONS` names by a string constant (None for other calls)."""
+    func = node.func
+    name = func.attr if isinstance(func, ast.Attribute) else func.id if isinstance(func, ast.Name) else None
+    if name not in IMPORT_FUNCTIONS or not node.args:
+        return None
+    first = node.args[0]
+    return first.value if isinstance(first, ast.Constant) and isinstance(first.value, str) else None
+
+
 def imported_names(tree: ast.AST, module: str, is_package: bool) -> list[tuple[int, str]]:
-    """(line, absolute module name) of every import statement, at any depth; ``from a import b`` yields a.b too."""
+    """(line, absolute module name) of every import statement, at any depth, and of every module named by a string
+    to ``importlib.import_module`` or ``__import__``; ``from a import b`` yields a.b too."""
     found = []
     for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
+        if isinstance(node, ast.Call) and (target := _imported_by_call(node)) is not None:
+            found.append((node.lineno, target))
+        elif isinstance(node, ast.Import):
             found += [(node.lineno, alias.name) for alias in node.names]
         elif isinstance(node, ast.ImportFrom):
             if node.level:
@@ -66,6 +84,18 @@ def imported_names(tree: ast.AST, module: str, is_package: bool) -> list[tuple[i
             found.append((node.lineno, target))
             found += [(node.lineno, f"{target}.{alias.name}") for alias in node.names]
     return found
+
+
+def test_imports_by_string_count_as_imports():
+    tree = ast.parse(
+        "import importlib\n"
+        "def f():\n"
+        "    importlib.import_module('agiprobot_measurement.ros.plugins')\n"
+        "    __import__('rospy')\n"
+        "    import_module(name)\n"
+    )
+    found = [name for _, name in imported_names(tree, "agiprobot_measurement.x", False)]
+    assert found == ["importlib", "agiprobot_measurement.ros.plugins", "rospy"]
 
 
 def test_no_ros_import_statement_outside_the_ros_layer():

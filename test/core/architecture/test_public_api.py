@@ -13,7 +13,7 @@ from agiprobot_measurement._paths import PACKAGE_ROOT
 def test_documented_paths_are_the_new_homes_objects():
     from agiprobot_measurement import sensor_model, trajectory_manager, viewpoint
     from agiprobot_measurement.planning import trajectory_manager as planning_trajectory_manager
-    from agiprobot_measurement.planning import viewpoint as planning_viewpoint
+    from agiprobot_measurement.planning.candidates import viewpoint as planning_viewpoint
     from agiprobot_measurement.sensors.laser_line import model
 
     assert trajectory_manager.TrajectoryManager is planning_trajectory_manager.TrajectoryManager

@@ -13,9 +13,9 @@ def test_every_package_error_is_under_the_one_base():
     from agiprobot_measurement.calibration.registration import CalibrationError
     from agiprobot_measurement.motion.time_parameterization import TimeParameterizationError
     from agiprobot_measurement.motion.trajectory import TrajectoryError
+    from agiprobot_measurement.planning.cover.solve import SetCoverError
     from agiprobot_measurement.planning.part_loading import PartLoadError
-    from agiprobot_measurement.planning.plan_io import PlanError, PlanFileNotFoundError
-    from agiprobot_measurement.planning.set_cover import SetCoverError
+    from agiprobot_measurement.planning.plan.plan_io import PlanError, PlanFileNotFoundError
     from agiprobot_measurement.planning.trajectory_manager import ExecutionError, PlanningError
     from agiprobot_measurement.sensors.laser_line.model import ProcessingContextError
     from agiprobot_measurement.sensors.phoxi.device import PhoxiError

@@ -7,7 +7,7 @@ import pytest
 import trimesh
 from matplotlib.image import imread
 
-from agiprobot_measurement.planning.coverage_figure import NOT_MEASURABLE_COLOR, UNCERTAINTY_CMAP, plot_coverage
+from agiprobot_measurement.planning.report.coverage_figure import NOT_MEASURABLE_COLOR, UNCERTAINTY_CMAP, plot_coverage
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 

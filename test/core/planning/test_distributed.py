@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 import yaml
 
-from agiprobot_measurement.planning.distributed import ClusterError, DaskEvaluator
-from agiprobot_measurement.planning.streaming import StreamStats, evaluate_streaming
-from agiprobot_measurement.planning.viewpoint import generate_viewpoint_poses
+from agiprobot_measurement.planning.candidates.distributed import ClusterError, DaskEvaluator
+from agiprobot_measurement.planning.candidates.streaming import StreamStats, evaluate_streaming
+from agiprobot_measurement.planning.candidates.viewpoint import generate_viewpoint_poses
 from agiprobot_measurement.sensors.laser_line.model import SensorModel
 from agiprobot_measurement.station import PACKAGE_ROOT
 
@@ -132,7 +132,7 @@ def _model_and_poses():
 
 
 def test_a_killed_worker_has_its_chunks_recomputed(monkeypatch):
-    import agiprobot_measurement.planning.streaming as streaming
+    import agiprobot_measurement.planning.candidates.streaming as streaming
 
     model, poses = _model_and_poses()
     reference, kept = evaluate_streaming(model, poses, 0.1, 500.0)
@@ -164,7 +164,7 @@ def test_a_killed_worker_has_its_chunks_recomputed(monkeypatch):
 
 
 def test_the_pilot_runs_on_the_workers_and_projects_what_it_projects_in_process():
-    from agiprobot_measurement.planning.streaming import DOMINANCE_PILOT_SLICES, EvaluationSettings
+    from agiprobot_measurement.planning.candidates.streaming import DOMINANCE_PILOT_SLICES, EvaluationSettings
 
     model, poses = _model_and_poses()
     settings = EvaluationSettings(drop_dominated=True)
@@ -188,7 +188,7 @@ def test_the_pilot_runs_on_the_workers_and_projects_what_it_projects_in_process(
 
 
 def test_an_unreachable_scheduler_is_named(monkeypatch):
-    import agiprobot_measurement.planning.distributed as distributed
+    import agiprobot_measurement.planning.candidates.distributed as distributed
 
     monkeypatch.setattr(distributed, "CONNECT_TIMEOUT_S", 2.0)
     with pytest.raises(ClusterError, match=r"tcp://127\.0\.0\.1:9"):
@@ -196,7 +196,7 @@ def test_an_unreachable_scheduler_is_named(monkeypatch):
 
 
 def test_without_the_options_nothing_is_distributed():
-    from agiprobot_measurement.planning.streaming import EvaluationSettings
+    from agiprobot_measurement.planning.candidates.streaming import EvaluationSettings
 
     assert not EvaluationSettings().distributed
     assert EvaluationSettings(workers=2).distributed and EvaluationSettings(scheduler="tcp://h:1").distributed

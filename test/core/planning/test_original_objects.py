@@ -7,8 +7,14 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from agiprobot_measurement.planning.execution import ExecutionError, SimulatedExecutor, in_ros_process, segment_triples
-from agiprobot_measurement.planning.plan_io import (
+from agiprobot_measurement.planning.candidates.viewpoint import ViewPoint
+from agiprobot_measurement.planning.plan import executors
+from agiprobot_measurement.planning.plan.execution import (
+    ExecutionError,
+    SimulatedExecutor,
+    segment_triples,
+)
+from agiprobot_measurement.planning.plan.plan_io import (
     MessageTime,
     PlanError,
     load_execution_plan,
@@ -16,7 +22,6 @@ from agiprobot_measurement.planning.plan_io import (
     segment_to_dict,
 )
 from agiprobot_measurement.planning.trajectory_manager import PlanningError, TrajectoryManager
-from agiprobot_measurement.planning.viewpoint import ViewPoint
 from agiprobot_measurement.station import PACKAGE_ROOT
 
 CUBE = PACKAGE_ROOT / "parts" / "objectA_wuerfel.stl"
@@ -69,7 +74,7 @@ def test_view_trajectories_read_as_robot_trajectories_and_the_source_names_exist
 
 def test_execute_takes_robot_trajectory_shaped_items(planned):
     manager, _, _, segments = planned
-    assert not in_ros_process()
+    assert not executors.registered(executors.STATION)  # the core alone registers no station executor
     # what code written for the original hands over: objects with joint_trajectory / multi_dof_joint_trajectory
     shaped = [
         SimpleNamespace(joint_trajectory=s.joint_trajectory, multi_dof_joint_trajectory=s.multi_dof_joint_trajectory)

@@ -10,15 +10,10 @@ import trimesh
 
 from agiprobot_measurement.common.geometry import pose_matrix
 from agiprobot_measurement.errors import InputError
-from agiprobot_measurement.planning.placement import (
-    PlacementError,
-    check_placement,
-    find_overlaps,
-    fixture_placement,
-    scene_object_top_m,
-)
+from agiprobot_measurement.motion.placement_check import PlacementError, check_placement, find_overlaps
 from agiprobot_measurement.planning.trajectory_manager import TrajectoryManager
 from agiprobot_measurement.station import PACKAGE_ROOT, Station
+from agiprobot_measurement.station.placement import fixture_placement, scene_object_top_m
 
 CUBE = PACKAGE_ROOT / "parts" / "objectA_wuerfel.stl"
 

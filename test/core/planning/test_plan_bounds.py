@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 import scipy.sparse
 
-from agiprobot_measurement.planning.coverage_figure import plot_coverage
+from agiprobot_measurement.planning.cover.solve import solve_set_cover
+from agiprobot_measurement.planning.report.coverage_figure import plot_coverage
 from agiprobot_measurement.planning.request import PlanRequest, PlanRequestError
-from agiprobot_measurement.planning.set_cover import solve_set_cover
 from agiprobot_measurement.planning.trajectory_manager import TrajectoryManager
 from agiprobot_measurement.station import PACKAGE_ROOT
 
@@ -65,7 +65,7 @@ def test_three_coverage_numbers_are_consistent_on_the_cube(cube_run, tmp_path):
 def test_figure_colours_measurable_but_not_executable_apart(tmp_path):
     from matplotlib.colors import to_rgb
 
-    from agiprobot_measurement.planning import coverage_figure
+    from agiprobot_measurement.planning.report import coverage_figure
 
     seen = []
 

@@ -12,8 +12,8 @@ import yaml
 from agiprobot_measurement.common import files
 from agiprobot_measurement.motion.time_parameterization import time_optimal_trajectory
 from agiprobot_measurement.motion.trajectory import JointTrajectory
-from agiprobot_measurement.planning import plan_io
-from agiprobot_measurement.planning.plan_io import (
+from agiprobot_measurement.planning.plan import plan_io
+from agiprobot_measurement.planning.plan.plan_io import (
     CONNECT,
     MEASURE,
     ExecutionPlan,

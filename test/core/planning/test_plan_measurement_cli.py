@@ -9,7 +9,7 @@ import time
 import pytest
 import yaml
 
-from agiprobot_measurement.planning.plan_io import load_execution_plan
+from agiprobot_measurement.planning.plan.plan_io import load_execution_plan
 from agiprobot_measurement.station import PACKAGE_ROOT
 
 SCRIPT = PACKAGE_ROOT / "scripts" / "plan_measurement.py"

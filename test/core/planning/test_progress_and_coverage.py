@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from agiprobot_measurement.planning.coverage import (
+from agiprobot_measurement.planning.report.coverage import (
     NOT_PLANNED_RGB,
     UNCOVERABLE_RGB,
     is_uncoverable_color,
@@ -11,7 +11,7 @@ from agiprobot_measurement.planning.coverage import (
     measured_coverage,
     uncertainty_colors,
 )
-from agiprobot_measurement.planning.progress import STAGE_WEIGHTS, STAGES, overall_progress
+from agiprobot_measurement.planning.report.progress import STAGE_WEIGHTS, STAGES, overall_progress
 
 
 def test_overall_progress_runs_from_0_to_1_through_the_stages():

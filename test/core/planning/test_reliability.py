@@ -10,19 +10,20 @@ import pytest
 import yaml
 
 from agiprobot_measurement.common.files import PathPolicyError
-from agiprobot_measurement.planning.execution import (
+from agiprobot_measurement.planning.plan.execution import (
     ControllerLost,
     SimulatedExecutor,
     execute_segments,
     plan_part,
 )
-from agiprobot_measurement.planning.plan_io import (
+from agiprobot_measurement.planning.plan.plan_io import (
     ExecutionPlan,
     PlanError,
     dump_execution_plan,
     load_execution_plan,
     store_execution_plan,
 )
+from agiprobot_measurement.planning.plan.session import GoalError, MeasurementSession
 from agiprobot_measurement.planning.request import (
     PlanRequest,
     PlanRequestError,
@@ -32,7 +33,6 @@ from agiprobot_measurement.planning.request import (
     load_planning_defaults,
     load_work_budget,
 )
-from agiprobot_measurement.planning.session import GoalError, MeasurementSession
 from agiprobot_measurement.planning.trajectory_manager import TrajectoryManager
 from agiprobot_measurement.station import PACKAGE_ROOT, Station
 

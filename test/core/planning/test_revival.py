@@ -9,8 +9,10 @@ import numpy as np
 import pytest
 
 import agiprobot_measurement.planning.trajectory_manager as tm
-from agiprobot_measurement.planning.report import point_uncertainties
-from agiprobot_measurement.planning.streaming import chunk_block
+from agiprobot_measurement.planning.candidates.streaming import chunk_block
+from agiprobot_measurement.planning.report.report import point_uncertainties
+from agiprobot_measurement.planning.selection import loop, revival, verify
+from agiprobot_measurement.planning.selection.problem import coverage_problem
 from agiprobot_measurement.station import PACKAGE_ROOT
 
 CUBE = PACKAGE_ROOT / "parts" / "objectA_wuerfel.stl"
@@ -40,9 +42,9 @@ def test_the_reserve_names_a_dominator_measuring_all_points_of_each_dropped_cand
     manager = dropped_generation
     stats = manager.last_stream_stats
     assert stats.drop_dominated and stats.dropped_views > 0
-    reserve = manager._reserve_candidates
+    reserve = manager.run.reserve.candidates
     assert reserve.size == stats.dropped_views  # every drop here is a dominance drop with its dominator
-    views = manager._generation_views
+    views = manager.run.generation_views
     sample = np.linspace(0, reserve.size - 1, min(reserve.size, 200)).astype(int)
     block, columns, _ = chunk_block(
         manager.sensor_model, manager.candidates.poses[reserve[sample]], THRESHOLD_MM, 500.0
@@ -50,33 +52,33 @@ def test_the_reserve_names_a_dominator_measuring_all_points_of_each_dropped_cand
     assert columns.size == sample.size  # a dropped candidate measured something
     for j, k in enumerate(sample.tolist()):
         points = set(block.point_indices[block.indptr[j] : block.indptr[j + 1]].tolist())
-        dominator = views[manager._reserve_dominator_column[k]]
+        dominator = views[manager.run.reserve.dominator_column[k]]
         assert points <= _points(dominator)
 
 
 def test_a_failed_dominator_revives_its_dominated_candidates_once_when_its_points_are_left_open(dropped_generation):
     manager = dropped_generation
-    views = manager._generation_views
+    views = manager.run.generation_views
     store = manager.measurability
-    dominators, counts = np.unique(manager._reserve_dominator_column, return_counts=True)
+    dominators, counts = np.unique(manager.run.reserve.dominator_column, return_counts=True)
     column = int(dominators[np.argmax(counts)])
     view = views[column]
     a, b = store.indptr[column], store.indptr[column + 1]
     its_points = store.point_indices[a:b]
-    assert manager._revive_dominated() == []  # nothing verified yet: nothing to revive
+    assert revival.revive_dominated(manager.run, manager.tools()) == []  # nothing verified yet: nothing to revive
     view.mechanics_verified, view.mechanics_valid = True, False
-    manager._entry_alive[a:b] = False
+    manager.run.entry_alive[a:b] = False
     # every point of the failed view is still measured by other views (the cube's are seen from many): the
     # dominated candidates are not needed yet
-    others = np.isin(store.point_indices, its_points) & manager._entry_alive
+    others = np.isin(store.point_indices, its_points) & manager.run.entry_alive
     assert np.all(np.isin(its_points, store.point_indices[others]))
-    assert manager._revive_dominated() == []
+    assert revival.revive_dominated(manager.run, manager.tools()) == []
     # the other views of those points fail too (not verified yet, their entries gone): now the points are open
-    manager._entry_alive[others] = False
+    manager.run.entry_alive[others] = False
     before = len(manager.last_viewpoints)
-    revived = manager._revive_dominated()
-    manager._entry_alive[others] = True  # back as they were: the rest of the test reads the store's columns
-    expected = manager._reserve_candidates[manager._reserve_dominator_column == column]
+    revived = revival.revive_dominated(manager.run, manager.tools())
+    manager.run.entry_alive[others] = True  # back as they were: the rest of the test reads the store's columns
+    expected = manager.run.reserve.candidates[manager.run.reserve.dominator_column == column]
     assert sorted(v.metadata["candidate"] for v in revived) == sorted(expected.tolist())
     assert len(manager.last_viewpoints) == before + len(revived)
     for candidate_view in revived:
@@ -89,10 +91,10 @@ def test_a_failed_dominator_revives_its_dominated_candidates_once_when_its_point
         )
         lo, hi = candidate_view.scan_line
         assert lo < hi and candidate_view.estimated_duration_s > 0
-    assert manager._revive_dominated() == []  # the same failure revives nothing twice
+    assert revival.revive_dominated(manager.run, manager.tools()) == []  # the same failure revives nothing twice
     # the coverage problem takes the store's columns and the revived views together, in the views' order
     mixed = views[:50] + revived + views[50:100]
-    matrix, worst, _ = manager._coverage_problem(mixed, len(manager.samples))
+    matrix, worst, _ = coverage_problem(manager.run, mixed, len(manager.samples))
     assert matrix.shape == (manager.measurability.n_points, len(mixed))
     for k, v in enumerate(mixed):
         rows = set(matrix.indices[matrix.indptr[k] : matrix.indptr[k + 1]].tolist())
@@ -106,8 +108,10 @@ def test_a_plan_whose_dominators_fail_covers_what_the_plan_without_dropping_cove
     check does): with revival the points only those views measured are still covered by the dominated ones."""
     probe = _manager(True)
     probe.generate_samples_and_viewpoints(DENSITY, THRESHOLD_MM, ORIENTATIONS, "full")
-    failing = {probe._generation_views[c].metadata["candidate"] for c in np.unique(probe._reserve_dominator_column)}
-    real_check = tm.check_scan_line
+    failing = {
+        probe.run.generation_views[c].metadata["candidate"] for c in np.unique(probe.run.reserve.dominator_column)
+    }
+    real_check = verify.check_scan_line
 
     def check(view, *args, **kwargs):
         if view.metadata.get("candidate") in failing:
@@ -115,12 +119,12 @@ def test_a_plan_whose_dominators_fail_covers_what_the_plan_without_dropping_cove
             return None
         return real_check(view, *args, **kwargs)
 
-    monkeypatch.setattr(tm, "check_scan_line", check)
+    monkeypatch.setattr(verify, "check_scan_line", check)
     covered = {}
     for name, drop, revive in (("plain", False, True), ("dropped", True, True), ("no revival", True, False)):
         manager = _manager(drop)
         if not revive:
-            monkeypatch.setattr(manager, "_revive_dominated", lambda: [])
+            monkeypatch.setattr(loop, "revive_in", lambda *args: np.zeros(0, dtype=np.int64))
         try:
             ordered = manager.plan(DENSITY, THRESHOLD_MM, ORIENTATIONS, "full", "IP_basic", time_limit_s=240.0)
         except tm.PlanningError:

@@ -8,7 +8,7 @@ import yaml
 
 from agiprobot_measurement.common.files import PathPolicyError
 from agiprobot_measurement.errors import InputError
-from agiprobot_measurement.planning.execution import (
+from agiprobot_measurement.planning.plan.execution import (
     ExecutionCancelled,
     ExecutionError,
     PlanRejected,
@@ -16,9 +16,9 @@ from agiprobot_measurement.planning.execution import (
     execute_segments,
     load_plan,
 )
-from agiprobot_measurement.planning.plan_io import load_execution_plan
+from agiprobot_measurement.planning.plan.plan_io import load_execution_plan
+from agiprobot_measurement.planning.plan.session import GoalError, MeasurementSession
 from agiprobot_measurement.planning.request import load_planning_defaults
-from agiprobot_measurement.planning.session import GoalError, MeasurementSession
 from agiprobot_measurement.planning.trajectory_manager import TrajectoryManager
 from agiprobot_measurement.station import Station
 

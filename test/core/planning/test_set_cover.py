@@ -1,4 +1,4 @@
-"""Tests of the viewpoint-selection set cover (agiprobot_measurement.planning.set_cover)."""
+"""Tests of the viewpoint-selection set cover (agiprobot_measurement.planning.cover.solve)."""
 
 import itertools
 import time
@@ -7,8 +7,10 @@ import numpy as np
 import pytest
 from scipy import sparse
 
-from agiprobot_measurement.planning import cover_columns, cover_greedy, cover_reduction
-from agiprobot_measurement.planning.set_cover import SOLVER_TYPES, SetCoverError, solve_set_cover
+from agiprobot_measurement.planning.cover import columns as cover_columns
+from agiprobot_measurement.planning.cover import greedy as cover_greedy
+from agiprobot_measurement.planning.cover import reduction as cover_reduction
+from agiprobot_measurement.planning.cover.solve import SOLVER_TYPES, SetCoverError, solve_set_cover
 from agiprobot_measurement.testing.set_cover_instances import cube_instance, random_instance
 
 IP_SOLVERS = ("IP_basic", "IP_uncertainty", "IP_time")

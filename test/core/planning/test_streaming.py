@@ -8,8 +8,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from agiprobot_measurement.planning.request import PlanRequest, PlanRequestError, WorkTooLarge
-from agiprobot_measurement.planning.streaming import (
+from agiprobot_measurement.planning.candidates.streaming import (
     HUGE_PAGE_MIN_BYTES,
     EvaluationSettings,
     StreamStats,
@@ -20,7 +19,8 @@ from agiprobot_measurement.planning.streaming import (
     evaluate_streaming,
     redundant_columns_kept,
 )
-from agiprobot_measurement.planning.viewpoint import generate_viewpoint_poses
+from agiprobot_measurement.planning.candidates.viewpoint import generate_viewpoint_poses
+from agiprobot_measurement.planning.request import PlanRequest, PlanRequestError, WorkTooLarge
 from agiprobot_measurement.sensors.laser_line.model import MeasurabilityResult, SensorModel
 from agiprobot_measurement.station import PACKAGE_ROOT
 
@@ -83,7 +83,7 @@ def test_stream_is_compact_consistent_in_extents_and_independent_of_chunking(poc
     # the pilot's projection is close to what was kept
     assert stats.projected_pairs == pytest.approx(full.nnz, rel=0.25)
     # other chunk sizes give the same bytes
-    import agiprobot_measurement.planning.streaming as streaming
+    import agiprobot_measurement.planning.candidates.streaming as streaming
 
     monkeypatch.setattr(streaming, "MIN_CHUNK_VIEWS", 1)
     monkeypatch.setattr(streaming, "CHUNK_TARGET_S", 1e-6)
@@ -184,7 +184,7 @@ def test_dropping_dominated_candidates_keeps_the_coverage_and_a_reserve(pocket_p
     # the same points stay coverable
     np.testing.assert_array_equal(np.unique(dropped.point_indices), np.unique(plain.point_indices))
     # the reduction works on fixed groups of candidates: other chunk sizes keep the same columns
-    import agiprobot_measurement.planning.streaming as streaming
+    import agiprobot_measurement.planning.candidates.streaming as streaming
 
     monkeypatch.setattr(streaming, "REDUCTION_GROUP_VIEWS", 512)
     reference, reference_kept = evaluate_streaming(model, poses, 0.1, 500.0, settings=settings)

@@ -10,11 +10,14 @@ import pytest
 import scipy.sparse
 
 import agiprobot_measurement.planning.trajectory_manager as tm
-from agiprobot_measurement.planning.cover_columns import measurable_columns
-from agiprobot_measurement.planning.cover_greedy import greedy_weighted_cover
-from agiprobot_measurement.planning.cover_ip import solve_highs, solve_reduced_ip
-from agiprobot_measurement.planning.cover_reduction import implied_rows
-from agiprobot_measurement.planning.report import point_uncertainties
+from agiprobot_measurement.planning import pipeline
+from agiprobot_measurement.planning.cover.columns import measurable_columns
+from agiprobot_measurement.planning.cover.greedy import greedy_weighted_cover
+from agiprobot_measurement.planning.cover.ip import solve_highs, solve_reduced_ip
+from agiprobot_measurement.planning.cover.reduction import implied_rows
+from agiprobot_measurement.planning.report.report import point_uncertainties
+from agiprobot_measurement.planning.selection import open_points
+from agiprobot_measurement.planning.selection.problem import coverage_problem
 from agiprobot_measurement.station import PACKAGE_ROOT
 
 CUBE = PACKAGE_ROOT / "parts" / "objectA_wuerfel.stl"
@@ -45,7 +48,7 @@ def _reference_open_point_views(dense: np.ndarray, states, per_point: int) -> li
 
 @pytest.mark.parametrize("chunk_entries", [1, 7, 2_000_000])
 def test_open_point_views_equals_the_per_row_definition(monkeypatch, chunk_entries):
-    monkeypatch.setattr(tm, "OPEN_POINT_CHUNK_ENTRIES", chunk_entries)
+    monkeypatch.setattr(open_points, "OPEN_POINT_CHUNK_ENTRIES", chunk_entries)
     rng = np.random.default_rng(5)
     non_trivial = 0
     for _ in range(60):
@@ -56,7 +59,7 @@ def test_open_point_views_equals_the_per_row_definition(monkeypatch, chunk_entri
         dense = matrix.toarray()
         states = [(False, True, None)[k] for k in rng.integers(0, 3, n)]
         per_point = int(rng.integers(1, 6))
-        got = tm.open_point_views(matrix, [_View(s) for s in states], per_point)
+        got = open_points.open_point_views(matrix, [_View(s) for s in states], per_point)
         expected = _reference_open_point_views(dense, states, per_point)
         assert got.tolist() == expected
         non_trivial += len(expected) > 3
@@ -110,13 +113,13 @@ def test_coverage_problem_holds_the_live_entries_and_the_worst_uncertainty(cube_
     manager, _ = cube_plan
     views = manager.last_viewpoints
     store = manager.measurability
-    matrix, worst, _ = manager._coverage_problem(views, len(manager.samples))
+    matrix, worst, _ = coverage_problem(manager.run, views, len(manager.samples))
     assert matrix.dtype == bool and matrix.shape == (store.n_points, len(views))
     columns = np.array([v.coverage_column for v in views])
     rejected = shortened = 0
     for k in range(0, len(views), max(1, len(views) // 300)):
         a, b = store.indptr[columns[k]], store.indptr[columns[k] + 1]
-        live = manager._entry_alive[a:b]
+        live = manager.run.entry_alive[a:b]
         rows = matrix.indices[matrix.indptr[k] : matrix.indptr[k + 1]]
         assert np.array_equal(np.sort(rows), np.sort(store.point_indices[a:b][live]))
         top = store.uncertainties[a:b][live].max() if live.any() else 0.0
@@ -124,7 +127,7 @@ def test_coverage_problem_holds_the_live_entries_and_the_worst_uncertainty(cube_
         rejected += not live.any() and b > a
         shortened += live.any() and not live.all()
     assert rejected > 0  # the plan rejected some views: the test sees empty columns
-    verified_only, _, _ = manager._coverage_problem(views, len(manager.samples), only_verified=True)
+    verified_only, _, _ = coverage_problem(manager.run, views, len(manager.samples), only_verified=True)
     sizes = np.diff(verified_only.indptr)
     unverified = np.array([v.mechanics_verified is False for v in views])
     assert unverified.any() and not sizes[unverified].any()
@@ -136,8 +139,8 @@ def test_restricted_cover_is_an_executable_cover_of_the_given_points(cube_plan):
     n = len(manager.samples)
     points = np.isfinite(point_uncertainties(ordered, n))
     points[np.flatnonzero(points)[::2]] = False  # half of them: a smaller cover must do
-    report = manager._cover_points_with_verified(
-        points, {"solver_type": "IP_basic", "set_cover_time_limit_s": 20.0, "mip_gap": 0.0, "min_planning_time": 0.2},
+    report = pipeline.cover_with_verified(
+        manager, points, {"solver_type": "IP_basic", "set_cover_time_limit_s": 20.0, "mip_gap": 0.0, "min_planning_time": 0.2},
         time.perf_counter() + 60.0,
     )  # fmt: skip
     assert report is not None

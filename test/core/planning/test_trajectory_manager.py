@@ -7,15 +7,15 @@ import numpy as np
 import pytest
 
 from agiprobot_measurement.motion.trajectory import check_continuity, check_trajectory
+from agiprobot_measurement.planning.candidates.viewpoint import ViewPoint
 from agiprobot_measurement.planning.part_loading import PartLoadError
-from agiprobot_measurement.planning.plan_io import load_execution_plan, validate_execution_plan
+from agiprobot_measurement.planning.plan.plan_io import load_execution_plan, validate_execution_plan
 from agiprobot_measurement.planning.trajectory_manager import (
     ExecutionError,
     PlanningError,
     SimulatedExecutor,
     TrajectoryManager,
 )
-from agiprobot_measurement.planning.viewpoint import ViewPoint
 from agiprobot_measurement.station import PACKAGE_ROOT
 
 CUBE = PACKAGE_ROOT / "parts" / "objectA_wuerfel.stl"

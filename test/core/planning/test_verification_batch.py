@@ -8,8 +8,10 @@ import numpy as np
 import pytest
 import scipy.sparse
 
-from agiprobot_measurement.planning.mechanics import scan_line_starts_free
-from agiprobot_measurement.planning.trajectory_manager import TrajectoryManager, substitute_views
+from agiprobot_measurement.planning.candidates.mechanics import scan_line_starts_free
+from agiprobot_measurement.planning.selection.open_points import substitute_views
+from agiprobot_measurement.planning.selection.verify import finish_scan_trajectories, verify_mechanics
+from agiprobot_measurement.planning.trajectory_manager import TrajectoryManager
 from agiprobot_measurement.station import PACKAGE_ROOT
 
 CUBE = PACKAGE_ROOT / "parts" / "objectA_wuerfel.stl"
@@ -30,7 +32,7 @@ def test_start_screen_rejects_exactly_what_the_full_check_rejects(cube_views):
     sample = [views[i] for i in rng.choice(len(views), size=min(160, len(views)), replace=False)]
     free = scan_line_starts_free(sample, manager.ik, manager.collision, manager.preferred_state, chunk=37)
     copies = [copy.deepcopy(v) for v in sample]
-    valid = np.array([manager._verify_mechanics(v) for v in copies])
+    valid = np.array([verify_mechanics(manager.run, manager.tools(), v) for v in copies])
     # a view without a free start at either end never passes the full check ...
     assert not (valid & ~free).any()
     # ... and the screen is not vacuous here: it does reject some views, and keeps the valid ones
@@ -42,13 +44,13 @@ def test_deferred_trajectory_equals_the_eager_one(cube_views):
     checked = 0
     for view in views[:: max(1, len(views) // 60)]:
         eager, deferred = copy.deepcopy(view), copy.deepcopy(view)
-        ok_eager = manager._verify_mechanics(eager)
-        ok_deferred = manager._verify_mechanics(deferred, time_parameterize=False)
+        ok_eager = verify_mechanics(manager.run, manager.tools(), eager)
+        ok_deferred = verify_mechanics(manager.run, manager.tools(), deferred, time_parameterize=False)
         assert ok_eager == ok_deferred
         if not ok_eager:
             continue
         assert deferred.get_trajectory_for_measurement() is None
-        manager._finish_scan_trajectories([deferred])
+        finish_scan_trajectories(manager.run, manager.tools(), [deferred])
         a, b = eager.get_trajectory_for_measurement(), deferred.get_trajectory_for_measurement()
         assert b is not None and b.duration == pytest.approx(a.duration, rel=1e-12)
         np.testing.assert_allclose(b.start, a.start)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from agiprobot_measurement.motion.trajectory import JointTrajectory
-from agiprobot_measurement.planning.viewpoint import (
+from agiprobot_measurement.planning.candidates.viewpoint import (
     TILT_MODES,
     TILT_STEPS,
     ViewPoint,

@@ -1,7 +1,7 @@
 """trajectory_manager node: plan, store, load and execute measurement trajectories in ROS.
 
 The node maps messages to the core and back; the work is done by
-:class:`~agiprobot_measurement.planning.session.MeasurementSession` (planning, plan files, start adaptation,
+:class:`~agiprobot_measurement.planning.plan.session.MeasurementSession` (planning, plan files, start adaptation,
 execution loop, measured coverage) and :class:`~agiprobot_measurement.ros.executor.RosSegmentExecutor` (the robot
 controller's action, the scanner's stitching, cancel).
 
@@ -53,11 +53,11 @@ from agiprobot_measurement.msg import (
     PlanMeasurementFeedback,
     PlanMeasurementResult,
 )
-from agiprobot_measurement.planning.coverage import measured_colors, uncertainty_colors
-from agiprobot_measurement.planning.execution import PlanPart
-from agiprobot_measurement.planning.progress import overall_progress
+from agiprobot_measurement.planning.plan.execution import PlanPart
+from agiprobot_measurement.planning.plan.session import GoalError, MeasurementSession
+from agiprobot_measurement.planning.report.coverage import measured_colors, uncertainty_colors
+from agiprobot_measurement.planning.report.progress import overall_progress
 from agiprobot_measurement.planning.request import PlanRequest, PlanRequestError, WorkBudget
-from agiprobot_measurement.planning.session import GoalError, MeasurementSession
 from agiprobot_measurement.planning.trajectory_manager import PlanningCancelled
 from agiprobot_measurement.ros.action_client import ActionClient
 from agiprobot_measurement.ros.conversions import matrix_to_pose, pose_to_matrix, xyz_cloud, xyz_point_cloud

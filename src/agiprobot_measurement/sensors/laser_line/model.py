@@ -142,7 +142,7 @@ class MeasurabilityResult:
         ``t0`` (at most 500 mm) to 3e-5 mm. Both changed plans when the planner used them (measured): a shortened
         scan line's intact end equals its extreme ``t0`` exactly and the partial acceptance compares at 1e-9 mm;
         the set cover breaks ties by the uncertainties. The planner therefore keeps float64 by default
-        (:class:`~agiprobot_measurement.planning.streaming.EvaluationSettings`, ``compact=False``).
+        (:class:`~agiprobot_measurement.planning.candidates.streaming.EvaluationSettings`, ``compact=False``).
         """
         return MeasurabilityResult(
             self.n_points,
@@ -608,7 +608,7 @@ class SensorModel:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Measurable samples of one viewpoint's straight trajectory.
 
-        ``viewpoint``: a :class:`~agiprobot_measurement.planning.viewpoint.ViewPoint` (or a 4x4 anchor pose of the
+        ``viewpoint``: a :class:`~agiprobot_measurement.planning.candidates.viewpoint.ViewPoint` (or a 4x4 anchor pose of the
         laser_emitter_frame, mm). ``uncertainty_threshold``: largest permissible assigned uncertainty in mm.
         ``maximum_deflection``: how far (mm) the emitter may travel from the anchor in each direction.
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import trimesh
 
+from agiprobot_measurement.planning.candidates.viewpoint import ViewPoint, generate_viewpoint_poses
 from agiprobot_measurement.planning.part_loading import load_part
-from agiprobot_measurement.planning.viewpoint import ViewPoint, generate_viewpoint_poses
 from agiprobot_measurement.sensors.laser_line.model import (
     MeasurabilityResult,
     ProcessingContextError,

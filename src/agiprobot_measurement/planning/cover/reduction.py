@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agiprobot_measurement.planning.cover_columns import ColumnSets
+from agiprobot_measurement.planning.cover.columns import ColumnSets
 
 __all__ = [
     "MAX_REDUCTION_ROUNDS",

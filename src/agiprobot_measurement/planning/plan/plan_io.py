@@ -39,6 +39,7 @@ __all__ = [
     "MEASURE",
     "PLAN_SUFFIXES",
     "SEGMENT_KINDS",
+    "START_TOLERANCE_RAD",
     "ExecutionPlan",
     "MessageShape",
     "MessageTime",
@@ -67,6 +68,8 @@ CONNECT = "connect"
 MEASURE = "measure"
 SEGMENT_KINDS = (CONNECT, MEASURE)
 PLAN_SUFFIXES = (".yaml", ".yml")
+#: a plan whose start is this close (rad, every joint) to the current state needs no adaptation
+START_TOLERANCE_RAD = 1e-3
 
 # libyaml's parser/emitter when present (5x faster on a 260 kB plan); the constructors and representers are
 # the same Python classes either way, so the loaded values and written text are identical.
@@ -537,7 +540,7 @@ def adapt_to_current_start_pose(
     plan: ExecutionPlan,
     current_q: np.ndarray | Mapping[str, float],
     planner_fn: Callable[[np.ndarray, np.ndarray], JointTrajectory],
-    tolerance_rad: float = 1e-3,
+    tolerance_rad: float = START_TOLERANCE_RAD,
     mode: str = "prepend",
 ) -> ExecutionPlan:
     """A copy of ``plan`` that starts at the current joint state ``current_q`` (rad, plan's joint order, or a

@@ -3,7 +3,7 @@
 
 The sensor model, holding the mesh and the samples, goes to every worker once (scattered, broadcast); a copy
 rebuilds its ray tracer on arrival. Each chunk task returns its sparse block
-(:func:`~agiprobot_measurement.planning.streaming.chunk_block`: compact types, empty columns dropped). The client
+(:func:`~agiprobot_measurement.planning.candidates.streaming.chunk_block`: compact types, empty columns dropped). The client
 keeps a bounded number of tasks in flight, merges blocks in candidate order and reports progress as futures
 complete. A worker that dies takes its running tasks with it; the scheduler reruns them elsewhere, and a task
 that still fails for a reason outside the evaluation (the worker lost, the connection reset) is submitted again,
@@ -20,6 +20,7 @@ import time
 from collections.abc import Callable
 
 from agiprobot_measurement.errors import InputError, InternalError
+from agiprobot_measurement.planning.errors import PlanningInputError
 
 __all__ = ["MAX_ATTEMPTS", "ClusterError", "DaskEvaluator", "peak_rss_bytes"]
 
@@ -80,7 +81,7 @@ def _tune_worker_heap() -> None:
 
 
 def _evaluate_task(sensor_model, poses, threshold_mm, deflection_mm, compact, drop_dominated, redundancy):
-    from agiprobot_measurement.planning.streaming import chunk_block
+    from agiprobot_measurement.planning.candidates.streaming import chunk_block
 
     _tune_worker_heap()
 
@@ -92,7 +93,7 @@ def _evaluate_task(sensor_model, poses, threshold_mm, deflection_mm, compact, dr
 
 
 def _summary_task(sensor_model, poses, threshold_mm, deflection_mm, compact, drop_dominated):
-    from agiprobot_measurement.planning.streaming import block_summary
+    from agiprobot_measurement.planning.candidates.streaming import block_summary
 
     _tune_worker_heap()
     return block_summary(sensor_model, poses, threshold_mm, deflection_mm, 1, compact, drop_dominated)
@@ -111,7 +112,7 @@ class DaskEvaluator:
 
     def __init__(self, workers: int = 0, scheduler: str = "", local_threads: int = 1):
         if not scheduler and workers < 1:
-            raise ValueError("DaskEvaluator needs workers >= 1 or a scheduler address")
+            raise PlanningInputError("DaskEvaluator needs workers >= 1 or a scheduler address")
         self.workers = int(workers)
         self.scheduler = str(scheduler or "")
         self.local_threads = int(local_threads)
@@ -211,7 +212,7 @@ class DaskEvaluator:
         redundancy: int = 0,
     ) -> None:
         """Evaluate every chunk of poses on the cluster; ``arrived(index, block, columns, info)`` for each (see
-        :func:`~agiprobot_measurement.planning.streaming.chunk_block`), in the order they complete (the caller
+        :func:`~agiprobot_measurement.planning.candidates.streaming.chunk_block`), in the order they complete (the caller
         merges by index)."""
         options = (threshold_mm, deflection_mm, compact, drop_dominated, redundancy)
         self._run(_evaluate_task, sensor_model, chunks, options, lambda index, out: arrived(index, *out))
@@ -219,7 +220,7 @@ class DaskEvaluator:
     def summaries(
         self, sensor_model, blocks: list, threshold_mm: float, deflection_mm: float, compact=False, drop_dominated=False
     ) -> list[dict]:
-        """:func:`~agiprobot_measurement.planning.streaming.block_summary` of every block of poses, on the cluster
+        """:func:`~agiprobot_measurement.planning.candidates.streaming.block_summary` of every block of poses, on the cluster
         (the pilot's work spread over the workers), in the order of ``blocks``."""
         out: list = [None] * len(blocks)
 

@@ -26,6 +26,7 @@ from typing import NamedTuple
 import numpy as np
 
 from agiprobot_measurement.motion.trajectory import JointTrajectory
+from agiprobot_measurement.planning.errors import PlanningInputError, PlanningTypeError
 
 __all__ = [
     "TILT_MODES",
@@ -66,14 +67,14 @@ def orientation_angles(orientations_around_boresight: int) -> np.ndarray:
     """
     count = int(orientations_around_boresight)
     if count != orientations_around_boresight or count < 1:
-        raise ValueError(f"orientations_around_boresight must be a positive integer, got {count}")
+        raise PlanningInputError(f"orientations_around_boresight must be a positive integer, got {count}")
     return 2.0 * np.pi * np.arange(count) / count
 
 
 def tilt_angles(tilt_mode: str, sensor_model) -> np.ndarray:
     """(T, 2) tilt angles (theta, psi) in rad of a tilt mode: 1 row for 'none', 9 for 'limited'/'full'."""
     if tilt_mode not in TILT_MODES:
-        raise ValueError(f"unknown viewpoint tilt mode {tilt_mode!r}; valid modes: {', '.join(TILT_MODES)}")
+        raise PlanningInputError(f"unknown viewpoint tilt mode {tilt_mode!r}; valid modes: {', '.join(TILT_MODES)}")
     if tilt_mode == "none":
         return np.zeros((1, 2))
     return TILT_STEPS * sensor_model.get_median_deviation_angle()
@@ -82,7 +83,7 @@ def tilt_angles(tilt_mode: str, sensor_model) -> np.ndarray:
 def _unit_rows(vectors: np.ndarray, what: str) -> np.ndarray:
     norm = np.linalg.norm(vectors, axis=-1, keepdims=True)
     if not np.all(np.isfinite(vectors)) or np.any(norm < 1e-12):
-        raise ValueError(f"{what} must be finite and non-zero")
+        raise PlanningInputError(f"{what} must be finite and non-zero")
     return vectors / norm
 
 
@@ -118,9 +119,9 @@ def anchor_poses(points, normals, angles, tilts, standoff: float) -> np.ndarray:
     points = np.asarray(points, dtype=float).reshape(-1, 3)
     frames = base_frames(normals)
     if frames.shape[0] != points.shape[0]:
-        raise ValueError(f"{points.shape[0]} points but {frames.shape[0]} normals")
+        raise PlanningInputError(f"{points.shape[0]} points but {frames.shape[0]} normals")
     if not np.all(np.isfinite(points)):
-        raise ValueError("surface points must be finite")
+        raise PlanningInputError("surface points must be finite")
     angles = np.asarray(angles, dtype=float).reshape(-1)
     tilts = np.asarray(tilts, dtype=float).reshape(-1, 2)
     local = _rot(2, angles)[:, None] @ _rot(0, tilts[:, 0]) @ _rot(1, tilts[:, 1])  # (K, T, 3, 3)
@@ -198,7 +199,7 @@ def reverse_trajectory(trajectory):
     joint_trajectory = getattr(msg, "joint_trajectory", msg)
     points = getattr(joint_trajectory, "points", None)
     if points is None:
-        raise TypeError(f"cannot reverse a {type(trajectory).__name__}: expected a JointTrajectory")
+        raise PlanningTypeError(f"cannot reverse a {type(trajectory).__name__}: expected a JointTrajectory")
     if points:
         total = points[-1].time_from_start
         originals = [p.time_from_start for p in points]
@@ -248,14 +249,14 @@ class ViewPoint:
     ):
         standoff_distance = float(standoff_distance)
         if not math.isfinite(standoff_distance) or standoff_distance <= 0.0:
-            raise ValueError(f"standoff_distance must be a positive number of mm, got {standoff_distance}")
+            raise PlanningInputError(f"standoff_distance must be a positive number of mm, got {standoff_distance}")
         for name, value in (
             ("angle_around_boresight", angle_around_boresight),
             ("tilt_theta", tilt_theta),
             ("tilt_psi", tilt_psi),
         ):
             if not math.isfinite(float(value)):
-                raise ValueError(f"{name} must be finite, got {value}")
+                raise PlanningInputError(f"{name} must be finite, got {value}")
         self._surface_point = np.asarray(surface_point, dtype=float).reshape(3)
         self._surface_normal = _unit_rows(np.asarray(surface_normal, dtype=float).reshape(1, 3), "surface_normal")[0]
         self.angle_around_boresight = float(angle_around_boresight)
@@ -355,7 +356,7 @@ class ViewPoint:
         """4x4 start and end poses (mm) of the laser_emitter_frame on the measurement line, in execution
         order. Requires :attr:`scan_line` to be set."""
         if self.scan_line is None:
-            raise ValueError("the scan line of this viewpoint has not been set")
+            raise PlanningInputError("the scan line of this viewpoint has not been set")
         poses = []
         for distance in self.scan_line:
             pose = self._anchor_pose.copy()
@@ -372,7 +373,7 @@ class ViewPoint:
         indices = np.asarray(measurable_point_indices, dtype=np.int64).reshape(-1)
         values = np.asarray(uncertainties, dtype=float).reshape(-1)
         if indices.shape != values.shape:
-            raise ValueError(
+            raise PlanningInputError(
                 f"{indices.size} indices but {values.size} uncertainties: both lists must have the same length"
             )
         if trajectory_distances is None:
@@ -380,7 +381,7 @@ class ViewPoint:
         else:
             distances = np.asarray(trajectory_distances, dtype=float).reshape(-1)
             if distances.shape != indices.shape:
-                raise ValueError("trajectory_distances must have the same length as the indices")
+                raise PlanningInputError("trajectory_distances must have the same length as the indices")
         self._measurable_indices = indices
         self._uncertainties = values
         self._trajectory_distances = distances

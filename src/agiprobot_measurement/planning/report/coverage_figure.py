@@ -25,6 +25,7 @@ from matplotlib.ticker import MaxNLocator
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
 from agiprobot_measurement.common.files import atomic_write
+from agiprobot_measurement.planning.errors import PlanningInputError
 
 __all__ = [
     "DEFAULT_VIEWS",
@@ -57,9 +58,9 @@ def _as_points(points_mm) -> np.ndarray:
     if points.size == 0:
         return np.zeros((0, 3))
     if points.ndim != 2 or points.shape[1] != 3:
-        raise ValueError(f"points_mm must have shape (N, 3), got {points.shape}")
+        raise PlanningInputError(f"points_mm must have shape (N, 3), got {points.shape}")
     if not np.all(np.isfinite(points)):
-        raise ValueError("points_mm contains NaN or infinite coordinates")
+        raise PlanningInputError("points_mm contains NaN or infinite coordinates")
     return points
 
 
@@ -69,10 +70,10 @@ def _as_lines(scan_lines) -> list[tuple[np.ndarray, np.ndarray]]:
         try:
             start, end = line
         except (TypeError, ValueError):
-            raise ValueError(f"scan line {k + 1} must be a (start_mm, end_mm) pair") from None
+            raise PlanningInputError(f"scan line {k + 1} must be a (start_mm, end_mm) pair") from None
         start, end = np.asarray(start, dtype=float), np.asarray(end, dtype=float)
         if start.shape != (3,) or end.shape != (3,) or not (np.all(np.isfinite(start)) and np.all(np.isfinite(end))):
-            raise ValueError(f"scan line {k + 1} needs two finite (3,) positions in mm")
+            raise PlanningInputError(f"scan line {k + 1} needs two finite (3,) positions in mm")
         lines.append((start, end))
     return lines
 
@@ -154,7 +155,7 @@ def plot_coverage(
     points = _as_points(points_mm)
     uncertainties = np.asarray(uncertainties_mm, dtype=float).reshape(-1)
     if uncertainties.shape[0] != points.shape[0]:
-        raise ValueError(f"{uncertainties.shape[0]} uncertainties for {points.shape[0]} points")
+        raise PlanningInputError(f"{uncertainties.shape[0]} uncertainties for {points.shape[0]} points")
     lines = _as_lines(scan_lines)
     measured = np.isfinite(uncertainties)
     if u_min is None:
@@ -163,14 +164,14 @@ def plot_coverage(
         u_max = float(uncertainties[measured].max()) if measured.any() else 1.0
     u_min, u_max = float(u_min), float(u_max)
     if not (np.isfinite(u_min) and np.isfinite(u_max)):
-        raise ValueError(f"u_min and u_max must be finite, got {u_min}, {u_max}")
+        raise PlanningInputError(f"u_min and u_max must be finite, got {u_min}, {u_max}")
     if u_max < u_min:
-        raise ValueError(f"u_max ({u_max}) must not be below u_min ({u_min})")
+        raise PlanningInputError(f"u_max ({u_max}) must not be below u_min ({u_min})")
     if u_max == u_min:
         # one value everywhere: widen the scale so the colorbar stays readable
         u_min, u_max = u_min - 0.5 * max(abs(u_min), 1e-3), u_max + 0.5 * max(abs(u_max), 1e-3)
     if not views:
-        raise ValueError("at least one (elevation, azimuth) view is needed")
+        raise PlanningInputError("at least one (elevation, azimuth) view is needed")
 
     norm = Normalize(vmin=u_min, vmax=u_max, clip=True)
     colors = np.empty((len(points), 4))
@@ -181,7 +182,7 @@ def plot_coverage(
         if mask is not None:
             mask = np.asarray(mask, dtype=bool).reshape(-1)
             if mask.shape[0] != points.shape[0]:
-                raise ValueError(f"{name} has {mask.shape[0]} entries for {points.shape[0]} points")
+                raise PlanningInputError(f"{name} has {mask.shape[0]} entries for {points.shape[0]} points")
         masks.append(mask)
     metrology, executable = masks
     if metrology is not None:

@@ -1,14 +1,13 @@
-"""Where the part stands: its placement on the fixture and the check of a placement against the scene.
+"""The check of a part's placement against the scene and the robot (FCL).
 
-:func:`fixture_placement` turns a part (its CAD frame, optionally rotated) so that its lowest point sits on the
-top face of the scene's fixture and its footprint is centred on the fixture. :func:`check_placement` tests the
-placed part against every scene object (table, fixture, pedestal, mirrors, ...) and the robot at its start
-state; an overlap raises :class:`PlacementError` naming the object, how deep the part reaches into it (the
-shortest axis-aligned shift that frees the part from it) and the lift along world +z that clears every object,
-checked with FCL before it is reported.
+:func:`check_placement` tests the placed part against every scene object (table, fixture, pedestal, mirrors, ...)
+and the robot at its start state; an overlap raises :class:`PlacementError` naming the object, how deep the part
+reaches into it (the shortest axis-aligned shift that frees the part from it) and the lift along world +z that
+clears every object, checked with FCL before it is reported. Shapes are built with :mod:`.collision`'s helpers.
 
-The part's mesh is in mm in the world frame (as :class:`~agiprobot_measurement.planning.part_loading.LoadedPart`
-holds it); scene objects are in metres (the scene file's unit). Offsets in messages are mm.
+The part's mesh is a ``trimesh.Trimesh`` in mm in the world frame (as a loaded part of the planning holds it);
+scene objects are in metres (the scene file's unit). Offsets in messages are mm. Where the part is put (the fixture
+placement) is :mod:`agiprobot_measurement.station.placement`.
 """
 
 from __future__ import annotations
@@ -20,23 +19,10 @@ import fcl
 import numpy as np
 
 from agiprobot_measurement.errors import InputError
+from agiprobot_measurement.motion.collision import _bvh, _fcl_transform, _load_mesh
 
-__all__ = [
-    "FIXTURE_NAME",
-    "PLACEMENTS",
-    "Overlap",
-    "PlacementError",
-    "check_placement",
-    "clearing_shift_mm",
-    "find_overlaps",
-    "fixture_placement",
-    "scene_object_top_m",
-]
+__all__ = ["Overlap", "PlacementError", "check_placement", "clearing_shift_mm", "find_overlaps"]
 
-#: the scene object a part is put on by ``placement='fixture'``
-FIXTURE_NAME = "fixture"
-#: ``scene``: at the scene file's part pose times the caller's transform; ``fixture``: on the fixture, centred
-PLACEMENTS = ("scene", "fixture")
 #: a part resting on a surface touches it; shifts below this (mm) are contact, not overlap
 CONTACT_TOLERANCE_MM = 0.05
 #: shifts are searched up to this far (mm); beyond it the part is hopelessly inside something
@@ -65,12 +51,7 @@ class Overlap:
 
 
 def _part_object(mesh_mm) -> fcl.CollisionObject:
-    vertices = np.asarray(mesh_mm.vertices, dtype=float) * 1e-3
-    model = fcl.BVHModel()
-    model.beginModel(len(mesh_mm.faces), len(vertices))
-    model.addSubModel(vertices, np.asarray(mesh_mm.faces, dtype=np.int64))
-    model.endModel()
-    return fcl.CollisionObject(model, fcl.Transform())
+    return fcl.CollisionObject(_bvh(np.asarray(mesh_mm.vertices, dtype=float) * 1e-3, mesh_mm.faces), fcl.Transform())
 
 
 def _scene_object(obstacle) -> fcl.CollisionObject | None:
@@ -83,18 +64,12 @@ def _scene_object(obstacle) -> fcl.CollisionObject | None:
     elif obstacle.type == "sphere":
         pose, geometry = obstacle.pose, fcl.Sphere(float(obstacle.radius_m))
     elif obstacle.type == "mesh" and obstacle.mesh is not None:
-        import trimesh
-
-        mesh = trimesh.load(str(obstacle.mesh), force="mesh")
-        vertices = np.asarray(mesh.vertices, dtype=float) * float(obstacle.mesh_scale)
-        geometry = fcl.BVHModel()
-        geometry.beginModel(len(mesh.faces), len(vertices))
-        geometry.addSubModel(vertices, np.asarray(mesh.faces, dtype=np.int64))
-        geometry.endModel()
+        mesh = _load_mesh(obstacle.mesh)
+        geometry = _bvh(np.asarray(mesh.vertices, dtype=float) * float(obstacle.mesh_scale), mesh.faces)
         pose = obstacle.pose
     else:
         return None
-    return fcl.CollisionObject(geometry, fcl.Transform(pose[:3, :3], pose[:3, 3]))
+    return fcl.CollisionObject(geometry, _fcl_transform(pose))
 
 
 def _collides(part: fcl.CollisionObject, other: fcl.CollisionObject, shift_mm: np.ndarray) -> bool:
@@ -189,29 +164,3 @@ def check_placement(mesh_mm, scene, collision=None, start_state=None, where: str
     else:
         advice = "no lift along +z clears it: move the part (transform / part pose) or place it on the fixture"
     raise PlacementError("; ".join(lines) + "; " + advice, overlaps, lift)
-
-
-def scene_object_top_m(obstacle) -> tuple[float, np.ndarray]:
-    """World z (m) of a box-shaped scene object's top and the (x, y) centre (m) of its footprint."""
-    size, pose = obstacle.solid_box()
-    signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
-    corners = (signs * (np.asarray(size) / 2.0)) @ pose[:3, :3].T + pose[:3, 3]
-    return float(corners[:, 2].max()), 0.5 * (corners[:, :2].min(axis=0) + corners[:, :2].max(axis=0))
-
-
-def fixture_placement(vertices_mm: np.ndarray, rotation: np.ndarray, scene, fixture: str = FIXTURE_NAME) -> np.ndarray:
-    """The 4x4 world placement (translation mm) of a part with CAD-frame vertices ``vertices_mm`` (already in
-    mm) turned by ``rotation`` (3x3, world frame): its lowest point on the top of scene object ``fixture`` and
-    the centre of its bounding box over the fixture's centre. Raises InputError without such a box."""
-    found = [o for o in scene.objects if o.name == fixture]
-    if not found or found[0].type not in ("box", "chessboard"):
-        names = ", ".join(o.name for o in scene.objects) or "none"
-        raise InputError(f"placement 'fixture' needs a box scene object named '{fixture}'; the scene has: {names}")
-    top_m, centre_m = scene_object_top_m(found[0])
-    rotated = np.asarray(vertices_mm, dtype=float) @ np.asarray(rotation, dtype=float).T
-    lo, hi = rotated.min(axis=0), rotated.max(axis=0)
-    placement = np.eye(4)
-    placement[:3, :3] = rotation
-    placement[:2, 3] = centre_m * 1000.0 - 0.5 * (lo[:2] + hi[:2])
-    placement[2, 3] = top_m * 1000.0 - lo[2]
-    return placement

@@ -12,8 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agiprobot_measurement.planning.cover_columns import ColumnSets
-from agiprobot_measurement.planning.cover_greedy import greedy_weighted_cover, make_irredundant
+from agiprobot_measurement.planning.cover.columns import ColumnSets
+from agiprobot_measurement.planning.cover.greedy import greedy_weighted_cover, make_irredundant
 
 __all__ = [
     "SUPPORT_MIP_COLS",

@@ -15,7 +15,7 @@ from agiprobot_measurement.motion.cartesian import compute_cartesian_path
 from agiprobot_measurement.motion.time_parameterization import constant_speed_scan_trajectory
 
 # the chunked metrology moved to the streaming module; re-exported here for its callers
-from agiprobot_measurement.planning.streaming import evaluate_in_chunks
+from agiprobot_measurement.planning.candidates.streaming import evaluate_in_chunks
 
 __all__ = [
     "SCAN_ACCELERATION_MM_S2",

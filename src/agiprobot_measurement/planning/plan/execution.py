@@ -1,17 +1,15 @@
 """Executing a plan: the executor interface, the segment loop, loading a stored plan and adapting its start.
 
-An executor drives the robot through one segment at a time (:class:`SegmentExecutor`). The package has two:
-:class:`SimulatedExecutor` (instant, on a kinematic state; pytest, and the API's default outside ROS) and
-``agiprobot_measurement.ros.executor.RosSegmentExecutor`` (the robot controller's action, the scanner's stitching;
-the API's default inside a ROS process with the station running, see :func:`ros_station_executor`).
+An executor drives the robot through one segment at a time (:class:`SegmentExecutor`). The core has
+:class:`SimulatedExecutor` (instant, on a kinematic state; pytest, and the API's default without a station); the
+layers above register the station's executor in :mod:`~agiprobot_measurement.planning.plan.executors`.
 :func:`execute_segments` runs the loop: feedback before each segment, stop at the first failure or cancel, and an
 :class:`ExecutionOutcome` that says how far it got. Joint values are rad, times s, lengths mm.
 """
 
 from __future__ import annotations
 
-import importlib
-import sys
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,9 +19,9 @@ import numpy as np
 
 from agiprobot_measurement.errors import InputError, InternalError
 from agiprobot_measurement.motion.trajectory import JointTrajectory, check_trajectory
-from agiprobot_measurement.planning import plan_io
-from agiprobot_measurement.planning.plan_io import ExecutionPlan
-from agiprobot_measurement.planning.viewpoint import ViewPoint
+from agiprobot_measurement.planning.candidates.viewpoint import ViewPoint
+from agiprobot_measurement.planning.plan import executors, plan_io
+from agiprobot_measurement.planning.plan.plan_io import START_TOLERANCE_RAD, ExecutionPlan
 
 __all__ = [
     "ControllerLost",
@@ -37,15 +35,17 @@ __all__ = [
     "SegmentFeedback",
     "SimulatedExecutor",
     "adapt_plan_start",
+    "as_joint_trajectory",
+    "choose_executor",
     "execute_segments",
     "load_plan",
+    "plan_info",
     "plan_part",
     "plan_segments",
     "segment_triples",
+    "starts_at",
+    "view_segments",
 ]
-
-#: a start this close (rad, every joint) to the current state needs no adaptation
-START_TOLERANCE_RAD = 1e-3
 
 
 class ExecutionError(InternalError):
@@ -196,7 +196,7 @@ class PlanPart:
 
 def plan_part(plan: ExecutionPlan) -> PlanPart | None:
     """The part named in a stored plan's parameters, or None. A malformed entry raises
-    :class:`~agiprobot_measurement.planning.plan_io.PlanError` naming the plan file and the key."""
+    :class:`~agiprobot_measurement.planning.plan.plan_io.PlanError` naming the plan file and the key."""
     where = f"{plan.source}: " if plan.source is not None else ""
     params = plan.metadata.get("parameters", {}) if isinstance(plan.metadata, dict) else {}
     if not isinstance(params, dict):
@@ -229,7 +229,7 @@ class LoadedPlan:
 
 def load_plan(path: str | Path, limits, joint_names: Sequence[str]) -> LoadedPlan:
     """Read a stored plan and check it against the robot's joints and limits (:class:`PlanRejected` if it does
-    not fit; :class:`~agiprobot_measurement.planning.plan_io.PlanError` if it cannot be read)."""
+    not fit; :class:`~agiprobot_measurement.planning.plan.plan_io.PlanError` if it cannot be read)."""
     path = Path(path)
     plan = plan_io.load_execution_plan(path)
     verdict = plan_io.validate_execution_plan(plan, limits, list(joint_names))
@@ -238,20 +238,27 @@ def load_plan(path: str | Path, limits, joint_names: Sequence[str]) -> LoadedPla
     return LoadedPlan(path, plan, plan_part(plan))
 
 
+def starts_at(plan: ExecutionPlan, state: np.ndarray) -> bool:
+    """Whether ``plan`` starts at ``state`` (rad) within :data:`START_TOLERANCE_RAD` on every joint."""
+    return bool(np.abs(plan.segments[0].trajectory.start - state).max() <= START_TOLERANCE_RAD)
+
+
 def adapt_plan_start(
     plan: ExecutionPlan,
     state: np.ndarray,
     connect: Callable[[np.ndarray, np.ndarray], JointTrajectory | None],
+    error: type[Exception] = PlanRejected,
 ) -> ExecutionPlan:
-    """``plan`` starting at the current ``state``: unchanged when it already starts there, else with a motion
-    from ``connect(start, goal)`` (a collision-free trajectory or None) merged into the first connection."""
-    if np.abs(plan.segments[0].trajectory.start - state).max() <= START_TOLERANCE_RAD:
+    """``plan`` starting at the current ``state``: unchanged when it already starts there (:func:`starts_at`),
+    else with a motion from ``connect(start, goal)`` (a collision-free trajectory or None) merged into the first
+    connection; ``error`` (default :class:`PlanRejected`) is raised when ``connect`` finds no motion."""
+    if starts_at(plan, state):
         return plan
 
     def planner_fn(start, goal):
         trajectory = connect(np.asarray(start), np.asarray(goal))
         if trajectory is None:
-            raise PlanRejected("no collision-free motion from the current state to the plan's start")
+            raise error("no collision-free motion from the current state to the plan's start")
         return trajectory
 
     return plan_io.adapt_to_current_start_pose(plan, state, planner_fn)
@@ -261,7 +268,7 @@ def segment_triples(items: Sequence) -> list[tuple[str, JointTrajectory, object]
     """``(kind, trajectory, view)`` of what ``TrajectoryManager.execute`` accepts: views (each its connection and
     its measurement), or an execution plan's segments in C-M-C-M-... order: plan segments, bare trajectories,
     ``moveit_msgs/RobotTrajectory`` messages or anything shaped like one (``joint_trajectory``), or their
-    expanded mappings. Raises :class:`~agiprobot_measurement.planning.plan_io.PlanError` naming the segment
+    expanded mappings. Raises :class:`~agiprobot_measurement.planning.plan.plan_io.PlanError` naming the segment
     that is none of these."""
     if isinstance(items, ExecutionPlan):
         items = items.segments
@@ -278,22 +285,72 @@ def segment_triples(items: Sequence) -> list[tuple[str, JointTrajectory, object]
 EXECUTOR_CHOICES = ("auto", "simulated", "station")
 
 
-def in_ros_process() -> bool:
-    """Whether this process is a ROS node (``rospy.init_node`` was called); imports nothing from ROS."""
-    rospy = sys.modules.get("rospy")
-    core = getattr(rospy, "core", None)
-    return bool(core is not None and core.is_initialized())
+def as_joint_trajectory(item) -> JointTrajectory:
+    """The joint trajectory of ``item``: a :class:`JointTrajectory`, a plan segment, an expanded mapping, or a
+    ``moveit_msgs/RobotTrajectory``-shaped object (``joint_trajectory``) or ``trajectory_msgs/JointTrajectory``."""
+    if isinstance(item, JointTrajectory):
+        return item
+    if isinstance(item, plan_io.PlanSegment):
+        return item.trajectory
+    if isinstance(item, dict):
+        return JointTrajectory.from_dict(item.get("joint_trajectory", item))
+    if hasattr(item, "joint_trajectory"):
+        return JointTrajectory.from_msg(item.joint_trajectory)
+    return JointTrajectory.from_msg(item)
 
 
-def ros_station_executor(joint_names: Sequence[str], surface_points_mm=None, part: PlanPart | None = None):
-    """The running station's executor (``agiprobot_measurement.ros.library_executor.station_executor``), or None
-    when this is not a ROS process or no controller answers.
+def choose_executor(
+    choice, joint_names: Sequence[str], parameters: dict, current_state, limits, surface_points=None, error=InputError
+):
+    """The executor of ``TrajectoryManager.execute``'s ``executor`` argument: a
+    :class:`SegmentExecutor` as given; ``'station'`` / ``'auto'`` the registered station executor
+    (:data:`~agiprobot_measurement.planning.plan.executors.STATION`) when one answers, with the part named by
+    the planning ``parameters``; ``'station'`` raises :class:`ExecutionError` when none does; else (and for
+    ``'simulated'``) an instant :class:`SimulatedExecutor` at ``current_state`` (rad). An unknown name raises
+    ``error``."""
+    if choice is not None and not isinstance(choice, str):
+        return choice
+    choice = "auto" if choice is None else choice
+    if choice not in EXECUTOR_CHOICES:
+        raise error(f"executor must be one of {EXECUTOR_CHOICES} or a SegmentExecutor, got {choice!r}")
+    if choice != "simulated":
+        part = None
+        if "part_file" in parameters and "part_transform_mm" in parameters:
+            placement = np.asarray(parameters["part_transform_mm"], dtype=float).reshape(4, 4)
+            part = PlanPart(str(parameters["part_file"]), str(parameters.get("units", "mm")), placement)
+        station = None
+        if executors.registered(executors.STATION):
+            station = executors.get(executors.STATION)(list(joint_names), surface_points, part)
+        if station is not None:
+            return station
+        if choice == "station":
+            raise ExecutionError(
+                "executor='station': no station executor is registered (the ROS layer registers its own), "
+                "this is not a ROS process or no robot controller answers"
+            )
+    return SimulatedExecutor(current_state, limits)
 
-    The core never imports the ROS layer at module level: this looks it up by name, and only in a process where
-    ``rospy`` is already initialised, so ``TrajectoryManager.execute`` drives the real (or simulated) controller
-    for scripts written against the original, and stays instant and ROS-free everywhere else.
-    """
-    if not in_ros_process():
-        return None
-    module = importlib.import_module("agiprobot_measurement.ros.library_executor")
-    return module.station_executor(joint_names, surface_points_mm=surface_points_mm, part=part)
+
+def view_segments(views, error: type[Exception] = InputError) -> list[plan_io.PlanSegment]:
+    """Two plan segments per view: the connection to it ('connect') and its measurement ('measure'); ``error`` is
+    raised for a view that lacks one of them."""
+    segments = []
+    for view in views:
+        connection, measurement = view.get_trajectory_to_view(), view.get_trajectory_for_measurement()
+        if connection is None or measurement is None:
+            raise error(f"{view} lacks its trajectories: connect_viewpoints first")
+        segments += [
+            plan_io.PlanSegment(plan_io.CONNECT, connection),
+            plan_io.PlanSegment(plan_io.MEASURE, measurement),
+        ]
+    return segments
+
+
+def plan_info(robot_name: str, joint_names: Sequence[str]) -> dict:
+    """The header of a plan file planned by this package for ``robot_name``'s ``joint_names``."""
+    return {
+        "Timestamp": time.strftime("%a %b %d %H:%M:%S %Y"),
+        "robot": robot_name,
+        "joint_names": list(joint_names),
+        "planner": "agiprobot_measurement",
+    }

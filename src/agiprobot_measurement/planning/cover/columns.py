@@ -1,5 +1,5 @@
 """Set-cover input: the measurability matrix as column-wise sparse sets, per-view worst uncertainties and
-normalised costs (the first step of :func:`~agiprobot_measurement.planning.set_cover.solve_set_cover`).
+normalised costs (the first step of :func:`~agiprobot_measurement.planning.cover.solve.solve_set_cover`).
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Streaming candidate evaluation under a memory budget.
 
 The candidates' metrology is computed chunk by chunk (in this process, or on a Dask cluster through
-:mod:`~agiprobot_measurement.planning.distributed`) and only the sparse measurability of candidates that measure
+:mod:`~agiprobot_measurement.planning.candidates.distributed`) and only the sparse measurability of candidates that measure
 something is kept. The result does not depend on the chunking, the number of threads or workers: every (view,
 point) pair is evaluated with the same operations wherever it is evaluated, each chunk is reduced on its own
 (types, dominated columns) and chunks are merged in candidate order.
@@ -528,7 +528,7 @@ def evaluate_streaming(
     """Evaluate ``poses`` (V, 4, 4 mm) in chunks; return (the compact measurability of the candidates that
     measure something, their indices into ``poses``, ascending).
 
-    ``executor``: a :class:`~agiprobot_measurement.planning.distributed.DaskEvaluator` (None = this process);
+    ``executor``: a :class:`~agiprobot_measurement.planning.candidates.distributed.DaskEvaluator` (None = this process);
     ``fixed_bytes``: memory this process already holds for the run (samples, candidate poses), counted against
     the budget. ``report(stage, fraction, message)`` follows the completed chunks (stage 'metrology'). ``stats``
     is filled in. Raises :class:`~agiprobot_measurement.planning.request.WorkTooLarge` when the projected store

@@ -52,15 +52,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from agiprobot_measurement.planning.cover_columns import (
+from agiprobot_measurement.planning.cover.columns import (
     SetCoverError,
     measurable_columns,
     normalised_costs,
     worst_uncertainty,
 )
-from agiprobot_measurement.planning.cover_greedy import greedy_cover, make_irredundant
-from agiprobot_measurement.planning.cover_ip import solve_cbc, solve_highs, solve_reduced_ip
-from agiprobot_measurement.planning.cover_reduction import Reduction, reduce_problem, restrict
+from agiprobot_measurement.planning.cover.greedy import greedy_cover, make_irredundant
+from agiprobot_measurement.planning.cover.ip import solve_cbc, solve_highs, solve_reduced_ip
+from agiprobot_measurement.planning.cover.reduction import Reduction, reduce_problem, restrict
 
 __all__ = [
     "BACKENDS",

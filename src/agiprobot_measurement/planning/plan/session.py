@@ -3,7 +3,7 @@ node's state, without ROS).
 
 :class:`MeasurementSession` plans from a :class:`~agiprobot_measurement.planning.request.PlanRequest`, loads and
 stores plan files, adapts a plan's start to the robot's current state, executes it through any
-:class:`~agiprobot_measurement.planning.execution.SegmentExecutor` and compares what was measured with what was
+:class:`~agiprobot_measurement.planning.plan.execution.SegmentExecutor` and compares what was measured with what was
 predicted. Relative part paths are resolved against the package root. Plan files and coverage figures follow
 the package's one file policy (:class:`~agiprobot_measurement.common.files.FileRoot`): names resolve under the
 plan directory, absolute names only inside it or the allowed directories, ``..`` and ``~`` are refused, and an
@@ -24,10 +24,10 @@ import numpy as np
 from agiprobot_measurement._paths import PACKAGE_ROOT
 from agiprobot_measurement.common.files import FileRoot, PathPolicyError
 from agiprobot_measurement.errors import InputError
-from agiprobot_measurement.planning import plan_io
-from agiprobot_measurement.planning.coverage import MeasuredCoverage, measured_coverage
-from agiprobot_measurement.planning.coverage_figure import plot_coverage
-from agiprobot_measurement.planning.execution import (
+from agiprobot_measurement.planning.candidates.viewpoint import ViewPoint
+from agiprobot_measurement.planning.connection import ConnectionPlanner
+from agiprobot_measurement.planning.plan import plan_io
+from agiprobot_measurement.planning.plan.execution import (
     ExecutionOutcome,
     LoadedPlan,
     PlanPart,
@@ -37,11 +37,13 @@ from agiprobot_measurement.planning.execution import (
     execute_segments,
     load_plan,
     plan_segments,
+    starts_at,
 )
-from agiprobot_measurement.planning.report import CoverageReport
+from agiprobot_measurement.planning.report.coverage import MeasuredCoverage, measured_coverage
+from agiprobot_measurement.planning.report.coverage_figure import plot_coverage
+from agiprobot_measurement.planning.report.report import CoverageReport
 from agiprobot_measurement.planning.request import PlanRequest, WorkBudget
 from agiprobot_measurement.planning.trajectory_manager import ProgressCallback, TrajectoryManager
-from agiprobot_measurement.planning.viewpoint import ViewPoint
 
 __all__ = ["GoalError", "MeasurementSession", "PlanningOutcome"]
 
@@ -203,16 +205,12 @@ class MeasurementSession:
         return plan_io.store_execution_plan(self.plan_path(name, overwrite), self.plan)
 
     # ------------------------------------------------------------------------------------ execution
-    def connection_planner(self, state: np.ndarray, part: PlanPart | None = None) -> TrajectoryManager:
-        """The manager that plans motions from ``state``: the planning run's (unless ``part`` names another
-        plan's part), else one with the plan's part in the collision world."""
+    def connection_planner(self, state: np.ndarray, part: PlanPart | None = None) -> ConnectionPlanner:
+        """The planner of motions from ``state``: the planning run's (unless ``part`` names another plan's part),
+        else one with the plan's part in the collision world."""
         if self.manager is not None and part is None:
-            return self.manager
-        part = part if part is not None else self.part
-        manager = TrajectoryManager(self.station, start_state=state)
-        if part is not None:
-            manager.set_collision_part(part)
-        return manager
+            return self.manager.connection
+        return ConnectionPlanner.for_station(self.station, part if part is not None else self.part)
 
     def prepared_plan(self, state: np.ndarray, candidate: LoadedPlan | None = None) -> plan_io.ExecutionPlan:
         """The session's plan (or ``candidate``, a plan read but not adopted yet) starting at the robot's current
@@ -220,10 +218,10 @@ class MeasurementSession:
         plan = candidate.plan if candidate is not None else self.plan
         if plan is None:
             raise GoalError("no plan: plan one, load one, or give plan_file")
-        if np.abs(plan.segments[0].trajectory.start - state).max() <= 1e-3:
+        if starts_at(plan, state):
             return plan
-        manager = self.connection_planner(state, candidate.part if candidate is not None else None)
-        return adapt_plan_start(plan, state, lambda start, goal: manager.connect(start, goal, planning_time_s=1.0))
+        planner = self.connection_planner(state, candidate.part if candidate is not None else None)
+        return adapt_plan_start(plan, state, planner.connect)
 
     def execute(
         self,

@@ -8,7 +8,7 @@ import heapq
 
 import numpy as np
 
-from agiprobot_measurement.planning.cover_columns import ColumnSets
+from agiprobot_measurement.planning.cover.columns import ColumnSets
 
 __all__ = [
     "fresh_gains",

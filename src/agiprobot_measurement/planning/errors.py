@@ -1,0 +1,24 @@
+"""The planning pipeline's errors."""
+
+from __future__ import annotations
+
+from agiprobot_measurement.errors import InputError, InternalError
+
+__all__ = ["PlanningCancelled", "PlanningError", "PlanningInputError", "PlanningTypeError"]
+
+
+class PlanningError(InternalError):
+    """The planning pipeline cannot go on (nothing reachable, nothing measurable, no part loaded...)."""
+
+
+class PlanningInputError(InputError):
+    """A planning call's argument is wrong (an unknown solver, a joint state of the wrong size...)."""
+
+
+class PlanningTypeError(PlanningInputError, TypeError):
+    """A planning call's argument has the wrong type (a ``TypeError`` too, as the builtin checks raise)."""
+
+
+class PlanningCancelled(RuntimeError):
+    """The caller cancelled planning (the progress callback raised it). Deliberately not an error of the package:
+    a cancel is the caller's wish, and the edges that report errors let it through."""

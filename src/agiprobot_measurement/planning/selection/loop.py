@@ -1,0 +1,447 @@
+"""The verify-and-resolve loop of the set cover: solve, verify what the cover picked (and what the next covers
+will likely pick), correct the problem, solve again, until the chosen views are all executable.
+
+Each round is three steps over a :class:`CoverLoop`: :meth:`~CoverLoop.solve_round` (the cover of this round's
+columns: all views, or the candidate pool after the first solve), :meth:`~CoverLoop.settle` (is the cover
+verified and good enough, or are open points left to verify) and :meth:`~CoverLoop.verify_round` (the batch of
+views to verify, and the pool of the next round). :meth:`~CoverLoop.polish` spends the time left on the programme
+over verified views. :func:`cover_points_with_verified` covers a given point set with verified views only.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse
+
+from agiprobot_measurement.planning.candidates.viewpoint import ViewPoint
+from agiprobot_measurement.planning.cover.solve import SOLVER_TYPES, SetCoverResult, solve_set_cover
+from agiprobot_measurement.planning.errors import PlanningError, PlanningInputError
+from agiprobot_measurement.planning.run import PlanningRun, PlanningTools
+from agiprobot_measurement.planning.selection.open_points import open_point_views, substitute_views
+from agiprobot_measurement.planning.selection.problem import coverage_problem, executable_columns
+from agiprobot_measurement.planning.selection.revival import revive_in
+from agiprobot_measurement.planning.selection.verify import (
+    finish_scan_trajectories,
+    screen_scan_lines,
+    verify_mechanics,
+)
+
+__all__ = ["CoverLoop", "cover_points_with_verified", "solve_scp"]
+
+LOG = logging.getLogger(__name__)
+
+#: an IP solve of one verification round stops after this long (s): its cover only names what to verify next
+ROUND_IP_TIME_S = 2.0
+#: ... and this long on problems of at least LARGE_PROBLEM_VIEWS candidates (tilt full; counted before dominated
+#: ones were dropped): there the pool's programmes have a ~40 % integrality gap, so a round's solve always runs to
+#: its limit; 1 s gave the same covers as 2 s on the cylinder and idler_riser and saved ~25 s on the cylinder
+LARGE_ROUND_IP_TIME_S = 1.0
+LARGE_PROBLEM_VIEWS = 100_000
+#: a round over the candidate pool of a large problem verifies up to this many of the pool's unverified views at
+#: once: the next solves choose from the pool, so they are final sooner than when a few new picks are verified per
+#: round (cylinder at tilt full: 22 rounds instead of 28; at tilt none it costs more than the rounds it saves)
+POOL_VERIFY_MAX = 3000
+#: the last solve over the verified views, when the rounds left a gap, stops after this long (s): at tilt full its
+#: programme has tens of thousands of verified views (cylinder: 22 views proven optimal after 40 s; 23 views and an
+#: 8.7 % gap, reported, after 15 s)
+POLISH_IP_TIME_S = 15.0
+#: ... and one over all views after this long (s): its reductions name the candidate pool of the next rounds
+FULL_ROUND_IP_TIME_S = 8.0
+#: the set cover loop solves the problem over all views at most this often (the rest over the candidate pool)
+MAX_FULL_SOLVES = 3
+#: each verification round takes up to this many unverified views of every point no verified view measures yet
+POINT_VIEWS_PER_ROUND = 24
+#: ... but no more than this many in one round (the next round's cover may settle the rest)
+MAX_POINT_VIEWS_PER_ROUND = 2000
+#: each verification round also takes this many unverified views sharing the most points with each picked one
+SUBSTITUTES_PER_VIEW = 20
+#: the candidate pool takes at most this many of a solve's most likely columns (or four times the batch)
+POOL_LIKELY_COLUMNS = 6000
+
+
+@dataclass
+class _Round:
+    """One round's problem and cover: the columns solved over, the matrix and per-view figures of all views,
+    the (sub)matrix solved, the IP time limit, the chosen views and those of them not yet verified."""
+
+    columns: np.ndarray
+    matrix: object
+    worst: np.ndarray
+    durations: np.ndarray
+    sub: object
+    limit: float
+    chosen: list
+    pending: list
+
+
+@dataclass
+class CoverLoop:
+    """The state of one verify-and-resolve loop over ``views`` (the facade's ``solve_scp`` arguments)."""
+
+    run: PlanningRun
+    tools: PlanningTools
+    views: list
+    solver_type: str
+    time_limit_s: float
+    max_rounds: int
+    mip_gap: float
+    deadline: float
+    verification_batch: int | None
+    n_points: int = 0
+    provided: set = field(default_factory=set)
+    set_cover_time: float = 0.0
+    verified_count: int = 0
+    only_verified: bool = False
+    result: SetCoverResult | None = None
+    chosen: list = field(default_factory=list)
+    rounds_used: int = 0
+    # Rounds after the first solve a restricted problem: the columns the first (full) solve's reductions kept,
+    # plus every column verified since. The full matrix's reductions cost seconds on parts whose views see
+    # hundreds of points; the pool's cost milliseconds. When a restricted cover is fully verified, the full
+    # problem is solved once more (if time allows) to prove the cover is optimal over all views.
+    pool: np.ndarray | None = None
+    full_checked: bool = False
+    full_solve_s: float = 0.0
+    full_solves: int = 0
+    best_verified: SetCoverResult | None = None
+    # a round's cover whose picks all verified as executable with their points: the next round takes it as
+    # its (verified) cover instead of solving again, which could pick other, equally good unverified views
+    settled: SetCoverResult | None = None
+
+    @property
+    def defer_trajectories(self) -> bool:
+        """Only IP_time needs the verified views' real durations while solving; the others time-parameterise the
+        scan lines of the chosen views only."""
+        return self.solver_type != "IP_time"
+
+    @property
+    def n_candidates(self) -> int:
+        candidates = self.run.candidates
+        return max(len(self.views), 0 if candidates is None else len(candidates.poses))
+
+    def _verify(self, view: ViewPoint) -> None:
+        verify_mechanics(self.run, self.tools, view, time_parameterize=not self.defer_trajectories)
+        self.verified_count += 1
+
+    def solve_round(self, round_index: int) -> _Round:
+        """This round's cover: over all views, the pool, or (the fallback, after the last round or at the
+        deadline) the verified views only."""
+        views, run = self.views, self.run
+        now = time.perf_counter()
+        # the first round always solves and verifies its picks: a plan comes out however short the time
+        if round_index == self.max_rounds or (now >= self.deadline and round_index > 0):
+            self.only_verified = True  # the fallback: no more verification, a cover of verified views
+            run.time_limit_hit = now >= self.deadline
+            cause = "the time limit came" if run.time_limit_hit else f"{self.max_rounds} rounds"
+            run.warn(
+                f"set cover: {cause} after {self.verified_count} scan lines verified; solving over verified views only",
+                LOG,
+            )
+        matrix, worst, durations = coverage_problem(run, views, self.n_points, self.only_verified)
+        self.tools.report("set cover", min(0.9, round_index / max(self.max_rounds, 1)), f"round {round_index + 1}")
+        # an IP solve never takes all the time left: verification and the last solve need some
+        # a round's cover only decides what to verify next (its columns change after that): a short solve is
+        # enough; the last cover gets the time left (below)
+        remaining = self.deadline - time.perf_counter()
+        columns = np.arange(len(views)) if self.pool is None or self.only_verified else self.pool
+        if self.only_verified:
+            # the unverified columns are empty here: leaving them out is the same programme, much smaller
+            executable = executable_columns(views)
+            columns = executable if executable.size else columns
+        # a solve over all views names the pool the next rounds choose from: its reductions must finish
+        round_s = LARGE_ROUND_IP_TIME_S if self.n_candidates >= LARGE_PROBLEM_VIEWS else ROUND_IP_TIME_S
+        limit = min(self.time_limit_s, FULL_ROUND_IP_TIME_S if columns.size == len(views) else round_s)
+        if math.isfinite(remaining):
+            limit = max(1.0, min(limit, 0.5 * remaining))
+        sub = matrix if columns.size == len(views) else matrix[:, columns]
+        if self.settled is not None and not self.only_verified:
+            result, self.settled = self.settled, None
+        else:
+            result = solve_set_cover(
+                sub,
+                self.solver_type,
+                uncertainties=worst[columns],
+                durations_s=durations[columns] if self.solver_type == "IP_time" else None,
+                time_limit_s=limit,
+                mip_gap=self.mip_gap,
+            )
+            self.set_cover_time += result.solve_time_s
+            if columns.size == len(views):
+                self.full_solve_s = result.solve_time_s
+                self.full_solves += 1
+            result = dataclasses.replace(result, selected=columns[result.selected])
+        self.result = result
+        self.chosen = [views[j] for j in result.selected.tolist()]
+        pending = [v for v in self.chosen if v.mechanics_verified is False]
+        return _Round(columns, matrix, worst, durations, sub, limit, self.chosen, pending)
+
+    def settle(self, step: _Round, round_index: int) -> str | None:
+        """What the round's cover settles: ``'done'`` (the cover is final), ``'again'`` (solve again without a
+        verification batch), or None (verify a batch)."""
+        views, columns, result = self.views, step.columns, self.result
+        if not step.pending and columns.size < len(views):
+            self.best_verified = result
+        if step.pending and columns.size == len(views) and self.best_verified is not None:
+            # unverified views count as executable in the full problem, so its bound is a bound on every
+            # executable cover: a verified cover within the gap of it is good enough
+            best, bound = self.best_verified, result.lower_bound
+            same_points = int(best.covered.sum()) >= result.n_coverable
+            if same_points and bound is not None and best.objective > 0:
+                gap = max(0.0, (best.objective - bound) / best.objective)
+                if gap <= max(self.mip_gap, 1e-9):
+                    self.result = dataclasses.replace(best, gap=gap, lower_bound=bound, proven_optimal=gap <= 1e-9)
+                    self.chosen = [views[j] for j in self.result.selected.tolist()]
+                    self.full_checked = True
+                    return "done"
+        if step.pending:
+            return None
+        if columns.size == len(views):
+            self.full_checked = True
+            return "done"
+        # a verified cover of the pool: worth proving over all views only if that fits in the time, and a
+        # few times at most (each full solve may name new candidates, each costs the full reductions)
+        if self.full_solves < MAX_FULL_SOLVES and time.perf_counter() + 1.5 * self.full_solve_s < self.deadline:
+            self.pool = None
+            return "again"
+        # points that only unverified views outside the pool measure: verify their views (no solve) while
+        # time and rounds allow, then solve the pool again with them, so such points are settled
+        per_point = POINT_VIEWS_PER_ROUND * 2 ** min(round_index, 10)
+        open_columns = open_point_views(step.matrix, views, per_point)[:MAX_POINT_VIEWS_PER_ROUND]
+        if open_columns.size and time.perf_counter() < self.deadline and round_index + 1 < self.max_rounds:
+            self.verified_count += screen_scan_lines(self.run, self.tools, [views[j] for j in open_columns.tolist()])
+            for j in open_columns.tolist():
+                if time.perf_counter() >= self.deadline:
+                    break
+                if views[j].mechanics_verified is False:
+                    self._verify(views[j])
+            # revived views join the problem, not the pool: they come into it verified, as the open
+            # points' views (above) or through a solve over all views
+            revive_in(self.run, self.tools, views, self.provided)
+            self.pool = np.union1d(columns, open_columns)
+            return "again"
+        self.run.warn(
+            f"set cover: the gap holds for a candidate pool of {columns.size} of {len(views)} views (no more time "
+            "or rounds to solve over all views again)",
+            LOG,
+        )
+        return "done"
+
+    def _batch(self, step: _Round, round_index: int) -> tuple[list, int, np.ndarray | None]:
+        """The views to verify this round (the picks first), the batch size aimed at, the likely columns."""
+        views, columns, pending = self.views, step.columns, step.pending
+        batch = list(pending)
+        greedy_pending = []
+        if self.solver_type != "greedy" and columns.size < len(views):
+            # the greedy cover of the pool costs little and names views the next solve may want (a solve over
+            # all views already started from its own greedy cover, and a greedy pass over all is not cheap)
+            extra = solve_set_cover(step.sub, "greedy", uncertainties=step.worst[columns], time_limit_s=step.limit)
+            self.set_cover_time += extra.solve_time_s
+            greedy_pending = [
+                views[j] for j in columns[extra.selected].tolist() if views[j].mechanics_verified is False
+            ]
+        size = max(int(self.verification_batch or 0), 4 * len(step.chosen), len(pending) + len(greedy_pending))
+        batch += greedy_pending
+        likely = self.result.stats.get("likely_columns")
+        likely = None if likely is None else columns[np.asarray(likely, dtype=np.int64)]
+        if likely is not None and len(batch) < size:
+            # the columns the reduced programme kept, most likely first: the next covers choose from them
+            unverified = [views[j] for j in likely.tolist() if views[j].mechanics_verified is False]
+            batch += unverified[: 2 * size]
+        # points no verified view measures yet: a few of their unverified views each, largest first, so that a
+        # point whose views keep failing is settled in one pass instead of one view per round
+        # (twice as many each round: a point all of whose views fail is known to be so after a few rounds)
+        per_point = POINT_VIEWS_PER_ROUND * 2 ** min(round_index, 10)
+        batch = list(dict.fromkeys(batch))[:size]
+        batch += [views[j] for j in open_point_views(step.matrix, views, per_point)][:MAX_POINT_VIEWS_PER_ROUND]
+        pending_columns = [v.coverage_column if v.coverage_column is not None else -1 for v in pending]
+        if all(views[j] is v for j, v in zip(pending_columns, pending, strict=True) if 0 <= j < len(views)):
+            picked_columns = np.array([j for j in pending_columns if 0 <= j < len(views)], dtype=np.int64)
+        else:
+            index_of = {id(v): j for j, v in enumerate(views)}
+            picked_columns = np.array([index_of[id(v)] for v in pending], dtype=np.int64)
+        batch += [views[j] for j in substitute_views(step.matrix, views, picked_columns, SUBSTITUTES_PER_VIEW)]
+        if columns.size < len(views) and self.n_candidates >= LARGE_PROBLEM_VIEWS:
+            batch += [views[j] for j in columns.tolist() if views[j].mechanics_verified is False][:POOL_VERIFY_MAX]
+        return list(dict.fromkeys(batch)), size, likely
+
+    def verify_round(self, step: _Round, round_index: int) -> None:
+        """Verify this round's batch, remember a cover that verified as it is, revive dominated candidates of the
+        failed views and name the next round's pool."""
+        views, result, chosen, pending = self.views, self.result, step.chosen, step.pending
+        batch, size, likely = self._batch(step, round_index)
+        LOG.debug(
+            "set cover round %d: %d of %d columns, %d chosen, %d pending, %d to verify (%s)",
+            round_index + 1, step.columns.size, len(views), len(chosen), len(pending), len(batch), result.message,
+        )  # fmt: skip
+        # views without a free start at either end of their line are settled for the whole batch at once
+        self.verified_count += screen_scan_lines(self.run, self.tools, batch)
+        for k, view in enumerate(batch):
+            if view.mechanics_verified is not False:
+                continue
+            if k >= len(pending) and time.perf_counter() >= self.deadline:
+                break  # the picked views first; the likely ones only while there is time
+            self._verify(view)
+            if self.verified_count % 25 == 0 or k == len(batch) - 1:
+                done = min(1.0, self.verified_count / (self.verified_count + 10))
+                self.tools.report("mechanics", done, f"verified {self.verified_count} scan lines")
+        if all(v.mechanics_verified is True and v.mechanics_valid for v in chosen):
+            still = np.zeros(result.covered.size, dtype=bool)
+            for view in chosen:
+                still[np.asarray(view.measurable_indices, dtype=np.int64)] = True
+            if still[result.covered].all():
+                self.settled = result
+        revive_in(self.run, self.tools, views, self.provided)  # into the problem, not the pool (see settle)
+        verified_columns = np.flatnonzero([v.mechanics_verified is True and v.mechanics_valid for v in views])
+        previous = np.zeros(0, dtype=np.int64) if self.pool is None else self.pool
+        extra_columns = [result.selected, verified_columns, previous]
+        if likely is not None:
+            # the most likely only: without a finished reduction (tilt full, a loaded machine) the list is
+            # every column, and a pool of all columns makes every round a full solve
+            extra_columns.append(likely[: max(POOL_LIKELY_COLUMNS, 4 * size)])
+        self.pool = np.unique(np.concatenate([np.asarray(c, dtype=np.int64) for c in extra_columns]))
+
+    def polish(self) -> None:
+        """The rounds' short solves may leave a gap: spend what is left on the programme over the verified views
+        (every cover of it is executable); the gap is then the one over verified views."""
+        result, views = self.result, self.views
+        if not self.chosen or (result.gap is not None and result.gap <= self.mip_gap) or self.solver_type == "greedy":
+            return
+        left = self.deadline - time.perf_counter()
+        if not math.isfinite(left):
+            left = self.time_limit_s
+        if left <= 2.0:
+            return
+        matrix, worst, durations = coverage_problem(self.run, views, self.n_points, only_verified=True)
+        executable = executable_columns(views)
+        if executable.size == 0:
+            executable = np.arange(len(views))
+        polished = solve_set_cover(
+            matrix[:, executable],
+            self.solver_type,
+            uncertainties=worst[executable],
+            durations_s=durations[executable] if self.solver_type == "IP_time" else None,
+            time_limit_s=max(1.0, min(self.time_limit_s, 0.8 * left, POLISH_IP_TIME_S)),
+            mip_gap=self.mip_gap,
+        )
+        polished = dataclasses.replace(polished, selected=executable[polished.selected])
+        self.set_cover_time += polished.solve_time_s
+        polished_views = [views[j] for j in polished.selected.tolist()]
+        if (
+            polished.covered.sum() >= result.covered.sum()
+            and polished.objective <= result.objective
+            and polished.gap is not None
+            and all(v.mechanics_verified for v in polished_views)
+        ):
+            self.result = dataclasses.replace(polished, message=polished.message + " (over verified views)")
+            self.chosen = polished_views
+
+    def rounds(self) -> None:
+        """Solve, settle and verify until the cover is final or the fallback (verified views only) solved."""
+        for round_index in range(self.max_rounds + 1):
+            self.rounds_used = round_index + 1
+            step = self.solve_round(round_index)
+            if self.only_verified:
+                break
+            verdict = self.settle(step, round_index)
+            if verdict == "done":
+                break
+            if verdict == "again":
+                continue
+            self.verify_round(step, round_index)
+
+
+def solve_scp(
+    run: PlanningRun,
+    tools: PlanningTools,
+    *,
+    provided_viewpoints,
+    solver_type,
+    time_limit_s,
+    max_rounds,
+    mip_gap,
+    deadline_s,
+    verification_batch,
+) -> set:
+    """The facade's ``solve_scp`` (see there) over ``run``: the chosen views as a set."""
+    if solver_type not in SOLVER_TYPES:
+        raise PlanningInputError(f"unknown solver_type {solver_type!r}; valid names: {', '.join(SOLVER_TYPES)}")
+    views = list(provided_viewpoints)
+    if not views:
+        raise PlanningError("solve_scp needs at least one viewpoint")
+    n_points = len(run.sampled_surface_points) or 1 + max(int(v.measurable_indices.max(initial=0)) for v in views)
+    t0 = time.perf_counter()
+    provided = {id(v) for v in views}
+    run.pending_scan_paths = {k: p for k, p in run.pending_scan_paths.items() if k in provided}
+    mechanics_before = run.timings_s.get("mechanics", 0.0)
+    run.time_limit_hit = False
+    loop = CoverLoop(
+        run,
+        tools,
+        views,
+        solver_type,
+        time_limit_s,
+        max_rounds,
+        mip_gap,
+        math.inf if deadline_s is None else float(deadline_s),
+        verification_batch,
+        n_points=n_points,
+        provided=provided,
+    )
+    loop.rounds()
+    run.timings_s["set_cover_full_problem_checked"] = bool(loop.full_checked)
+    loop.polish()
+    chosen, result = loop.chosen, loop.result
+    if not chosen:
+        raise PlanningError("no viewpoint is executable: every candidate failed the mechanical checks")
+    finish_scan_trajectories(run, tools, chosen)
+    run.timings_s["set_cover_and_mechanics"] = time.perf_counter() - t0
+    run.timings_s["set_cover"] = loop.set_cover_time
+    run.timings_s["set_cover_last_solve"] = result.solve_time_s
+    run.timings_s["set_cover_rounds"] = loop.rounds_used
+    run.timings_s["scan_lines_verified"] = loop.verified_count
+    run.timings_s["mechanics_in_set_cover"] = run.timings_s.get("mechanics", 0.0) - mechanics_before
+    run.last_set_cover = result
+    run.parameters["solver_type"] = solver_type
+    run.parameters["set_cover_mip_gap"] = float(mip_gap)
+    tools.report("set cover", 1.0, f"{len(chosen)} views cover {int(result.covered.sum())} points")
+    return set(chosen)
+
+
+def cover_points_with_verified(
+    run: PlanningRun, tools: PlanningTools, points: np.ndarray, settings: dict, deadline: float
+):
+    """Cover the points of the mask ``points`` with the run's verified executable views (no new verification:
+    every cover is executable); returns the chosen views (their trajectories finished), or None when there is no
+    time, no such view or the samples differ. The cover is the run's ``last_set_cover``."""
+    views = list(run.last_viewpoints or [])
+    left = deadline - time.perf_counter()
+    if not views or points.size != len(run.samples) or not points.any() or left < 5.0:
+        return None
+    started = time.perf_counter()
+    matrix, worst, durations = coverage_problem(run, views, len(run.samples), only_verified=True)
+    executable = executable_columns(views)
+    if executable.size == 0:
+        return None
+    solver_type = settings["solver_type"]
+    sub = scipy.sparse.csr_matrix(matrix)[np.flatnonzero(points)].tocsc()[:, executable]
+    result = solve_set_cover(
+        sub,
+        solver_type,
+        uncertainties=worst[executable],
+        durations_s=durations[executable] if solver_type == "IP_time" else None,
+        time_limit_s=max(1.0, min(settings["set_cover_time_limit_s"], 0.5 * left)),
+        mip_gap=settings["mip_gap"],
+    )
+    chosen = [views[j] for j in executable[result.selected].tolist()]
+    if not chosen:
+        return None
+    run.last_set_cover = dataclasses.replace(result, selected=executable[result.selected])
+    run.timings_s["set_cover_restricted"] = time.perf_counter() - started
+    finish_scan_trajectories(run, tools, chosen)
+    return chosen
