@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
+from agiprobot_measurement.common.config import ConfigError
 from agiprobot_measurement.errors import InputError, InternalError
 
-__all__ = ["PlanningCancelled", "PlanningError", "PlanningInputError", "PlanningTypeError"]
+__all__ = ["PlanningCancelled", "PlanningError", "PlanningInputError", "PlanningTypeError", "validated"]
 
 
 class PlanningError(InternalError):
@@ -22,3 +25,12 @@ class PlanningTypeError(PlanningInputError, TypeError):
 class PlanningCancelled(RuntimeError):
     """The caller cancelled planning (the progress callback raised it). Deliberately not an error of the package:
     a cancel is the caller's wish, and the edges that report errors let it through."""
+
+
+def validated(check: Callable[[], object], error: Callable[[str], Exception], message: str):
+    """``check()`` (a call of a :mod:`~agiprobot_measurement.common.config` validator), its ``ConfigError``
+    raised again as ``error(message)`` (the caller's error class and wording)."""
+    try:
+        return check()
+    except ConfigError as exc:
+        raise error(message) from exc

@@ -22,7 +22,9 @@ import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
 
+from agiprobot_measurement.common import config
 from agiprobot_measurement.errors import InputError
+from agiprobot_measurement.planning.errors import validated
 from agiprobot_measurement.station import UNIT_SCALES_TO_M
 from agiprobot_measurement.station.placement import fixture_placement
 
@@ -136,9 +138,9 @@ def validate_rigid_transform(transform, tolerance: float = 1e-6) -> np.ndarray:
 
 def downward_faces(mesh: trimesh.Trimesh, remove_threshold_angle_deg: float = 20.0) -> np.ndarray:
     """Boolean mask of the faces whose normal lies within ``remove_threshold_angle_deg`` of world -z."""
-    threshold = float(remove_threshold_angle_deg)
-    if not (math.isfinite(threshold) and 0.0 <= threshold <= 90.0):
-        raise PartLoadError(f"remove_threshold_angle_deg must lie in [0, 90] degrees, got {threshold}")
+    message = f"remove_threshold_angle_deg must lie in [0, 90] degrees, got {remove_threshold_angle_deg}"
+    check = lambda: config.number(remove_threshold_angle_deg, "remove_threshold_angle_deg", 0.0, 90.0)  # noqa: E731
+    threshold = validated(check, PartLoadError, message)
     normals = np.asarray(mesh.face_normals)
     # a small slack so that exactly downward faces count at a threshold of 0
     return -normals[:, 2] >= math.cos(math.radians(threshold)) - 1e-9
@@ -146,10 +148,8 @@ def downward_faces(mesh: trimesh.Trimesh, remove_threshold_angle_deg: float = 20
 
 def _scale_from(units: str | None, scale: float | None, path: Path) -> float:
     if scale is not None:
-        value = float(scale)
-        if not math.isfinite(value) or value <= 0.0:
-            raise PartLoadError(f"{path}: scale must be a positive number (mm per file unit), got {scale}")
-        return value
+        message = f"{path}: scale must be a positive number (mm per file unit), got {scale}"
+        return validated(lambda: config.positive(scale, "scale"), PartLoadError, message)
     if units not in UNIT_SCALES_TO_MM:
         raise PartLoadError(f"{path}: unknown unit {units!r}; valid units: {', '.join(UNIT_SCALES_TO_MM)}")
     return UNIT_SCALES_TO_MM[units]
@@ -351,9 +351,8 @@ def sample_surface(
     (Poisson-disk like). ``seed`` makes the result reproducible. Returns points (N, 3) mm, the face index of
     each point in ``mesh`` and the face's unit normal.
     """
-    density = float(density)
-    if not math.isfinite(density) or density <= 0.0:
-        raise PartLoadError(f"sampling density must be a positive number of points/mm^2, got {density}")
+    message = f"sampling density must be a positive number of points/mm^2, got {density}"
+    density = validated(lambda: config.positive(density, "density"), PartLoadError, message)
     if int(oversampling) < 1:
         raise PartLoadError("oversampling must be >= 1")
     face_index = np.arange(len(mesh.faces)) if faces is None else np.asarray(faces, dtype=np.int64).reshape(-1)

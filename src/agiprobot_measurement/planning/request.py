@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import functools
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,7 +29,7 @@ from agiprobot_measurement.common.units import UNIT_SCALES_TO_M
 from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.planning.candidates.viewpoint import TILT_MODES, TILT_STEPS
 from agiprobot_measurement.planning.cover.solve import SOLVER_TYPES
-from agiprobot_measurement.planning.errors import PlanningTypeError
+from agiprobot_measurement.planning.errors import PlanningTypeError, validated
 from agiprobot_measurement.station.placement import PLACEMENTS
 
 __all__ = [
@@ -66,10 +67,7 @@ class PlanRequestError(InputError):
 def _validated(check, field_name: str, message: str):
     """``check()`` (a :mod:`~agiprobot_measurement.common.config` validator's call), its ConfigError turned into a
     :class:`PlanRequestError` of ``field_name`` saying ``message``."""
-    try:
-        return check()
-    except ConfigError as exc:
-        raise PlanRequestError(field_name, message) from exc
+    return validated(check, functools.partial(PlanRequestError, field_name), message)
 
 
 def check_positive(value, field_name: str, label: str | None = None) -> float:

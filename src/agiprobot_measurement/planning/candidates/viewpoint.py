@@ -20,13 +20,13 @@ order and keeps the first that is valid (:func:`select_limited_tilt`).
 from __future__ import annotations
 
 import copy
-import math
 from typing import NamedTuple
 
 import numpy as np
 
+from agiprobot_measurement.common import config
 from agiprobot_measurement.motion.trajectory import JointTrajectory
-from agiprobot_measurement.planning.errors import PlanningInputError, PlanningTypeError
+from agiprobot_measurement.planning.errors import PlanningInputError, PlanningTypeError, validated
 
 __all__ = [
     "TILT_MODES",
@@ -65,9 +65,9 @@ def orientation_angles(orientations_around_boresight: int) -> np.ndarray:
     The full circle, because a trajectory and its opposite direction put the detector (behind the emitter
     along -x) on opposite sides, which changes what is occluded.
     """
-    count = int(orientations_around_boresight)
-    if count != orientations_around_boresight or count < 1:
-        raise PlanningInputError(f"orientations_around_boresight must be a positive integer, got {count}")
+    message = f"orientations_around_boresight must be a positive integer, got {orientations_around_boresight}"
+    check = lambda: config.whole(orientations_around_boresight, "orientations_around_boresight", low=1)  # noqa: E731
+    count = validated(check, PlanningInputError, message)
     return 2.0 * np.pi * np.arange(count) / count
 
 
@@ -247,16 +247,16 @@ class ViewPoint:
         tilt_theta: float = 0,
         tilt_psi: float = 0,
     ):
-        standoff_distance = float(standoff_distance)
-        if not math.isfinite(standoff_distance) or standoff_distance <= 0.0:
-            raise PlanningInputError(f"standoff_distance must be a positive number of mm, got {standoff_distance}")
+        message = f"standoff_distance must be a positive number of mm, got {standoff_distance}"
+        standoff_distance = validated(
+            lambda: config.positive(standoff_distance, "standoff"), PlanningInputError, message
+        )
         for name, value in (
             ("angle_around_boresight", angle_around_boresight),
             ("tilt_theta", tilt_theta),
             ("tilt_psi", tilt_psi),
         ):
-            if not math.isfinite(float(value)):
-                raise PlanningInputError(f"{name} must be finite, got {value}")
+            validated(lambda: config.number(value, name), PlanningInputError, f"{name} must be finite, got {value}")  # noqa: B023
         self._surface_point = np.asarray(surface_point, dtype=float).reshape(3)
         self._surface_normal = _unit_rows(np.asarray(surface_normal, dtype=float).reshape(1, 3), "surface_normal")[0]
         self.angle_around_boresight = float(angle_around_boresight)
