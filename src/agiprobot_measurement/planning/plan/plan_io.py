@@ -107,8 +107,8 @@ class PlanSegment:
 
     A segment also reads as the original's ``moveit_msgs/RobotTrajectory``: ``joint_trajectory`` and
     ``multi_dof_joint_trajectory`` are message-shaped snapshots (``seg.joint_trajectory.points[-1]
-    .time_from_start.to_sec()``); inside ROS, ``agiprobot_measurement.ros.conversions.joint_trajectory_to_msg``
-    makes a ``trajectory_msgs/JointTrajectory`` message of ``trajectory``.
+    .time_from_start.to_sec()``); inside ROS, the ROS layer's conversions make a ``trajectory_msgs/JointTrajectory``
+    message of ``trajectory``.
     """
 
     kind: str
