@@ -110,6 +110,23 @@ def test_no_issue_or_brief_numbers_around_the_nodes():
     assert _numbers_in(files) == []
 
 
+def test_the_ros_interface_reference_covers_every_node():
+    """Every node type of nodes/ and packages/*/nodes/ has a section, and every section is checked by a rostest."""
+    text = (DOCS / "ros-interface.md").read_text()
+    type_lines = re.findall(r"^Types? (.+?), started by", text, re.M)
+    documented = {name for line in type_lines for name in re.findall(r"`([^`]+)`", line)}
+    node_types = {p.name for p in (PACKAGE_ROOT / "nodes").iterdir() if p.is_file()}
+    node_types |= {p.name for p in PACKAGE_ROOT.glob("packages/*/nodes/*") if p.is_file()}
+    assert sorted(node_types - documented) == [], "node types without a section in docs/ros-interface.md"
+    sections = set(re.findall(r"^### Node `(/[^`]+)`(?: \((\w+)\))?", text, re.M))
+    keys = {name + (f":{variant}" if variant else "") for name, variant in sections}
+    checked = set()
+    for test in (PACKAGE_ROOT / "test" / "ros").glob("test_ros_interface_reference*.test"):
+        for value in re.findall(r'<param name="nodes" value="([^"]+)"', test.read_text()):
+            checked |= set(value.split())
+    assert sorted(keys - checked) == [], "sections no rostest checks"
+
+
 @pytest.mark.xfail(
     strict=False,
     reason="the numbers in src/, scripts/ and config/nbv.yaml are being removed area by area; enable once merged",
