@@ -15,22 +15,35 @@ from matplotlib.patches import FancyArrowPatch, FancyBboxPatch
 
 HERE = Path(__file__).resolve().parent
 
-# (label, detail, x, y, width, colour); units are the axes' (0..100 x 0..60)
-ENTRY, ROS, DOMAIN, FLOOR = "#f2d7a6", "#c9d9f2", "#cfe8c9", "#e3e3e3"
-BOXES = {
-    "nodes": ("nodes/ + launch/", "launchers, launch files", 2, 50, 30, ENTRY),
-    "cli": ("scripts/", "command-line tools", 35, 50, 30, ENTRY),
-    "api": ("documented API", "trajectory_manager,\nsensor_model, viewpoint", 68, 50, 30, ENTRY),
-    "ros": ("ros/", "the only place importing ROS:\nnodes, executors, messages, markers", 2, 34, 30, ROS),
-    "planning": ("planning/", "candidates, set cover,\nplan, report", 35, 34, 15, DOMAIN),
-    "nbv": ("nbv/", "2D method,\n3D loop", 51.5, 34, 14, DOMAIN),
-    "calibration": ("calibration/", "flange, hand-eye", 67, 34, 15, DOMAIN),
-    "mild": ("mild/", "MILD model", 83.5, 34, 14.5, DOMAIN),
-    "sensors": ("sensors/", "laser line, PhoXi", 35, 19, 20, FLOOR),
-    "motion": ("motion/", "IK, FCL, OMPL, TOPP-RA", 57, 19, 20, FLOOR),
-    "station": ("station/", "config, scene, URDF", 79, 19, 19, FLOOR),
-    "common": ("common/ + errors", "geometry, files, config, one error root", 35, 4, 63, FLOOR),
-}
+# one box a line: name | x y width (axes units, 0..100 x 0..67) | floor | label | detail (";" breaks the line)
+COLOURS = {"entry": "#f2d7a6", "ros": "#c9d9f2", "domain": "#cfe8c9", "floor": "#e3e3e3"}
+BOX_TABLE = """
+nodes       |  2   50 30   | entry  | nodes/ + launch/ | launchers, launch files
+cli         | 35   50 30   | entry  | scripts/         | command-line tools
+api         | 68   50 30   | entry  | documented API   | trajectory_manager,; sensor_model, viewpoint
+ros         |  2   34 30   | ros    | ros/             | the only place importing ROS:; nodes, executors, messages, markers
+planning    | 35   34 15   | domain | planning/        | candidates, set cover,; plan, report
+nbv         | 51.5 34 14   | domain | nbv/             | 2D method,; 3D loop
+calibration | 67   34 15   | domain | calibration/     | flange, hand-eye
+mild        | 83.5 34 14.5 | domain | mild/            | MILD model
+sensors     | 35   19 20   | floor  | sensors/         | laser line, PhoXi
+motion      | 57   19 20   | floor  | motion/          | IK, FCL, OMPL, TOPP-RA
+station     | 79   19 19   | floor  | station/         | config, scene, URDF
+common      | 35    4 63   | floor  | common/ + errors | geometry, files, config, one error root
+"""
+
+
+def _boxes() -> dict[str, tuple[str, str, float, float, float, str]]:
+    """name -> (label, detail, x, y, width, colour), from BOX_TABLE."""
+    boxes = {}
+    for row in BOX_TABLE.strip().splitlines():
+        name, place, floor, label, detail = (cell.strip() for cell in row.split("|"))
+        x, y, width = (float(v) for v in place.split())
+        boxes[name] = (label, detail.replace("; ", "\n"), x, y, width, COLOURS[floor])
+    return boxes
+
+
+BOXES = _boxes()
 ARROWS = [
     ("nodes", "ros"),
     ("cli", "planning"),
