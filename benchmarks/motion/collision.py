@@ -1,19 +1,17 @@
-#!/usr/bin/env python3
-"""Benchmark collision checking and joint-space planning on the station scene (with the part).
+"""Collision checking and joint-space planning on the station scene (with the part).
 
 Prints full-robot collision checks per second (batch, random and valid states; single calls) and, for N
 seeded pairs of random valid states, the planner's success rate and planning times (median, mean, p90, max).
 By default the planner is RRTConnect with the straight-line shortcut off, so every pair is planned by OMPL.
 
-    scripts/bench_collision_planning.py                      # 100 pairs, RRTConnect
-    scripts/bench_collision_planning.py --pairs 20 --planner PRM --direct
+    python -m benchmarks.motion.collision                      # 100 pairs, RRTConnect
+    python -m benchmarks.motion.collision --pairs 20 --planner PRM --direct
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 
 import numpy as np
@@ -134,4 +132,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())
