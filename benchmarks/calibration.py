@@ -56,7 +56,9 @@ from agiprobot_measurement.common.geometry import transform_points
 from agiprobot_measurement.motion.kinematics import TrueKinematics, load_kinematics_correction
 from agiprobot_measurement.sensors.phoxi.renderer import SceneGeometry, primitive_mesh
 from agiprobot_measurement.station import CONFIG_DIR
-from benchmarks.harness import write_json
+from benchmarks.harness import load_conditions, write_json
+
+DEFAULTS = load_conditions("calibration").mapping("defaults")
 
 
 def _spoiler(sim, p, rotation):
@@ -606,21 +608,27 @@ def _pair(values) -> str:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--seeds", type=int, default=20)
-    parser.add_argument("--spoil", type=float, default=0.2, help="fraction of spoiled path frames (default 0.2)")
+    parser.add_argument("--seeds", type=int, default=DEFAULTS["seeds"])
+    parser.add_argument(
+        "--spoil", type=float, default=DEFAULTS["spoil"], help="fraction of spoiled path frames (%(default)g)"
+    )
     parser.add_argument("--fractions", type=float, nargs="+", help="zig-zag fractions (default: the config's)")
-    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--workers", type=int, default=DEFAULTS["workers"])
     parser.add_argument("--no-chessboard", action="store_true", help="skip the test mode (chessboard corners)")
     parser.add_argument("--compare", action="store_true", help="the flange method against OpenCV's AX = XB solvers")
-    parser.add_argument("--frames", type=int, nargs="+", default=[8, 15, 30], help="--compare: frame budgets")
+    parser.add_argument(
+        "--frames", type=int, nargs="+", default=list(DEFAULTS["frames"]), help="--compare: frame budgets"
+    )
     parser.add_argument(
         "--scales",
         type=float,
         nargs="+",
-        default=[0.0, 0.5, 1.0, 2.0],
+        default=list(DEFAULTS["scales"]),
         help="--compare: factors on config/ur10e_kinematics_correction.yaml's correction (0 = perfect)",
     )
-    parser.add_argument("--tilt-deg", type=float, default=25.0, help="--compare: largest tilt / roll of the poses")
+    parser.add_argument(
+        "--tilt-deg", type=float, default=DEFAULTS["tilt_deg"], help="--compare: largest tilt / roll of the poses"
+    )
     parser.add_argument(
         "--flange-tilted", action="store_true", help="--compare: also the flange method on the board's tilted poses"
     )

@@ -25,6 +25,9 @@ from agiprobot_measurement.common.geometry import wrap_to_pi
 from agiprobot_measurement.mild.config import load_settings
 from agiprobot_measurement.mild.robot_model import MildRobotModel
 from agiprobot_measurement.mild.state import RobotState, view_directions
+from benchmarks.harness import load_conditions
+
+DEFAULTS = load_conditions("mild").mapping("defaults")
 
 
 def reachable_poses(model: MildRobotModel, count: int, rng: np.random.Generator):
@@ -74,7 +77,7 @@ def single_calls(model, source, positions, quaternions):
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--settings", default=None, help="settings YAML (default: the real robot's)")
-    parser.add_argument("--poses", type=int, default=2000)
+    parser.add_argument("--poses", type=int, default=DEFAULTS["poses"])
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
     settings = load_settings(args.settings)

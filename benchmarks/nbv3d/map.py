@@ -36,7 +36,7 @@ from agiprobot_measurement.nbv.voxel_map import MapConfig, VoxelMap
 from agiprobot_measurement.sensors.phoxi.models import RESOLUTION_LOW, load_scanner_model
 from agiprobot_measurement.sensors.phoxi.renderer import ScanSettings, StructuredLightScanner
 from agiprobot_measurement.sensors.phoxi.scene_geometry import SceneGeometry
-from benchmarks.harness import ChildFailed, run_process, timed, write_json
+from benchmarks.harness import ChildFailed, load_conditions, run_process, timed, write_json
 
 #: the cold-JIT child: imports, a first fusion, pooling and gains with an empty numba cache (seconds of each)
 COLD_JIT_CODE = (
@@ -50,6 +50,8 @@ COLD_JIT_CODE = (
     "v=ViewModel(0.7,0.5,0.3,0.6,np.zeros(3)); evaluate_views(g,look_at([0.025,0.025,0.5],[0.025]*3,up=(0,1,0))[None],v);"
     "t4=time.perf_counter(); print(t1-t, t2-t1, t3-t2, t4-t3)"
 )
+
+DEFAULTS = load_conditions("nbv3d_map").mapping("defaults")
 
 
 def scene_frame():
@@ -253,8 +255,12 @@ def run(args) -> dict:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--views", type=int, default=150, help="candidate poses evaluated at 5 mm (default 150)")
-    parser.add_argument("--repeats", type=int, default=3, help="warm repetitions per measurement (median)")
+    parser.add_argument(
+        "--views", type=int, default=DEFAULTS["views"], help="candidate poses evaluated at 5 mm (%(default)s)"
+    )
+    parser.add_argument(
+        "--repeats", type=int, default=DEFAULTS["repeats"], help="warm repetitions per measurement (median)"
+    )
     parser.add_argument("--json", help="write the figures to this JSON file")
     parser.add_argument("--cold", action="store_true", help="also time the first calls with an empty numba cache")
     args = parser.parse_args(argv)
