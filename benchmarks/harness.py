@@ -6,12 +6,15 @@ and target checks.
 - :func:`parse_key_values` reads repeatable ``KEY=VALUE`` options; :func:`number_value` and :func:`switch_value`
   convert their values. Errors are :class:`OptionError` naming the option and the item.
 - :func:`run_process` runs a command with a timeout; :func:`run_json` runs a benchmark's child (``python -m
-  <module> ...``) in a fresh process, so its peak memory is its own, and returns the last JSON line it printed or
-  ``{"error": ...}``.
+  <module> ...``, see :func:`child_command`) in a fresh process, so that its peak memory is its own, and returns the
+  last JSON line it printed; :class:`ChildFailed` says why there is none.
 - :func:`peak_rss_mb` is this process's peak resident memory; :func:`timed` the median of repeated calls.
 - :func:`format_table` lays out rows under a header; :func:`write_json` writes results atomically.
 - :class:`Target` (name, measured, target, ok) with :func:`format_targets` and :func:`targets_json`: the one way a
   benchmark states whether a figure meets its target.
+
+The import bootstrap (a checkout without the catkin environment finds the package in ``src/``) is
+``benchmarks/__init__.py``'s: it runs once, before any benchmark module.
 """
 
 from __future__ import annotations
@@ -117,7 +120,8 @@ def parse_key_values(
     """``KEY=VALUE`` items (a repeatable option's values) as ``{KEY: value(KEY, VALUE)}``.
 
     An item without ``=`` or with a key outside ``names`` (when given) is refused naming the expected form and the
-    known keys; an :class:`OptionError` (or ``ConfigError``) from ``value`` is refused prefixed with the item.
+    known keys; an ``InputError`` from ``value`` (an :class:`OptionError`, a ``ConfigError``) is refused prefixed with
+    the option and the item.
     """
     key_word = metavar.partition("=")[0]
     out: dict[str, object] = {}
