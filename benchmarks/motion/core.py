@@ -1,10 +1,9 @@
-#!/usr/bin/env python3
-"""Benchmark the motion core: closed-form IK, KDL IK, collision checks, RRTConnect, Cartesian lines.
+"""The motion core: closed-form IK, KDL IK, collision checks, RRTConnect, Cartesian lines.
 
-Usage (after ``source tools/env.sh``)::
+Usage (after ``source tools/env.sh``, from the checkout's root)::
 
-    python3 scripts/bench_motion.py                  # every benchmark
-    python3 scripts/bench_motion.py --only ik_closed_form cartesian --poses 50000
+    python -m benchmarks.motion                       # every benchmark
+    python -m benchmarks.motion --only ik_closed_form cartesian --poses 50000
 
 Each benchmark is a function ``(context, args) -> list[Row]`` listed in ``BENCHMARKS``; add collision or
 planner benchmarks by writing such a function and registering it there.
@@ -13,8 +12,6 @@ planner benchmarks by writing such a function and registering it there.
 from __future__ import annotations
 
 import argparse
-import statistics
-import sys
 import time
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -22,14 +19,19 @@ from typing import NamedTuple
 import numpy as np
 
 from agiprobot_measurement.motion.cartesian import compute_cartesian_path
+from agiprobot_measurement.motion.collision import CollisionChecker
 from agiprobot_measurement.motion.ik import KDLIK, URAnalyticIK
 from agiprobot_measurement.motion.kinematics import KinematicModel
+from agiprobot_measurement.motion.motion_planning import MotionPlanner
 from agiprobot_measurement.station import Station
+from benchmarks.harness import format_table, load_conditions, timed
+from benchmarks.motion.collision import bench_collision, bench_planning
 
-# scanner pointing straight down 0.3 m above the part (part at 0.45, -0.55, 1.0 m in world)
-LINE_START_XYZ_M = np.array([0.35, -0.55, 1.3])
-LINE_DIRECTION = np.array([1.0, 0.0, 0.0])
-LINE_SEED_Q = np.array([-0.8, -1.6, -1.6, -1.5, 1.57, 0.0])
+CONDITIONS = load_conditions("motion_core")
+LINE_START_XYZ_M = np.array(CONDITIONS["line_start_xyz_m"], dtype=float)
+LINE_DIRECTION = np.array(CONDITIONS["line_direction"], dtype=float)
+LINE_SEED_Q = np.array(CONDITIONS["line_seed_q"], dtype=float)
+DEFAULTS = CONDITIONS.mapping("defaults")
 
 
 class Row(NamedTuple):
@@ -52,13 +54,7 @@ class Context:
 
 
 def _median_seconds(function, repeats: int) -> float:
-    function()  # warm-up: caches, lazy imports
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        function()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
+    return timed(function, repeats, warmup=True).median_s  # the warm-up call fills caches and lazy imports
 
 
 # ------------------------------------------------------------------------------------------- benchmarks
@@ -89,8 +85,6 @@ def bench_ik_kdl(ctx: Context, args) -> list[Row]:
 def _load_collision_checker(ctx: Context):
     """The collision checker's batch check, or (None, reason) while that module is missing or broken."""
     try:
-        from agiprobot_measurement.motion.collision import CollisionChecker
-
         checker = CollisionChecker.from_station(ctx.station, model=ctx.model)
         return checker.check_states, "with batched collision check"
     except Exception as exc:  # another helper's module in progress: benchmark without it and say why
@@ -115,7 +109,7 @@ def bench_cartesian(ctx: Context, args) -> list[Row]:
             start_q = q
             break
     if start_q is None:
-        raise SystemExit("bench_motion: no IK branch executes the benchmark's Cartesian line in this station")
+        raise SystemExit("motion benchmark: no IK branch executes the benchmark's Cartesian line in this station")
     rows = []
     for label, validity in (("IK only", None), (note, checker)):
         if label != "IK only" and validity is None:
@@ -140,10 +134,6 @@ def bench_cartesian(ctx: Context, args) -> list[Row]:
 
 
 def bench_collision_rate(ctx: Context, args) -> list[Row]:
-    from bench_collision_planning import bench_collision
-
-    from agiprobot_measurement.motion.collision import CollisionChecker
-
     checker = CollisionChecker.from_station(ctx.station, model=ctx.model)
     result = bench_collision(checker, args.collision_states, args.seed)
     note = f"scene + cube part, {100 * result['valid_fraction_random']:.0f} % of random states valid"
@@ -161,11 +151,6 @@ def bench_collision_rate(ctx: Context, args) -> list[Row]:
 
 
 def bench_rrtconnect(ctx: Context, args) -> list[Row]:
-    from bench_collision_planning import bench_planning
-
-    from agiprobot_measurement.motion.collision import CollisionChecker
-    from agiprobot_measurement.motion.motion_planning import MotionPlanner
-
     checker = CollisionChecker.from_station(ctx.station, model=ctx.model)
     planner = MotionPlanner(checker, planner="RRTConnect", try_direct=False, seed=args.seed + 1)
     result = bench_planning(planner, args.pairs, args.seed + 1)
@@ -189,30 +174,27 @@ BENCHMARKS = {
 # ------------------------------------------------------------------------------------------------- main
 def print_table(rows: list[Row]) -> None:
     header = ("benchmark", "metric", "value", "unit", "note")
-    cells = [header] + [
-        (r.benchmark, r.metric, "n/a" if np.isnan(r.value) else f"{r.value:,.1f}", r.unit, r.note) for r in rows
-    ]
-    widths = [max(len(row[i]) for row in cells) for i in range(len(header))]
-    for index, row in enumerate(cells):
-        padded = [
-            cell.rjust(w) if i == 2 else cell.ljust(w) for i, (cell, w) in enumerate(zip(row, widths, strict=True))
-        ]
-        print("  ".join(padded).rstrip())
-        if index == 0:
-            print("  ".join("-" * w for w in widths))
+    cells = [(r.benchmark, r.metric, "n/a" if np.isnan(r.value) else f"{r.value:,.1f}", r.unit, r.note) for r in rows]
+    print(format_table(header, cells, right=(2,), sep="  "))
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
     parser.add_argument("--only", nargs="+", choices=sorted(BENCHMARKS), help="run only these benchmarks")
-    parser.add_argument("--poses", type=int, default=20000, help="closed-form IK batch size (default 20000)")
-    parser.add_argument("--kdl-poses", type=int, default=1000, help="poses for KDL IK (default 1000)")
-    parser.add_argument("--repeats", type=int, default=20, help="repeats for median timings (default 20)")
-    parser.add_argument("--line-mm", type=float, default=200.0, help="Cartesian line length, mm (default 200)")
-    parser.add_argument("--step-mm", type=float, default=2.0, help="Cartesian step, mm (default 2)")
+    parser.add_argument("--poses", type=int, default=DEFAULTS["poses"], help="closed-form IK batch size (%(default)s)")
+    parser.add_argument("--kdl-poses", type=int, default=DEFAULTS["kdl_poses"], help="poses for KDL IK (%(default)s)")
+    parser.add_argument(
+        "--repeats", type=int, default=DEFAULTS["repeats"], help="repeats for median timings (%(default)s)"
+    )
+    parser.add_argument(
+        "--line-mm", type=float, default=DEFAULTS["line_mm"], help="Cartesian line length, mm (%(default)g)"
+    )
+    parser.add_argument("--step-mm", type=float, default=DEFAULTS["step_mm"], help="Cartesian step, mm (%(default)g)")
     parser.add_argument("--no-collision", action="store_true", help="Cartesian benchmark without collision check")
-    parser.add_argument("--collision-states", type=int, default=20000, help="states per collision batch")
-    parser.add_argument("--pairs", type=int, default=100, help="random valid state pairs for RRTConnect")
+    parser.add_argument(
+        "--collision-states", type=int, default=DEFAULTS["collision_states"], help="states per collision batch"
+    )
+    parser.add_argument("--pairs", type=int, default=DEFAULTS["pairs"], help="random valid state pairs for RRTConnect")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     args = parser.parse_args(argv)
 
@@ -227,4 +209,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

@@ -1,4 +1,3 @@
-#!/usr/bin/env python3
 """Accuracy of the flange-based calibration against the hidden true camera pose, over seeds, without ROS.
 
 Per seed: the scanner's pose is the configured one moved by up to +-5 cm and turned by up to +-3 deg (the truth,
@@ -9,8 +8,8 @@ robot's (select_consistent_flags); coarse = flag points only. Fine = flag points
 frames and once with a fraction of the path frames spoiled (a plate occludes part of the flange and a decoy disc
 of the flange's size sits 8 cm beside it: a wrong cluster); the clean frames are shared by both runs.
 
-    scripts/bench_calibration.py                          # 20 seeds, 20 % spoiled, 2 workers
-    scripts/bench_calibration.py --seeds 3 --workers 4 --fractions 0.5
+    python -m benchmarks.calibration                          # 20 seeds, 20 % spoiled, 2 workers
+    python -m benchmarks.calibration --seeds 3 --workers 4 --fractions 0.5
 
 The station is that of launch/calibration.launch (config/calibration_scene.yaml: the chessboard lies on the table in
 every frame). Test mode (--no-chessboard skips it): the chessboard's 8 x 11 inner corners found in the texture image
@@ -27,22 +26,43 @@ the flange, on the same robot poses and frame budgets (--frames, default 8 15 30
 kinematics differ from the nominal ones by the correction of config/ur10e_kinematics_correction.yaml times each
 --scales factor (0 = the perfect robot). See compare_seed for how the poses are chosen and frames spoiled.
 
-    scripts/bench_calibration.py --compare --workers 2 --json compare.json --plot compare.png      # 20 seeds
-    scripts/bench_calibration.py --compare --seeds 5 --workers 2
+    python -m benchmarks.calibration --compare --workers 2 --json compare.json --plot compare.png      # 20 seeds
+    python -m benchmarks.calibration --compare --seeds 5 --workers 2
 """
 
 import argparse
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
-from pathlib import Path
 
 import numpy as np
+from scipy.spatial.transform import Rotation
+
+from agiprobot_measurement.calibration import hand_eye
+from agiprobot_measurement.calibration.chessboard_test import (
+    corner_points,
+    detect_corners,
+    match_to_truth,
+    positioning_errors_mm,
+    scene_chessboard_corners,
+    scene_chessboards,
+)
+from agiprobot_measurement.calibration.config import load_calibration_config, tool_rotation
+from agiprobot_measurement.calibration.flange_detection import detect_flange, detect_flange_candidates
+from agiprobot_measurement.calibration.registration import CalibrationError, pose_error, read_flag_points, zigzag_path
+from agiprobot_measurement.calibration.session import CalibrationSession, detector_config
+from agiprobot_measurement.calibration.simulation import SimulatedStation, nominal_camera_pose, perturbed_pose
+from agiprobot_measurement.common.geometry import transform_points
+from agiprobot_measurement.motion.kinematics import TrueKinematics, load_kinematics_correction
+from agiprobot_measurement.sensors.phoxi.renderer import SceneGeometry, primitive_mesh
+from agiprobot_measurement.station import CONFIG_DIR
+from benchmarks.harness import load_conditions, write_json
+
+DEFAULTS = load_conditions("calibration").mapping("defaults")
 
 
 def _spoiler(sim, p, rotation):
     """Decoy disc 8 cm beside the flange and a plate over a third of the flange, 2 cm in front (world frame)."""
-    from agiprobot_measurement.sensors.phoxi.renderer import SceneGeometry, primitive_mesh
 
     world = sim.world_from_base
     decoy = np.eye(4)
@@ -66,14 +86,6 @@ def chessboard_test(sim, h_base_camera, cfg):
     """Test mode: the chessboard of config/calibration_scene.yaml (on the table, 1.6 m from the camera) seen with the
     robot out of view, its corners found in the texture, taken to 3D and transformed with the calibration; the
     positioning error per corner (mm) against the true corners."""
-    from agiprobot_measurement.calibration.chessboard_test import (
-        corner_points,
-        detect_corners,
-        positioning_errors_mm,
-        scene_chessboard_corners,
-        scene_chessboards,
-    )
-    from agiprobot_measurement.common.geometry import transform_points
 
     (board,) = scene_chessboards(sim.station.scene)
     frame = sim.capture(sim.station.named_states["up"], 999)
@@ -84,17 +96,6 @@ def chessboard_test(sim, h_base_camera, cfg):
 
 def run_seed(args):
     seed, spoil_fraction, fractions, chessboard = args
-    from agiprobot_measurement.calibration.config import load_calibration_config, tool_rotation
-    from agiprobot_measurement.calibration.flange_detection import detect_flange, detect_flange_candidates
-    from agiprobot_measurement.calibration.registration import (
-        CalibrationError,
-        pose_error,
-        read_flag_points,
-        zigzag_path,
-    )
-    from agiprobot_measurement.calibration.session import CalibrationSession, detector_config
-    from agiprobot_measurement.calibration.simulation import SimulatedStation, nominal_camera_pose, perturbed_pose
-    from agiprobot_measurement.station import CONFIG_DIR
 
     started = time.monotonic()
     rng = np.random.default_rng(1000 + seed)
@@ -171,10 +172,6 @@ def _compare_poses(cfg, flags, rng, count, tilt_deg):
     tool_z_towards_m (the flange and the board face the camera), then tilted about a random horizontal axis of the tool
     by 10 deg .. tilt_deg and rolled about its z by up to +-tilt_deg, so that the AX = XB solvers get the rotation
     diversity they need (their accuracy grows with the angles between stations; Tsai & Lenz)."""
-    from scipy.spatial.transform import Rotation
-
-    from agiprobot_measurement.calibration.config import tool_rotation
-    from agiprobot_measurement.calibration.registration import zigzag_path
 
     path = zigzag_path(
         flags,
@@ -199,7 +196,6 @@ def _compare_poses(cfg, flags, rng, count, tilt_deg):
 def _test_errors_mm(sim, true_kin, h_base_camera, corners_camera, truth, normal, offset_m):
     """Test mode on an imperfect robot: the tool0 target `offset_m` above each corner estimate (flange facing the
     board), joints by the NOMINAL IK, the point `offset_m` in front of the TRUE flange against the true corner (mm)."""
-    from agiprobot_measurement.common.geometry import transform_points
 
     targets = transform_points(h_base_camera, corners_camera)
     ok = np.isfinite(targets).all(axis=1)
@@ -219,7 +215,6 @@ def _test_errors_mm(sim, true_kin, h_base_camera, corners_camera, truth, normal,
     reached = true_kin.fk(q_good) if true_kin is not None else sim.kinematics.fk(q_good)
     tips = reached[:, :3, 3] + reached[:, :3, 2] * offset_m
     idx = np.flatnonzero(ok)[good]
-    from agiprobot_measurement.calibration.chessboard_test import match_to_truth
 
     errors[idx] = np.linalg.norm(tips - truth[match_to_truth(targets[idx], truth)], axis=1) * 1000.0
     return errors
@@ -228,9 +223,6 @@ def _test_errors_mm(sim, true_kin, h_base_camera, corners_camera, truth, normal,
 def _flange_variant(sim, frames_points, physical, cfg, detector):
     """Flange detections of one pose set: flag candidates (frames 0-3) and path detections (cropped around the
     perfect robot's coarse prediction); (candidates, path detections) or a failure reason (str)."""
-    from agiprobot_measurement.calibration.flange_detection import detect_flange, detect_flange_candidates
-    from agiprobot_measurement.calibration.registration import CalibrationError
-    from agiprobot_measurement.calibration.session import CalibrationSession
 
     candidates = []
     for i in range(4):
@@ -256,8 +248,6 @@ def _flange_estimates(cfg, reported, candidates, path, n, label, where):
     whether the flag check's tolerance had to be raised). When the flag points' camera and robot distances disagree
     by more than the configured flag_tolerance_m (the robot's own error can do that), the procedure refuses; the
     benchmark then retries with 20 mm to show what the method would give, and says so."""
-    from agiprobot_measurement.calibration.registration import CalibrationError
-    from agiprobot_measurement.calibration.session import CalibrationSession
 
     out, raised = {}, False
     session = CalibrationSession.from_config(cfg, None)
@@ -297,20 +287,6 @@ def compare_seed(args):
     coarse prediction (on a real station a large kinematic error also moves the crop: at scale 2 this favours the
     flange method)."""
     seed, frames, scales, spoil, tilt_deg, chessboard, flange_tilted = args
-    from agiprobot_measurement.calibration import hand_eye
-    from agiprobot_measurement.calibration.chessboard_test import (
-        corner_points,
-        detect_corners,
-        scene_chessboard_corners,
-        scene_chessboards,
-    )
-    from agiprobot_measurement.calibration.config import load_calibration_config, tool_rotation
-    from agiprobot_measurement.calibration.registration import CalibrationError, pose_error, read_flag_points
-    from agiprobot_measurement.calibration.session import detector_config
-    from agiprobot_measurement.calibration.simulation import SimulatedStation, nominal_camera_pose, perturbed_pose
-    from agiprobot_measurement.common.geometry import transform_points
-    from agiprobot_measurement.motion.kinematics import TrueKinematics, load_kinematics_correction
-    from agiprobot_measurement.station import CONFIG_DIR
 
     started = time.monotonic()
     rng = np.random.default_rng(5000 + seed)
@@ -486,7 +462,7 @@ def _compare_summary(rows, key, **where):
 
 def _compare_plot(rows, frames, scales, path):
     """Mean translation error against the truth (top) and test-mode RMS (bottom) vs frames, one column per robot."""
-    import matplotlib
+    import matplotlib  # only for --plot: the plotting backend is chosen before pyplot loads
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -516,7 +492,6 @@ def _compare_plot(rows, frames, scales, path):
 
 
 def compare_main(args) -> int:
-    import json
 
     frames, scales = sorted(args.frames), list(dict.fromkeys(args.scales))
     if min(frames) < 5:
@@ -609,18 +584,16 @@ def compare_main(args) -> int:
                         )
                 print(f"  x{s:g} {n:3d} frames: " + "; ".join(cells))
     if args.json:
-        Path(args.json).write_text(
-            json.dumps(
-                {
-                    "frames": frames,
-                    "scales": scales,
-                    "spoil": args.spoil,
-                    "tilt_deg": args.tilt_deg,
-                    "seeds": infos,
-                    "rows": rows,
-                },
-                indent=1,
-            )
+        write_json(
+            args.json,
+            {
+                "frames": frames,
+                "scales": scales,
+                "spoil": args.spoil,
+                "tilt_deg": args.tilt_deg,
+                "seeds": infos,
+                "rows": rows,
+            },
         )
         print(f"json: {args.json}")
     if args.plot:
@@ -635,21 +608,27 @@ def _pair(values) -> str:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--seeds", type=int, default=20)
-    parser.add_argument("--spoil", type=float, default=0.2, help="fraction of spoiled path frames (default 0.2)")
+    parser.add_argument("--seeds", type=int, default=DEFAULTS["seeds"])
+    parser.add_argument(
+        "--spoil", type=float, default=DEFAULTS["spoil"], help="fraction of spoiled path frames (%(default)g)"
+    )
     parser.add_argument("--fractions", type=float, nargs="+", help="zig-zag fractions (default: the config's)")
-    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--workers", type=int, default=DEFAULTS["workers"])
     parser.add_argument("--no-chessboard", action="store_true", help="skip the test mode (chessboard corners)")
     parser.add_argument("--compare", action="store_true", help="the flange method against OpenCV's AX = XB solvers")
-    parser.add_argument("--frames", type=int, nargs="+", default=[8, 15, 30], help="--compare: frame budgets")
+    parser.add_argument(
+        "--frames", type=int, nargs="+", default=list(DEFAULTS["frames"]), help="--compare: frame budgets"
+    )
     parser.add_argument(
         "--scales",
         type=float,
         nargs="+",
-        default=[0.0, 0.5, 1.0, 2.0],
+        default=list(DEFAULTS["scales"]),
         help="--compare: factors on config/ur10e_kinematics_correction.yaml's correction (0 = perfect)",
     )
-    parser.add_argument("--tilt-deg", type=float, default=25.0, help="--compare: largest tilt / roll of the poses")
+    parser.add_argument(
+        "--tilt-deg", type=float, default=DEFAULTS["tilt_deg"], help="--compare: largest tilt / roll of the poses"
+    )
     parser.add_argument(
         "--flange-tilted", action="store_true", help="--compare: also the flange method on the board's tilted poses"
     )
@@ -705,4 +684,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

@@ -1,12 +1,11 @@
-#!/usr/bin/env python3
-"""Benchmark the viewpoint-selection set cover on synthetic cube instances.
+"""The viewpoint-selection set cover on synthetic cube instances.
 
 The presets mirror the original's cube benchmark (1,500 samples; 3, 6 and 12 orientations around the
-boresight, without and with the 9 tilts): see reference/measurement_planning.md. Example:
+boresight, without and with the 9 tilts; conditions/planning_set_cover.yaml). Example:
 
-    scripts/bench_set_cover.py                       # o3 o6 o12 o12-all, every solver
-    scripts/bench_set_cover.py --presets full --solvers greedy IP_basic
-    scripts/bench_set_cover.py --points 3000 --orientations 12 --valid-fraction 0.5
+    python -m benchmarks.planning.set_cover                   # o3 o6 o12 o12-all, every solver
+    python -m benchmarks.planning.set_cover --presets full --solvers greedy IP_basic
+    python -m benchmarks.planning.set_cover --points 3000 --orientations 12 --valid-fraction 0.5
 """
 
 from __future__ import annotations
@@ -17,15 +16,11 @@ import time
 
 from agiprobot_measurement.planning.set_cover import SOLVER_TYPES, solve_set_cover
 from agiprobot_measurement.testing.set_cover_instances import cube_instance
+from benchmarks.harness import load_conditions
 
-PRESETS = {
-    "o3": {"n_orientations": 3, "valid_fraction": 0.5},
-    "o6": {"n_orientations": 6, "valid_fraction": 0.5},
-    "o12": {"n_orientations": 12, "valid_fraction": 0.5},
-    "o12-all": {"n_orientations": 12, "valid_fraction": 1.0},
-    "full": {"n_orientations": 12, "n_tilts": 9, "valid_fraction": 1.0},
-}
-DEFAULT_PRESETS = ["o3", "o6", "o12", "o12-all"]
+CONDITIONS = load_conditions("planning_set_cover")
+PRESETS = CONDITIONS.mapping("presets")
+DEFAULT_PRESETS = list(CONDITIONS["default_presets"])
 
 
 def main(argv: list[str] | None = None) -> int:

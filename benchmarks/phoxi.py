@@ -1,14 +1,14 @@
-#!/usr/bin/env python3
-"""Benchmark: the simulated PhoXi scanner rendering the station scene with the robot (frames/s per resolution).
+"""The simulated PhoXi scanner rendering the station scene with the robot (frames/s per resolution).
 
 Each frame is what the node does per trigger without ROS: the robot's links posed by FK at a different joint state
 every frame, the scene (objects, part, robot) concatenated into one mesh, a fresh Embree scene, camera rays, shadow
 rays, noise, normals and texture. ``--messages`` adds building the driver's messages (cloud, images, camera info).
-Targets of the issue: high resolution <= 2 s per frame, low resolution <= 0.6 s per frame (2-core machine).
+Targets (conditions/phoxi.yaml): high resolution <= 2 s per frame, low resolution <= 0.6 s per frame (2-core
+machine); saving a high-resolution frame as PTX <= 2 s.
 
-  python3 scripts/bench_phoxi.py                  # 5 frames each of high and low resolution, model of the config
-  python3 scripts/bench_phoxi.py --frames 10 --model M --messages
-  python3 scripts/bench_phoxi.py --ptx            # time V2/save_last_frame of one high-resolution frame (.ptx, .ply)
+  python -m benchmarks.phoxi                  # 5 frames each of high and low resolution, model of the config
+  python -m benchmarks.phoxi --frames 10 --model M --messages
+  python -m benchmarks.phoxi --ptx            # time V2/save_last_frame of one high-resolution frame (.ptx, .ply)
 """
 
 from __future__ import annotations
@@ -16,32 +16,31 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
-import sys
+import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-try:
-    import agiprobot_measurement  # noqa: F401
-except ImportError:  # run from a checkout without the catkin environment
-    sys.path.insert(0, str(ROOT / "src"))
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-from agiprobot_measurement.motion.kinematics import KinematicModel  # noqa: E402
-from agiprobot_measurement.sensors.phoxi.device import frame_output, load_camera_config  # noqa: E402
-from agiprobot_measurement.sensors.phoxi.models import RESOLUTION_HIGH, RESOLUTION_LOW, load_scanner_model  # noqa: E402
-from agiprobot_measurement.sensors.phoxi.renderer import RayCaster, ScanSettings, StructuredLightScanner  # noqa: E402
-from agiprobot_measurement.sensors.phoxi.scene_geometry import (  # noqa: E402
+from agiprobot_measurement.motion.kinematics import KinematicModel
+from agiprobot_measurement.sensors.phoxi.device import PhoxiDevice, frame_output, load_camera_config
+from agiprobot_measurement.sensors.phoxi.models import RESOLUTION_HIGH, RESOLUTION_LOW, load_scanner_model
+from agiprobot_measurement.sensors.phoxi.renderer import RayCaster, ScanSettings, StructuredLightScanner
+from agiprobot_measurement.sensors.phoxi.scene_geometry import (
     RobotGeometry,
     SceneGeometry,
     scene_geometry,
 )
-from agiprobot_measurement.station import Station  # noqa: E402
-from agiprobot_measurement.station.urdf_model import UrdfModel  # noqa: E402
+from agiprobot_measurement.station import Station
+from agiprobot_measurement.station.urdf_model import UrdfModel
+from benchmarks.harness import Target, format_targets, load_conditions
+
+CONDITIONS = load_conditions("phoxi")
+TARGETS = CONDITIONS.mapping("targets")
 
 
 def build_messages(frame) -> None:
+    # the ROS message modules only with --messages: the benchmark runs without ROS otherwise
     from std_msgs.msg import Header
 
     from agiprobot_measurement.ros import phoxi_messages
@@ -59,11 +58,7 @@ def build_messages(frame) -> None:
 
 def bench_saving(model_name: str | None, repeats: int) -> int:
     """Seconds to write the last frame (high resolution, the station's scene) as PTX and as PLY, as the node's
-    V2/save_last_frame does; the PTX target is <= 2 s (it took 13 s with a per-row text writer)."""
-    import tempfile
-
-    from agiprobot_measurement.sensors.phoxi.device import PhoxiDevice
-
+    V2/save_last_frame does, against the PTX target."""
     station = Station.load()
     config = load_camera_config()
     model = load_scanner_model(model_name or config.model)
@@ -88,14 +83,22 @@ def bench_saving(model_name: str | None, repeats: int) -> int:
                 f"{extension}: {statistics.mean(times):.3f} s mean, min {min(times):.3f} s, max {max(times):.3f} s "
                 f"({size:.1f} MB)"
             )
-    ok = results["ptx"] <= 2.0
-    print(f"ptx target <= 2.0 s: {'ok' if ok else 'MISSED'}")
-    return 0 if ok else 1
+    limit = TARGETS["ptx_save_s"]
+    target = Target(
+        "save a high-resolution frame as .ptx", f"{results['ptx']:.3f} s", f"<= {limit:g} s", results["ptx"] <= limit
+    )
+    print(format_targets([target]))
+    return 0 if target.ok else 1
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--frames", type=int, default=5, help="timed frames per resolution (after one warm-up)")
+    parser.add_argument(
+        "--frames",
+        type=int,
+        default=CONDITIONS.mapping("defaults")["frames"],
+        help="timed frames per resolution (after one warm-up)",
+    )
     parser.add_argument("--model", default=None, help="PhoXi model (default: config/phoxi_camera.yaml's)")
     parser.add_argument("--messages", action="store_true", help="also build the ROS messages of each frame")
     parser.add_argument("--workers", type=int, default=None, help="render threads (default: CPUs, at most 4)")
@@ -120,8 +123,11 @@ def main(argv=None) -> int:
         f"{scanner.workers} render threads, load average {os.getloadavg()[0]:.1f}"
         + ("; with messages" if args.messages else "")
     )
-    results = {}
-    for resolution, label, target in ((RESOLUTION_HIGH, "high", 2.0), (RESOLUTION_LOW, "low", 0.6)):
+    targets = []
+    for resolution, label, target in (
+        (RESOLUTION_HIGH, "high", TARGETS["high_s_per_frame"]),
+        (RESOLUTION_LOW, "low", TARGETS["low_s_per_frame"]),
+    ):
         settings = ScanSettings(resolution=resolution)
         times, cpu, valid = [], [], []
         for i in range(args.frames + 1):
@@ -138,16 +144,16 @@ def main(argv=None) -> int:
                 cpu.append(elapsed_cpu)
                 valid.append(frame.stats["valid"])
         mean = statistics.mean(times)
-        results[label] = mean
         intr = model.intrinsics(resolution)
         print(
             f"{label:>4} {intr.width}x{intr.height}: {mean:.3f} s/frame ({1.0 / mean:.2f} frames/s), "
             f"min {min(times):.3f} s, max {max(times):.3f} s, CPU {statistics.mean(cpu):.3f} s/frame, "
-            f"{statistics.mean(valid):,.0f} valid points; "
-            f"target <= {target} s: {'ok' if mean <= target else 'MISSED'}"
+            f"{statistics.mean(valid):,.0f} valid points"
         )
-    return 0 if results["high"] <= 2.0 and results["low"] <= 0.6 else 1
+        targets.append(Target(f"{label} resolution per frame", f"{mean:.3f} s", f"<= {target:g} s", mean <= target))
+    print(format_targets(targets))
+    return 0 if all(t.ok for t in targets) else 1
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

@@ -1,5 +1,4 @@
-#!/usr/bin/env python3
-"""Benchmark of the 3D next-best-view methods on the simulated station (issue 17, brief section 4.4).
+"""The 3D next-best-view methods on the simulated station.
 
 Per object (the shared parts scaled to a 100-250 mm largest extent, the procedural concave shapes, or any mesh
 path) it builds the observable ground truth once, then runs every method on the same station, candidate pool and
@@ -12,14 +11,14 @@ most new points, or the most per rad of the move): in the targets, ``*_straight_
 straight joint distance, and ours', with the best volumetric metric's at equal coverage (what exact gains could
 save; the executed paths add the detours around obstacles).
 
-examples:
-  bench_nbv.py --objects cube cup two_towers --methods ours random hemisphere12 oracle --json /tmp/nbv.json
-  bench_nbv.py --objects all --methods ours occlusion_aware unobserved_voxel rear_side_voxel rear_side_entropy \\
+examples (python -m benchmarks.nbv3d ...):
+  --objects cube cup two_towers --methods ours random hemisphere12 oracle --json /tmp/nbv.json
+  --objects all --methods ours occlusion_aware unobserved_voxel rear_side_voxel rear_side_entropy \\
       proximity_count average_entropy area_factor report3d random hemisphere6 hemisphere12 hemisphere24 oracle \\
       --max-views 20 --json nbv_full.json
-  bench_nbv.py --objects all --methods ours --seeds 2 --ours-weight proximity_count=1 --ours-weight report=0.3 \\
+  --objects all --methods ours --seeds 2 --ours-weight proximity_count=1 --ours-weight report=0.3 \\
       --config-option motion.opening_elevation_deg=90 --json variant.json     # then --merge nbv_full.json variant.json
-  bench_nbv.py --gain-quality --objects all --max-views 10 --compare-weights proximity_count=1,report=0.3
+  --gain-quality --objects all --max-views 10 --compare-weights proximity_count=1,report=0.3
 
 Objects: cube, cylinder, featuretype, fandisk, angle_block, idler_riser, plate_holes (shared parts), u_channel,
 cup, two_towers, l_bracket, torus (procedural), or a mesh path (mm); "all" = every named one.
@@ -28,6 +27,7 @@ cup, two_towers, l_bracket, torus (procedural), or a mesh path (mm); "all" = eve
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import sys
@@ -36,27 +36,26 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-try:
-    import agiprobot_measurement  # noqa: F401
-except ImportError:
-    sys.path.insert(0, str(ROOT / "src"))
+from agiprobot_measurement.errors import InputError
+from agiprobot_measurement.nbv.gain_names import GAIN_NAMES
+from agiprobot_measurement.nbv.ground_truth import (
+    GainQuality,
+    GroundTruth,
+    auc,
+    oracle_views,
+    simulate,
+    views_to,
+)
+from agiprobot_measurement.nbv.reconstruction import METHODS, ReconstructionRequest
+from agiprobot_measurement.nbv.station3d import SimulatedNBVStation, load_nbv_config
+from benchmarks.harness import ROOT, load_conditions, number_value, parse_key_values, write_json
 
-from agiprobot_measurement.errors import InputError  # noqa: E402
-from agiprobot_measurement.nbv.gain_names import GAIN_NAMES  # noqa: E402
-
-SHARED = ROOT.parent / "shared" / "parts"
+CONDITIONS = load_conditions("nbv3d_loop")
+SHARED = (ROOT / CONDITIONS["parts_dir"]).resolve()
 #: name -> (file, unit, largest extent (m) on the fixture or None to keep it)
-PARTS = {
-    "cube": ("objectA_wuerfel.stl", "mm", None),
-    "cylinder": ("objectB_zylinder.stl", "mm", None),
-    "featuretype": ("featuretype.STL", "inch", 0.15),
-    "fandisk": ("fandisk.obj", "dm", 0.17),
-    "angle_block": ("angle_block.STL", "inch", 0.12),
-    "idler_riser": ("idler_riser.STL", "inch", 0.15),
-    "plate_holes": ("plate_holes.STL", "mm", 0.25),
-}
-SHAPE_NAMES = ("u_channel", "cup", "two_towers", "l_bracket", "torus")
+PARTS = {name: (p["file"], p["unit"], p["extent_m"]) for name, p in CONDITIONS.mapping("parts").items()}
+SHAPE_NAMES = tuple(CONDITIONS["shapes"])
+DEFAULTS = CONDITIONS.mapping("defaults")
 #: the seven volumetric metrics of Isler / Delmerico (every gain but the report's own)
 VOLUMETRIC = tuple(name for name in GAIN_NAMES if name != "report")
 
@@ -130,8 +129,6 @@ def self_terminated(summary: dict) -> dict:
     fired (the views and their measurements are the same up to there; the motions between them may differ, since
     OMPL's random planner is seeded once per process), with the metrics of that prefix. A run whose rule never fired is
     returned as it is."""
-    from agiprobot_measurement.nbv.ground_truth import auc, views_to
-
     stop = summary.get("stop") or {}
     if "view" not in stop:
         return summary
@@ -139,15 +136,22 @@ def self_terminated(summary: dict) -> dict:
     out = {key: value for key, value in summary.items() if key != "stop"}
     log = summary["view_log"][:k]
     curve = summary.get("coverage_curve", [])[:k]
-    out.update({
-        "termination_reason": stop["reason"], "views": k, "view_log": log, "coverage_curve": curve,
-        "planning_s_per_view": summary["planning_s_per_view"][: max(k - 1, 0)],
-        "joint_path_rad": float(sum(v["joint_path_rad"] for v in log)),
-        "motion_time_s": float(sum(v["motion_s"] for v in log)),
-        "coverage": stop.get("coverage", curve[-1] if curve else None),
-        "coverage_full_surface": stop.get("coverage_full_surface"),
-        "auc10": auc(curve, 10), "n90": views_to(curve, 0.90), "n95": views_to(curve, 0.95),
-    })  # fmt: skip
+    out.update(
+        {
+            "termination_reason": stop["reason"],
+            "views": k,
+            "view_log": log,
+            "coverage_curve": curve,
+            "planning_s_per_view": summary["planning_s_per_view"][: max(k - 1, 0)],
+            "joint_path_rad": float(sum(v["joint_path_rad"] for v in log)),
+            "motion_time_s": float(sum(v["motion_s"] for v in log)),
+            "coverage": stop.get("coverage", curve[-1] if curve else None),
+            "coverage_full_surface": stop.get("coverage_full_surface"),
+            "auc10": auc(curve, 10),
+            "n90": views_to(curve, 0.90),
+            "n95": views_to(curve, 0.95),
+        }
+    )
     for key in ("chamfer_mm", "accuracy_mm", "completeness_mm"):
         if key in stop:
             out[key] = stop[key]
@@ -183,37 +187,67 @@ def fmt(v, spec=".3f"):
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], epilog=__doc__.split("\n\n", 1)[1],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
-    parser.add_argument("--objects", nargs="+", default=["cube", "cup"])
-    parser.add_argument("--methods", nargs="+", default=["ours", "random", "hemisphere12"])
-    parser.add_argument("--max-views", type=int, default=20)
-    parser.add_argument("--random-seeds", type=int, default=5)
+    parser = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0],
+        epilog=__doc__.split("\n\n", 1)[1],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--objects", nargs="+", default=list(DEFAULTS["objects"]))
+    parser.add_argument("--methods", nargs="+", default=list(DEFAULTS["methods"]))
+    parser.add_argument("--max-views", type=int, default=DEFAULTS["max_views"])
+    parser.add_argument("--random-seeds", type=int, default=DEFAULTS["random_seeds"])
     parser.add_argument("--seed", type=int, default=0, help="scene noise seed, and the first run seed")
     parser.add_argument("--seeds", type=int, default=1, help="run seeds of every method but random (seed, seed+1, ...)")
-    parser.add_argument("--no-budget-run", action="store_true",
-                        help="ours stops at its stopping rule (default: it goes on to the budget, the rule's view is "
-                             "noted, and the self-terminated run is the prefix: 'ours' = that prefix, "
-                             "'ours@budget' = the whole run)")  # fmt: skip
-    parser.add_argument("--ours-option", action="append", default=[], metavar="FIELD=NUMBER",
-                        help="a numeric ReconstructionRequest field for 'ours' only (repeatable), e.g. "
-                             "cost_weight=0.15")  # fmt: skip
-    parser.add_argument("--ours-weight", action="append", default=[], metavar="TERM=WEIGHT",
-                        help="a term of ours' score (repeatable; together they replace config/nbv.yaml "
-                             "planning.ours_weights for this run), e.g. proximity_count=1 average_entropy=2")  # fmt: skip
-    parser.add_argument("--config-option", action="append", default=[], metavar="SECTION.KEY=NUMBER",
-                        help="override a numeric entry of config/nbv.yaml for every method of this run (repeatable), "
-                             "e.g. motion.opening_elevation_deg=55")  # fmt: skip
-    parser.add_argument("--gain-quality", action="store_true",
-                        help="instead of the benchmark: run 'ours' once per object and measure, at each of its first "
-                             "8 decisions below 97 %% coverage, how much of the truly best candidate's new coverage "
-                             "each gain's best candidate gets (1 = it picks the truly best view)")  # fmt: skip
-    parser.add_argument("--compare-weights", action="append", default=[], metavar="TERM=W,TERM=W",
-                        help="with --gain-quality: also score this mix of ours' terms on the same decisions "
-                             "(repeatable), e.g. proximity_count=1,report=0.3")  # fmt: skip
-    parser.add_argument("--pixel-step", type=int, default=2)
-    parser.add_argument("--gt-spacing", type=float, default=0.002, help="ground-truth point spacing (m)")
-    parser.add_argument("--gt-directions", type=int, default=200)
+    parser.add_argument(
+        "--no-budget-run",
+        action="store_true",
+        help="ours stops at its stopping rule (default: it goes on to the budget, the rule's view is "
+        "noted, and the self-terminated run is the prefix: 'ours' = that prefix, "
+        "'ours@budget' = the whole run)",
+    )
+    parser.add_argument(
+        "--ours-option",
+        action="append",
+        default=[],
+        metavar="FIELD=NUMBER",
+        help="a numeric ReconstructionRequest field for 'ours' only (repeatable), e.g. cost_weight=0.15",
+    )
+    parser.add_argument(
+        "--ours-weight",
+        action="append",
+        default=[],
+        metavar="TERM=WEIGHT",
+        help="a term of ours' score (repeatable; together they replace config/nbv.yaml "
+        "planning.ours_weights for this run), e.g. proximity_count=1 average_entropy=2",
+    )
+    parser.add_argument(
+        "--config-option",
+        action="append",
+        default=[],
+        metavar="SECTION.KEY=NUMBER",
+        help="override a numeric entry of config/nbv.yaml for every method of this run (repeatable), "
+        "e.g. motion.opening_elevation_deg=55",
+    )
+    parser.add_argument(
+        "--gain-quality",
+        action="store_true",
+        help="instead of the benchmark: run 'ours' once per object and measure, at each of its first "
+        "8 decisions below 97 %% coverage, how much of the truly best candidate's new coverage "
+        "each gain's best candidate gets (1 = it picks the truly best view)",
+    )
+    parser.add_argument(
+        "--compare-weights",
+        action="append",
+        default=[],
+        metavar="TERM=W,TERM=W",
+        help="with --gain-quality: also score this mix of ours' terms on the same decisions "
+        "(repeatable), e.g. proximity_count=1,report=0.3",
+    )
+    parser.add_argument("--pixel-step", type=int, default=DEFAULTS["pixel_step"])
+    parser.add_argument(
+        "--gt-spacing", type=float, default=DEFAULTS["gt_spacing_m"], help="ground-truth point spacing (m)"
+    )
+    parser.add_argument("--gt-directions", type=int, default=DEFAULTS["gt_directions"])
     parser.add_argument("--json", default=None, help="write the results here")
     parser.add_argument("--no-chamfer", action="store_true")
     parser.add_argument("--merge", nargs="+", default=None, help="only merge earlier --json files and print")
@@ -232,24 +266,11 @@ def main(argv=None) -> int:
 def ours_overrides(options: list[str]) -> dict:
     """``--ours-option FIELD=NUMBER`` as request overrides; a field that is not a numeric request field, or a value
     that is not a number, is refused with its name (the request validates the range)."""
-    import dataclasses
-
-    from agiprobot_measurement.nbv.reconstruction import ReconstructionRequest
-
     numeric = {f.name for f in dataclasses.fields(ReconstructionRequest) if f.type in ("float", "int", float, int)}
     numeric -= {"seed", "max_views"}  # --seed / --seeds and --max-views set them for every method
-    out = {}
-    for option in options:
-        name, sep, text = option.partition("=")
-        if not sep or name not in numeric:
-            raise InputError(
-                f"--ours-option {option!r}: expected FIELD=NUMBER, FIELD one of {', '.join(sorted(numeric))}"
-            )
-        try:
-            out[name] = float(text)
-        except ValueError:
-            raise InputError(f"--ours-option {option!r}: {text!r} is not a number") from None
-    return out
+    return parse_key_values(
+        options, "--ours-option", "FIELD=NUMBER", sorted(numeric), lambda _, text: number_value(text)
+    )
 
 
 def ours_weights(options: list[str], flag: str = "--ours-weight") -> dict | None:
@@ -258,18 +279,7 @@ def ours_weights(options: list[str], flag: str = "--ours-weight") -> dict | None
     if not options:
         return None
     known = ("expected_surface", *GAIN_NAMES)
-    out = {}
-    for option in options:
-        name, sep, text = option.partition("=")
-        if not sep or name not in known:
-            raise InputError(f"{flag} {option!r}: expected TERM=WEIGHT, TERM one of {', '.join(known)}")
-        try:
-            weight = float(text)
-        except ValueError:
-            raise InputError(f"{flag} {option!r}: {text!r} is not a number") from None
-        if not (math.isfinite(weight) and weight >= 0):
-            raise InputError(f"{flag} {option!r}: the weight must be a finite number >= 0")
-        out[name] = weight
+    out = parse_key_values(options, flag, "TERM=WEIGHT", known, lambda _, text: number_value(text, low=0.0))
     if not any(out.values()):
         raise InputError(f"{flag}: at least one weight must be positive")
     return out
@@ -278,29 +288,22 @@ def ours_weights(options: list[str], flag: str = "--ours-weight") -> dict | None
 def config_overrides(options: list[str], config: dict) -> dict:
     """``--config-option SECTION.KEY=NUMBER`` as {(section, key): number}; the entry must exist in ``config`` (the
     loaded config/nbv.yaml) and be a number there, the value must be a finite number."""
-    out = {}
-    for option in options:
-        path, sep, text = option.partition("=")
+
+    def value(path: str, text: str) -> float:
         section, dot, key = path.partition(".")
-        if not sep or not dot:
-            raise InputError(f"--config-option {option!r}: expected SECTION.KEY=NUMBER")
+        if not dot:
+            raise InputError("expected SECTION.KEY=NUMBER")
         current = config.get(section, {}).get(key) if isinstance(config.get(section), dict) else None
         if isinstance(current, bool) or not isinstance(current, (int, float)):
-            raise InputError(f"--config-option {option!r}: config/nbv.yaml has no numeric entry {section}.{key}")
-        try:
-            value = float(text)
-        except ValueError:
-            raise InputError(f"--config-option {option!r}: {text!r} is not a number") from None
-        if not math.isfinite(value):
-            raise InputError(f"--config-option {option!r}: the value must be finite")
-        out[(section, key)] = value
-    return out
+            raise InputError(f"config/nbv.yaml has no numeric entry {section}.{key}")
+        return number_value(text)
+
+    parsed = parse_key_values(options, "--config-option", "SECTION.KEY=NUMBER", value=value)
+    return {tuple(path.partition(".")[::2]): number for path, number in parsed.items()}
 
 
 def _setup(args):
     """(objects, their specs, the config with the command line's overrides, ours' request overrides)."""
-    from agiprobot_measurement.nbv.station3d import load_nbv_config
-
     objects = [*PARTS, *SHAPE_NAMES] if args.objects == ["all"] else args.objects
     ours_options = ours_overrides(args.ours_option)
     weights = ours_weights(args.ours_weight)
@@ -318,19 +321,19 @@ def _setup(args):
 
 
 def gain_quality(args) -> int:
-    """``--gain-quality``: per object one 'ours' run with a :class:`~.ground_truth.GainQuality` hook."""
-    from agiprobot_measurement.common.files import atomic_write_text
-    from agiprobot_measurement.nbv.ground_truth import GainQuality, GroundTruth, simulate
-    from agiprobot_measurement.nbv.reconstruction import ReconstructionRequest
-    from agiprobot_measurement.nbv.station3d import SimulatedNBVStation
-
+    """``--gain-quality``: per object one 'ours' run with a ``GainQuality`` hook."""
     objects, specs, config, ours_options, options = _setup(args)
     # the configured score without its motion cost, and the mixes to compare, on the same decisions
     mixes = {"score": dict(config.get("planning", {}).get("ours_weights", {}))}
     for i, text in enumerate(args.compare_weights, start=1):
         mixes[f"mix{i}"] = ours_weights(text.split(","), flag="--compare-weights")
-    results = {"max_views": args.max_views, "pixel_step": args.pixel_step, **options, "gain_quality": {},
-               "mixes": mixes}  # fmt: skip
+    results = {
+        "max_views": args.max_views,
+        "pixel_step": args.pixel_step,
+        **options,
+        "gain_quality": {},
+        "mixes": mixes,
+    }
     for name, (part, units, extent) in zip(objects, specs, strict=True):
         station = SimulatedNBVStation(part, units, extent, seed=args.seed, pixel_step=args.pixel_step, config=config)
         truth = GroundTruth(station, spacing_m=args.gt_spacing, directions=args.gt_directions)
@@ -350,15 +353,11 @@ def gain_quality(args) -> int:
         print(f"{obj:12s} " + " ".join(f"{fmt(r.get(n)):>10s}" for n in names))
     print(f"{'median':12s} " + " ".join(f"{medians[n]:10.3f}" for n in names))
     if args.json:
-        atomic_write_text(Path(args.json).expanduser(), json.dumps(results, indent=1, default=float))
+        write_json(args.json, results)
     return 0
 
 
 def run(args) -> int:
-    from agiprobot_measurement.nbv.ground_truth import GroundTruth, oracle_views, simulate
-    from agiprobot_measurement.nbv.reconstruction import METHODS, ReconstructionRequest
-    from agiprobot_measurement.nbv.station3d import SimulatedNBVStation
-
     for m in args.methods:
         if m != "oracle" and m not in METHODS:
             raise InputError(f"unknown method {m!r}; known: {', '.join([*METHODS, 'oracle'])}")
@@ -375,14 +374,19 @@ def run(args) -> int:
             "gt_poses": int(truth.visibility.matrix.shape[1]),
             "methods": {},
         }
-        print(f"[{name}] {entry['extent_mm']:.0f} mm, observable {truth.n_observable}/{len(truth.points_m)} "
-              f"from {entry['gt_poses']} poses ({time.perf_counter() - t:.1f} s)", file=sys.stderr)  # fmt: skip
+        print(
+            f"[{name}] {entry['extent_mm']:.0f} mm, observable {truth.n_observable}/{len(truth.points_m)} "
+            f"from {entry['gt_poses']} poses ({time.perf_counter() - t:.1f} s)",
+            file=sys.stderr,
+        )
         for method in args.methods:
             if method == "oracle":
                 oracle = oracle_views(truth)
                 entry["methods"]["oracle"] = oracle
-                print(f"[{name}] oracle: set cover {oracle.get('set_cover_views')} views, n95 {oracle['n95']}",
-                      file=sys.stderr)  # fmt: skip
+                print(
+                    f"[{name}] oracle: set cover {oracle.get('set_cover_views')} views, n95 {oracle['n95']}",
+                    file=sys.stderr,
+                )
                 continue
             seeds = range(args.random_seeds) if method == "random" else range(args.seed, args.seed + args.seeds)
             runs, budget_runs = [], []
@@ -399,9 +403,12 @@ def run(args) -> int:
                     budget_runs.append(summary)
                     summary = self_terminated(summary)
                 runs.append(summary)
-                print(f"[{name}] {method} seed {seed}: {summary['views']} views, coverage "
-                      f"{fmt(summary.get('coverage'))}, {summary['termination_reason']}, "
-                      f"{summary['wall_time_s']:.0f} s", file=sys.stderr)  # fmt: skip
+                print(
+                    f"[{name}] {method} seed {seed}: {summary['views']} views, coverage "
+                    f"{fmt(summary.get('coverage'))}, {summary['termination_reason']}, "
+                    f"{summary['wall_time_s']:.0f} s",
+                    file=sys.stderr,
+                )
             entry["methods"][method] = {"summary": aggregate(runs, args.max_views), "runs": runs}
             if budget_runs:
                 entry["methods"][method + "@budget"] = {
@@ -410,16 +417,12 @@ def run(args) -> int:
                 }
         results["objects"][name] = entry
         if args.json:  # after every object, so that a long run cut short keeps what it measured
-            from agiprobot_measurement.common.files import atomic_write_text
-
             results["targets"] = targets(results)
-            atomic_write_text(Path(args.json).expanduser(), json.dumps(results, indent=1, default=float))
+            write_json(args.json, results)
     results["targets"] = targets(results)
     print_table(results)
     if args.json:
-        from agiprobot_measurement.common.files import atomic_write_text
-
-        atomic_write_text(Path(args.json).expanduser(), json.dumps(results, indent=1, default=float))
+        write_json(args.json, results)
     return 0
 
 
@@ -439,14 +442,12 @@ def merge(args) -> int:
     results["targets"] = targets(results)
     print_table(results)
     if args.json:
-        from agiprobot_measurement.common.files import atomic_write_text
-
-        atomic_write_text(Path(args.json).expanduser(), json.dumps(results, indent=1, default=float))
+        write_json(args.json, results)
     return 0
 
 
 def targets(results: dict) -> dict:
-    """The issue's targets, per object and as the median over objects (where the methods were run).
+    """The targets' figures, per object and as the median over objects (where the methods were run).
 
     "The best volumetric metric" is the one of the seven with the best median over the objects (of C(4), resp.
     AUC(10)), so one metric for all objects as a user would pick it; ``*_per_object_max`` is the stricter bound
@@ -491,15 +492,25 @@ def targets(results: dict) -> dict:
             row["ours_budget_final"] = m["ours@budget"]["summary"]["final_coverage"]
             row["ours_stop_loss_max"] = float(max(losses))
             row["ours_stopped_before_budget"] = float(
-                np.mean([r["views"] < results["max_views"] and r["termination_reason"] != "max_views"
-                         for r in m["ours"]["runs"]])
-            )  # fmt: skip
+                np.mean(
+                    [
+                        r["views"] < results["max_views"] and r["termination_reason"] != "max_views"
+                        for r in m["ours"]["runs"]
+                    ]
+                )
+            )
         vol = {k: v["summary"] for k, v in m.items() if k in VOLUMETRIC}
         if vol:
             k4 = max(vol, key=lambda k: vol[k]["c4"] or 0.0)
             ka = max(vol, key=lambda k: vol[k]["auc10"] or 0.0)
-            row.update({"best_volumetric_c4_per_object_max": vol[k4]["c4"], "best_volumetric_c4_per_object": k4,
-                        "best_volumetric_auc10_per_object_max": vol[ka]["auc10"], "best_volumetric_auc10_per_object": ka})  # fmt: skip
+            row.update(
+                {
+                    "best_volumetric_c4_per_object_max": vol[k4]["c4"],
+                    "best_volumetric_c4_per_object": k4,
+                    "best_volumetric_auc10_per_object_max": vol[ka]["auc10"],
+                    "best_volumetric_auc10_per_object": ka,
+                }
+            )
         if best_auc in m:
             row["best_volumetric_c4"] = m[best_c4]["summary"]["c4"]
             row["best_volumetric_auc10"] = m[best_auc]["summary"]["auc10"]
@@ -574,8 +585,10 @@ def print_table(results: dict) -> None:
     for name, entry in results["objects"].items():
         for method, data in entry["methods"].items():
             if method == "oracle":
-                print(f"{name:<12} {'oracle':<18} set cover {data.get('set_cover_views')} views, greedy N90 "
-                      f"{data.get('n90')} N95 {data.get('n95')}")  # fmt: skip
+                print(
+                    f"{name:<12} {'oracle':<18} set cover {data.get('set_cover_views')} views, greedy N90 "
+                    f"{data.get('n90')} N95 {data.get('n95')}"
+                )
                 continue
             s = data["summary"]
             c = s["coverage_curve_mean"]
@@ -600,12 +613,14 @@ def print_table(results: dict) -> None:
                 for k, v in tg["volumetric_medians"].items()
             )
         )
-        print(f"best volumetric metric (median): C(4) {tg['best_volumetric_c4_metric']}, "
-              f"AUC(10) {tg['best_volumetric_auc10_metric']}")  # fmt: skip
+        print(
+            f"best volumetric metric (median): C(4) {tg['best_volumetric_c4_metric']}, "
+            f"AUC(10) {tg['best_volumetric_auc10_metric']}"
+        )
     medians = tg.get("median", {})
     if medians:
         print("median over objects: " + ", ".join(f"{k} {v:.3f}" for k, v in medians.items() if v is not None))
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

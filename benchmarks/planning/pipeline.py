@@ -1,8 +1,7 @@
-#!/usr/bin/env python3
-"""Benchmark: the whole planning pipeline on the original's benchmark part, beside the original's numbers.
+"""The whole planning pipeline on the original's benchmark part, beside the original's numbers.
 
-The cube ``parts/objectA_wuerfel.stl`` (mm) at 0.03 points/mm^2 (1,500 samples, bottom removed), planned with
-TrajectoryManager: sampling, metrology, mechanics (lazy, inside the set cover), set cover, connection.
+The cube of ``conditions/planning_pipeline.yaml`` (mm) at 0.03 points/mm^2 (1,500 samples, bottom removed), planned
+with TrajectoryManager: sampling, metrology, mechanics (lazy, inside the set cover), set cover, connection.
 Default rows: 12 orientations with tilt none (IP_basic and greedy) and tilt full (greedy, and IP_basic with
 a time limit); ``--all`` adds the original's rows with 3 and 6 orientations. Every configuration runs once, in a
 fresh process, so the peak memory (ru_maxrss) of each row is its own.
@@ -16,44 +15,50 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import resource
-import subprocess
 import sys
 import time
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-PART = ROOT / "parts" / "objectA_wuerfel.stl"
-DENSITY = 0.03
-PLAN_TIME_LIMIT_S = 300.0  # the request's default whole-plan limit (config/trajectory_manager.yaml)
-THRESHOLD_MM = 0.1
+from agiprobot_measurement.planning.trajectory_manager import TrajectoryManager
+from benchmarks.harness import (
+    ROOT,
+    ChildFailed,
+    Target,
+    child_command,
+    format_table,
+    format_targets,
+    load_conditions,
+    peak_rss_mb,
+    run_json,
+    write_json,
+)
+
+CONDITIONS = load_conditions("planning_pipeline")
+PART = ROOT / CONDITIONS["part"]
+DENSITY = CONDITIONS.number("density_points_per_mm2", low=0.0)
+PLAN_TIME_LIMIT_S = CONDITIONS.number("plan_time_limit_s", low=0.0)
+THRESHOLD_MM = CONDITIONS.number("threshold_mm", low=0.0)
+DEFAULTS = CONDITIONS.mapping("defaults")
 
 #: (orientations, tilt) -> valid viewpoints, generation + evaluation s, greedy (views, s), IP_basic (views, s),
 #: est. execution s (IP, greedy); None where the original has no number.
 ORIGINAL = {
-    (3, "none"): (2306, 194.0, (15, 0.9), (10, 108.0), (64.0, 64.0)),
-    (6, "none"): (4619, 538.0, (15, 1.9), (10, 268.0), (65.0, 82.0)),
-    (12, "none"): (8937, 1065.0, (15, 3.7), (10, 697.0), (63.0, 84.0)),
-    (12, "full"): (75900, 10116.0, None, None, (None, None)),
+    (row["orientations"], row["tilt"]): (
+        row["valid"],
+        row["generation_s"],
+        None if row["greedy"] is None else tuple(row["greedy"]),
+        None if row["ip"] is None else tuple(row["ip"]),
+        tuple(row["execution_s"]),
+    )
+    for row in CONDITIONS["original"]
 }
 
-TARGETS = {"none": 20.0, "full": 120.0}  # s for sampling + evaluation + mechanics
-TARGET_IP_S, TARGET_GREEDY_S, TARGET_PEAK_MB = 10.0, 1.0, 4096.0
-
-
-def peak_rss_mb() -> float:
-    # ru_maxrss is in KiB on Linux
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+_TARGETS = CONDITIONS.mapping("targets")
+TARGETS = dict(_TARGETS["generation_s"])  # s for sampling + evaluation + mechanics, per tilt
+TARGET_IP_S, TARGET_GREEDY_S, TARGET_PEAK_MB = _TARGETS["ip_s"], _TARGETS["greedy_s"], _TARGETS["peak_mb"]
 
 
 def run_one(orientations: int, tilt: str, solver: str, time_limit_s: float, seed: int) -> dict:
     """One configuration in this process; returns its measurements."""
-    try:
-        import agiprobot_measurement  # noqa: F401
-    except ImportError:  # run from a checkout without the catkin environment
-        sys.path.insert(0, str(ROOT / "src"))
-    from agiprobot_measurement.planning.trajectory_manager import TrajectoryManager
-
     rounds = []
 
     def progress(stage, fraction, message):
@@ -66,7 +71,7 @@ def run_one(orientations: int, tilt: str, solver: str, time_limit_s: float, seed
     _, views = manager.generate_samples_and_viewpoints(DENSITY, THRESHOLD_MM, orientations, tilt)
     # the planner's defaults: an IP may stop at a proven 2 % gap; the loop ends by the whole-plan time limit
     chosen = manager.solve_scp(
-        views, solver, time_limit_s=time_limit_s, mip_gap=0.02, deadline_s=t0 + PLAN_TIME_LIMIT_S
+        views, solver, time_limit_s=time_limit_s, mip_gap=CONDITIONS["mip_gap"], deadline_s=t0 + PLAN_TIME_LIMIT_S
     )
     manager.connect_viewpoints(chosen)
     total_s = time.perf_counter() - t0
@@ -195,21 +200,8 @@ HEADER = [
 ]
 
 
-def format_table(rows: list[list[str]]) -> str:
-    widths = [max(len(row[i]) for row in [HEADER, *rows] if i < len(row)) for i in range(len(HEADER))]
-    lines = [" | ".join(h.ljust(w) for h, w in zip(HEADER, widths, strict=True))]
-    lines.append("-+-".join("-" * w for w in widths))
-    for row in rows:
-        lines.append(" | ".join(c.ljust(w) for c, w in zip(row, widths, strict=False)))
-    return "\n".join(lines)
-
-
-def target_lines(results: list[dict]) -> list[str]:
-    lines = []
-
-    def check(ok: bool) -> str:
-        return "met " if ok else "MISSED"
-
+def target_checks(results: list[dict]) -> list[Target]:
+    targets = []
     for r in results:
         if "error" in r:
             continue
@@ -217,25 +209,42 @@ def target_lines(results: list[dict]) -> list[str]:
         generation = r["generation_s"] + r["mechanics_s"]
         limit = TARGETS.get(r["tilt"])
         if limit is not None:
-            lines.append(
-                f"{check(generation <= limit)} {name}: sampling+evaluation+mechanics {generation:.1f} s <= {limit:.0f} s"
-                f" (whole pipeline {r['total_s']:.1f} s)"
+            targets.append(
+                Target(
+                    f"{name}: sampling+evaluation+mechanics",
+                    f"{generation:.1f} s (whole pipeline {r['total_s']:.1f} s)",
+                    f"<= {limit:.0f} s",
+                    generation <= limit,
+                )
             )
         if r["solver"] == "IP_basic":
-            ok = r["proven_optimal"] and r["set_cover_s"] <= TARGET_IP_S
-            lines.append(
-                f"{check(ok)} {name}: proven optimal ({r['proven_optimal']}) in {r['set_cover_s']:.2f} s "
-                f"<= {TARGET_IP_S:.0f} s (all {r['rounds']} rounds; last solve {r['last_solve_s']:.2f} s)"
+            targets.append(
+                Target(
+                    f"{name}: proven optimal, set cover",
+                    f"{r['proven_optimal']}, {r['set_cover_s']:.2f} s (all {r['rounds']} rounds; last solve "
+                    f"{r['last_solve_s']:.2f} s)",
+                    f"True, <= {TARGET_IP_S:.0f} s",
+                    bool(r["proven_optimal"] and r["set_cover_s"] <= TARGET_IP_S),
+                )
             )
         if r["solver"] == "greedy":
-            lines.append(
-                f"{check(r['set_cover_s'] <= TARGET_GREEDY_S)} {name}: set cover {r['set_cover_s']:.2f} s "
-                f"<= {TARGET_GREEDY_S:.0f} s (all {r['rounds']} rounds; last solve {r['last_solve_s']:.2f} s)"
+            targets.append(
+                Target(
+                    f"{name}: set cover",
+                    f"{r['set_cover_s']:.2f} s (all {r['rounds']} rounds; last solve {r['last_solve_s']:.2f} s)",
+                    f"<= {TARGET_GREEDY_S:.0f} s",
+                    r["set_cover_s"] <= TARGET_GREEDY_S,
+                )
             )
-        lines.append(
-            f"{check(r['peak_mb'] <= TARGET_PEAK_MB)} {name}: peak memory {r['peak_mb']:,.1f} MB <= {TARGET_PEAK_MB:,.0f} MB"
+        targets.append(
+            Target(
+                f"{name}: peak memory",
+                f"{r['peak_mb']:,.1f} MB",
+                f"<= {TARGET_PEAK_MB:,.0f} MB",
+                r["peak_mb"] <= TARGET_PEAK_MB,
+            )
         )
-    return lines
+    return targets
 
 
 def main(argv=None) -> int:
@@ -246,11 +255,20 @@ def main(argv=None) -> int:
     parser.add_argument(
         "--tilt", nargs="+", choices=("none", "limited", "full"), help="run these tilt modes (default none full)"
     )
-    parser.add_argument("--solvers", nargs="+", default=["IP_basic", "greedy"], help="set cover solvers")
-    parser.add_argument("--time-limit", type=float, default=60.0, help="IP time limit per solve, s (60)")
-    parser.add_argument("--full-time-limit", type=float, default=30.0, help="IP time limit with tilt full, s (30)")
+    parser.add_argument("--solvers", nargs="+", default=list(DEFAULTS["solvers"]), help="set cover solvers")
+    parser.add_argument(
+        "--time-limit", type=float, default=DEFAULTS["time_limit_s"], help="IP time limit per solve, s (%(default)g)"
+    )
+    parser.add_argument(
+        "--full-time-limit",
+        type=float,
+        default=DEFAULTS["full_time_limit_s"],
+        help="IP time limit with tilt full, s (%(default)g)",
+    )
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--timeout", type=float, default=1800.0, help="wall-clock limit per configuration, s")
+    parser.add_argument(
+        "--timeout", type=float, default=DEFAULTS["timeout_s"], help="wall-clock limit per configuration, s"
+    )
     parser.add_argument("--json", help="also write the measurements to this JSON file")
     parser.add_argument(
         "--run-one", nargs=4, metavar=("ORIENTATIONS", "TILT", "SOLVER", "TIME_LIMIT"), help=argparse.SUPPRESS
@@ -270,18 +288,11 @@ def main(argv=None) -> int:
     try:
         for orientations, tilt, solver, limit in configurations(args):
             print(f"running {orientations} orientations, tilt {tilt}, {solver} ...", end=" ", flush=True)
-            command = [sys.executable, __file__, "--seed", str(args.seed), "--run-one"]
-            command += [str(orientations), tilt, solver, str(limit)]
+            command = child_command(__spec__.name, "--seed", args.seed, "--run-one", orientations, tilt, solver, limit)
             try:
-                done = subprocess.run(command, capture_output=True, text=True, timeout=args.timeout, check=False)
-                lines = done.stdout.strip().splitlines()
-                if done.returncode != 0 or not lines:
-                    tail = (done.stderr.strip().splitlines() or ["no output"])[-1]
-                    result = {"error": f"exit {done.returncode}: {tail}"}
-                else:
-                    result = json.loads(lines[-1])
-            except subprocess.TimeoutExpired:
-                result = {"error": f"timed out after {args.timeout:.0f} s"}
+                result = run_json(command, args.timeout)
+            except ChildFailed as exc:
+                result = {"error": str(exc)}
             result.update(orientations=orientations, tilt=tilt, solver=solver)
             print(result.get("error") or f"{result['total_s']:.1f} s", flush=True)
             results.append(result)
@@ -293,17 +304,16 @@ def main(argv=None) -> int:
             rows.append(original)
         rows.append(our_row(result))
     print()
-    print(format_table(rows))
+    print(format_table(HEADER, rows))
     print(
         "\ngen+eval+mech = sampling + anchor IK + metrology + viewpoint objects + scan-line mechanics (the original's "
         "'generation + evaluation');\nset cover = all rounds of solve_scp without the mechanics (r = rounds; the "
         "original solved once); est. exec = measuring + connecting."
     )
     print("\ntargets:")
-    for line in target_lines(results):
-        print("  " + line)
+    print(format_targets(target_checks(results)))
     if args.json:
-        Path(args.json).write_text(json.dumps(results, indent=1) + "\n", encoding="utf-8")
+        write_json(args.json, results)
     return 0
 
 

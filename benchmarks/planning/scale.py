@@ -1,5 +1,4 @@
-#!/usr/bin/env python3
-"""Scale benchmark: candidate evaluation of door-sized panels, streamed, in process and on local Dask clusters.
+"""Candidate evaluation of door-sized panels, streamed, in process and on local Dask clusters.
 
 Generated panels of 0.05, 0.2, 0.5 and 1 m^2 (footprint 1.4 : 1, curved in both directions, a grid of pockets
 with steep walls and ribs between them, like a car door's inner panel), placed on the fixture, sampled at 0.03
@@ -20,8 +19,8 @@ model. Its 2-worker value is printed next to the measured one. ``--reproject FIL
 
 Examples::
 
-    scripts/bench_scale.py --areas 0.05 --tilts none          # quick
-    nice -n 10 scripts/bench_scale.py --json scale.json        # everything (the 1 m^2 panel at tilt full: long)
+    python -m benchmarks.planning.scale --areas 0.05 --tilts none          # quick
+    nice -n 10 python -m benchmarks.planning.scale --json scale.json        # everything (1 m^2 at tilt full: long)
 """
 
 from __future__ import annotations
@@ -30,30 +29,39 @@ import argparse
 import dataclasses
 import hashlib
 import json
+import logging
 import math
 import os
-import subprocess
-import sys
+import resource
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+import trimesh
 
-DENSITY = 0.03
-ORIENTATIONS = 12
-THRESHOLD_MM = 0.1
-AREAS_M2 = (0.05, 0.2, 0.5, 1.0)
+from agiprobot_measurement.planning.distributed import peak_rss_bytes
+from agiprobot_measurement.planning.mechanics import reachable_anchors
+from agiprobot_measurement.planning.set_cover import solve_set_cover
+from agiprobot_measurement.planning.streaming import StreamStats, evaluate_streaming
+from agiprobot_measurement.planning.trajectory_manager import TrajectoryManager
+from agiprobot_measurement.planning.viewpoint import generate_viewpoint_poses
+from benchmarks.harness import ChildFailed, child_command, load_conditions, run_json, write_json
+
+CONDITIONS = load_conditions("planning_scale")
+DENSITY = CONDITIONS.number("density_points_per_mm2", low=0.0)
+ORIENTATIONS = CONDITIONS.whole("orientations", low=1)
+THRESHOLD_MM = CONDITIONS.number("threshold_mm", low=0.0)
+AREAS_M2 = tuple(CONDITIONS["areas_m2"])
 #: grid step of the generated panel's height field (mm)
-GRID_MM = 4.0
+GRID_MM = CONDITIONS.number("grid_mm", low=0.0)
+DEFAULTS = CONDITIONS.mapping("defaults")
 
 
 def door_panel(area_m2: float):
     """A closed panel mesh (mm) with a top surface of about ``area_m2``: curved (radii 2.5 m across, 4 m along),
     pockets 25 mm deep with steep walls in a grid of ~300 mm cells, ribs 12 mm high and 10 mm wide between them,
     a bottom 28 mm below the curved surface (a shell). Deterministic."""
-    import trimesh
-
     width = math.sqrt(area_m2 * 1.4) * 1000.0
     height = width / 1.4
     nx, ny = max(8, round(width / GRID_MM)) + 1, max(8, round(height / GRID_MM)) + 1
@@ -110,8 +118,6 @@ def door_panel(area_m2: float):
 
 def minor_faults() -> int:
     """Minor page faults of this process so far (each a page the kernel zeroed and mapped)."""
-    import resource
-
     return int(resource.getrusage(resource.RUSAGE_SELF).ru_minflt)
 
 
@@ -126,10 +132,6 @@ def evaluation_only(args, manager, out: dict) -> None:
     """The evaluation stage alone (``--evaluation-only``): sampling, candidates, anchor reachability, then the
     streamed evaluation with a store headroom of 1 (no later stage holds copies); ``--share`` evaluates a
     contiguous middle share of the reachable candidates (whole samples' groups of orientations and tilts)."""
-    from agiprobot_measurement.planning.mechanics import reachable_anchors
-    from agiprobot_measurement.planning.streaming import StreamStats, evaluate_streaming
-    from agiprobot_measurement.planning.viewpoint import generate_viewpoint_poses
-
     part = manager.part
     started = time.perf_counter()
     samples = part.sample(DENSITY, seed=manager.seed)
@@ -151,9 +153,14 @@ def evaluation_only(args, manager, out: dict) -> None:
     stats = StreamStats()
     cpu_started, faults_started = time.process_time(), minor_faults()
     store, _ = evaluate_streaming(
-        manager.sensor_model, candidates.poses[reachable], THRESHOLD_MM, 500.0, settings=settings,
-        executor=manager.evaluator(), stats=stats,
-    )  # fmt: skip
+        manager.sensor_model,
+        candidates.poses[reachable],
+        THRESHOLD_MM,
+        CONDITIONS["max_deflection_mm"],
+        settings=settings,
+        executor=manager.evaluator(),
+        stats=stats,
+    )
     out["client_cpu_s"] = time.process_time() - cpu_started
     out["client_minor_faults"] = minor_faults() - faults_started
     out.update(samples=len(samples), candidates=len(candidates.poses), reachable=int(reachable.size))
@@ -193,13 +200,7 @@ def fill_stats(out: dict, stats) -> None:
 
 def child(args) -> dict:
     """One configuration in this process; returns its figures."""
-    import logging
-
     logging.disable(logging.WARNING)
-    from agiprobot_measurement.planning.distributed import peak_rss_bytes
-    from agiprobot_measurement.planning.set_cover import solve_set_cover
-    from agiprobot_measurement.planning.trajectory_manager import TrajectoryManager
-
     mesh_file = Path(args.mesh_dir) / f"panel_{args.area:g}.stl"
     manager = TrajectoryManager(workers=args.workers, max_memory_bytes=args.max_memory * 1e9 or None)
     if args.redundancy is not None:
@@ -305,29 +306,42 @@ def projection(run: dict, n_workers: int, scatter: tuple[float, float] | None = 
 
 
 def run_child(area, tilt, workers, mesh_dir, args) -> dict:
-    command = [
-        sys.executable, __file__, "--child", "--area", str(area), "--tilt", tilt, "--workers", str(workers),
-        "--mesh-dir", mesh_dir, "--max-memory", str(args.max_memory),
-    ]  # fmt: skip
+    command = child_command(
+        __spec__.name,
+        "--child",
+        "--area",
+        area,
+        "--tilt",
+        tilt,
+        "--workers",
+        workers,
+        "--mesh-dir",
+        mesh_dir,
+        "--max-memory",
+        args.max_memory,
+    )
     if args.mirrors:
         command.append("--mirrors")
     if args.evaluation_only:
         command += ["--evaluation-only", "--share", str(args.share), "--drop", args.drop]
     if args.redundancy is not None:
         command += ["--redundancy", str(args.redundancy)]
-    done = subprocess.run(command, capture_output=True, text=True, check=False)
-    lines = [line for line in done.stdout.splitlines() if line.startswith("{")]
-    if not lines:
-        return {"area_m2": area, "tilt": tilt, "workers": workers, "error": done.stderr.strip()[-500:]}
-    return json.loads(lines[-1])
+    try:
+        return run_json(command)
+    except ChildFailed as exc:
+        return {"area_m2": area, "tilt": tilt, "workers": workers, "error": str(exc)}
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--areas", type=float, nargs="+", default=list(AREAS_M2), help="panel areas in m^2")
-    parser.add_argument("--tilts", nargs="+", default=["none", "full"], help="tilt modes")
+    parser.add_argument("--tilts", nargs="+", default=list(DEFAULTS["tilts"]), help="tilt modes")
     parser.add_argument(
-        "--configs", type=int, nargs="+", default=[0, 1, 2], help="0 = in process, N = N local Dask workers"
+        "--configs",
+        type=int,
+        nargs="+",
+        default=list(DEFAULTS["configs"]),
+        help="0 = in process, N = N local Dask workers",
     )
     parser.add_argument("--max-memory", type=float, default=0.0, help="memory budget in GB (0 = from the machine)")
     parser.add_argument("--mirrors", action="store_true", help="keep the scene's mirrors (they may block a panel)")
@@ -342,7 +356,9 @@ def main(argv=None) -> int:
     )
     parser.add_argument("--redundancy", type=int, help="force the per-chunk redundancy-fold cover (0 = off)")
     parser.add_argument("--json", help="write all figures here")
-    parser.add_argument("--project", type=int, nargs="+", default=[2, 4, 8, 16], help="worker counts to project")
+    parser.add_argument(
+        "--project", type=int, nargs="+", default=list(DEFAULTS["project"]), help="worker counts to project"
+    )
     parser.add_argument("--reproject", help="print the projections of a --json file again and exit")
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--area", type=float, help=argparse.SUPPRESS)
@@ -376,11 +392,11 @@ def main(argv=None) -> int:
                     results.append(result)
                     report_run(result)
                     if args.json:  # after every run: a long benchmark cut short keeps what it measured
-                        Path(args.json).write_text(json.dumps(results, indent=1))
+                        write_json(args.json, results)
                 report_panel(runs, args.project)
     print("identical stores across configurations:", same_digests(results))
     if args.json:
-        Path(args.json).write_text(json.dumps(results, indent=1))
+        write_json(args.json, results)
     return 0
 
 
@@ -466,4 +482,4 @@ def same_digests(results) -> str:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

@@ -1,10 +1,9 @@
-#!/usr/bin/env python3
-"""Benchmark the MILD robot model: exact and approximated inverse kinematics, solves/s and success rate.
+"""The MILD robot model: exact and approximated inverse kinematics, solves/s and success rate.
 
-Usage (after ``source tools/env.sh``)::
+Usage (after ``source tools/env.sh``, from the checkout's root)::
 
-    python3 scripts/bench_robot_model.py                      # real robot's settings, 2000 poses
-    python3 scripts/bench_robot_model.py --settings config/mild_robot_model_services_sim.yaml --poses 5000
+    python -m benchmarks.mild                      # real robot's settings, 2000 poses
+    python -m benchmarks.mild --settings config/mild_robot_model_services_sim.yaml --poses 5000
 
 Requested camera poses are reachable by construction: the camera poses of random robot states within the PTU limits
 whose base stands on an allowed cell of the map. An exact IK solve succeeds when it returns a state whose camera faces
@@ -26,6 +25,9 @@ from agiprobot_measurement.common.geometry import wrap_to_pi
 from agiprobot_measurement.mild.config import load_settings
 from agiprobot_measurement.mild.robot_model import MildRobotModel
 from agiprobot_measurement.mild.state import RobotState, view_directions
+from benchmarks.harness import load_conditions
+
+DEFAULTS = load_conditions("mild").mapping("defaults")
 
 
 def reachable_poses(model: MildRobotModel, count: int, rng: np.random.Generator):
@@ -36,8 +38,9 @@ def reachable_poses(model: MildRobotModel, count: int, rng: np.random.Generator)
         xy = rng.uniform([-0.5, -0.5], [10.5, 7.5], (count, 2))
         xy = xy[model.map.is_allowed(xy, model.settings.col_thresh)]
         n = len(xy)
-        chunks.append(np.column_stack([rng.uniform(lo, hi, n), rng.uniform(tlo, thi, n),
-                                       rng.uniform(0, 2 * np.pi, n), xy]))  # fmt: skip
+        chunks.append(
+            np.column_stack([rng.uniform(lo, hi, n), rng.uniform(tlo, thi, n), rng.uniform(0, 2 * np.pi, n), xy])
+        )
         found += n
     states = np.vstack(chunks)[:count]
     poses = model.camera_poses(states)
@@ -71,12 +74,12 @@ def single_calls(model, source, positions, quaternions):
     return len(positions) / seconds, states, np.array([s.ok for s in solutions])
 
 
-def main() -> int:
+def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--settings", default=None, help="settings YAML (default: the real robot's)")
-    parser.add_argument("--poses", type=int, default=2000)
+    parser.add_argument("--poses", type=int, default=DEFAULTS["poses"])
     parser.add_argument("--seed", type=int, default=0)
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     settings = load_settings(args.settings)
     model = MildRobotModel.load(settings)
     rng = np.random.default_rng(args.seed)
@@ -85,8 +88,10 @@ def main() -> int:
     print(
         f"settings: {args.settings or 'config/mild_robot_model_services_real.yaml'}; {args.poses} reachable camera poses"
     )
-    print(f"pan [{math.degrees(model.pan_limits[0]):.0f}, {math.degrees(model.pan_limits[1]):.0f}] deg, "
-          f"{settings.pan_sampling_steps} pan samples per iteration, accuracy {settings.ik_iteration_accuracy}")  # fmt: skip
+    print(
+        f"pan [{math.degrees(model.pan_limits[0]):.0f}, {math.degrees(model.pan_limits[1]):.0f}] deg, "
+        f"{settings.pan_sampling_steps} pan samples per iteration, accuracy {settings.ik_iteration_accuracy}"
+    )
     model.calculate_robot_state(source, positions[0], quaternions[0])  # warm-up (lazy imports)
 
     rows = []
@@ -109,11 +114,25 @@ def main() -> int:
         )
         approximated.calculate_robot_state(source, positions[0], quaternions[0])
         rate, states, _ = single_calls(approximated, source, positions, quaternions)
-        rows.append((f"approximated IK, LP by {solver}, single calls", rate, approximated_success(states, quaternions).mean(), args.poses))  # fmt: skip
+        rows.append(
+            (
+                f"approximated IK, LP by {solver}, single calls",
+                rate,
+                approximated_success(states, quaternions).mean(),
+                args.poses,
+            )
+        )
     start = time.perf_counter()
     batch = approximated.approximated_ik_batch(source, positions, quaternions)
     rate = args.poses / (time.perf_counter() - start)
-    rows.append(("approximated IK, closed-form LP, one batch", rate, approximated_success(batch.states, quaternions).mean(), args.poses))  # fmt: skip
+    rows.append(
+        (
+            "approximated IK, closed-form LP, one batch",
+            rate,
+            approximated_success(batch.states, quaternions).mean(),
+            args.poses,
+        )
+    )
 
     print(f"{'':48s} {'solves/s':>12s} {'success':>9s} {'poses':>7s}")
     for name, rate, success, count in rows:

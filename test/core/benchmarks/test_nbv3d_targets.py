@@ -11,11 +11,7 @@ import pytest
 
 from agiprobot_measurement.nbv.ground_truth import GroundTruth, auc, simulate
 from agiprobot_measurement.nbv.reconstruction import ReconstructionRequest
-
-
-@pytest.fixture(scope="module")
-def bench(load_script):
-    return load_script("bench_nbv")
+from benchmarks.nbv3d import loop as bench
 
 
 def view(path_rad, coverage, motion_s=1.0):
@@ -36,7 +32,7 @@ def budget_summary(stop_view=3):
     }
 
 
-def test_the_self_terminated_run_is_the_budget_runs_prefix(bench):
+def test_the_self_terminated_run_is_the_budget_runs_prefix():
     run = bench.self_terminated(budget_summary())
     assert run["views"] == 3 and run["termination_reason"] == "gain_below_threshold"
     assert run["coverage_curve"] == [0.5, 0.7, 0.8] and run["coverage"] == 0.8
@@ -50,7 +46,7 @@ def test_the_self_terminated_run_is_the_budget_runs_prefix(bench):
     assert bench.self_terminated(never) is never
 
 
-def test_the_joint_path_is_taken_up_to_the_coverage_level(bench):
+def test_the_joint_path_is_taken_up_to_the_coverage_level():
     run = budget_summary()
     assert bench.path_to(run, 0.8) == (3.0, True)
     assert bench.path_to(run, 0.5) == (0.0, True)
@@ -73,7 +69,7 @@ def method(c4, auc10, path_rad=1.0, final=0.9, runs=None):
     return {"summary": summary, "runs": runs or [{"view_log": [view(path_rad, final)], "coverage": final}]}
 
 
-def test_the_best_volumetric_metric_is_one_metric_over_the_objects(bench):
+def test_the_best_volumetric_metric_is_one_metric_over_the_objects():
     a, b = bench.VOLUMETRIC[:2]
     ours_run = {"view_log": [view(1.0, 0.8), view(1.0, 0.95)], "coverage": 0.95, "views": 2,
                 "termination_reason": "gain_below_threshold", "budget_final_coverage": 0.96}  # fmt: skip
@@ -106,7 +102,7 @@ def test_the_best_volumetric_metric_is_one_metric_over_the_objects(bench):
     assert median["ours_runs_stopped_before_budget"] == 1.0
 
 
-def test_a_run_whose_rule_never_fired_loses_nothing_against_its_budget(bench):
+def test_a_run_whose_rule_never_fired_loses_nothing_against_its_budget():
     a = bench.VOLUMETRIC[0]
     budget_only = {"view_log": [view(1.0, 0.9)], "coverage": 0.9, "views": 20, "termination_reason": "max_views"}
     methods = {a: method(0.7, 0.7), "ours": method(0.8, 0.8, runs=[budget_only]), "ours@budget": method(0.8, 0.8)}
@@ -115,7 +111,7 @@ def test_a_run_whose_rule_never_fired_loses_nothing_against_its_budget(bench):
     assert row["ours_stopped_before_budget"] == 0.0
 
 
-def test_a_budget_run_is_the_stopping_run_up_to_where_the_rule_fired(bench):
+def test_a_budget_run_is_the_stopping_run_up_to_where_the_rule_fired():
     from agiprobot_measurement.nbv.station3d import SimulatedNBVStation
 
     station = SimulatedNBVStation(pixel_step=8)  # the 100 mm cube of config/scene.yaml
@@ -139,7 +135,7 @@ def test_a_budget_run_is_the_stopping_run_up_to_where_the_rule_fired(bench):
     assert budget["coverage"] >= stopping["coverage"]
 
 
-def test_gain_quality_scores_each_gain_against_the_truly_best_view(bench):
+def test_gain_quality_scores_each_gain_against_the_truly_best_view():
     from agiprobot_measurement.nbv.ground_truth import GainQuality
     from agiprobot_measurement.nbv.station3d import SimulatedNBVStation
 
@@ -163,7 +159,7 @@ def test_gain_quality_scores_each_gain_against_the_truly_best_view(bench):
     assert late.decisions == [] and late.summary() == {}
 
 
-def test_views_to_95_not_reached_on_an_object_count_as_never_in_the_median(bench):
+def test_views_to_95_not_reached_on_an_object_count_as_never_in_the_median():
     a = bench.VOLUMETRIC[0]
     objects = {}
     for name, ours_n95, random_n95 in (("x", 3, 10), ("y", 4, None), ("z", None, None)):
@@ -178,7 +174,7 @@ def test_views_to_95_not_reached_on_an_object_count_as_never_in_the_median(bench
     assert median["random_n95"] == math.inf  # reached on one object of three
 
 
-def test_straight_paths_and_the_truth_aware_planners_are_compared_at_equal_coverage(bench):
+def test_straight_paths_and_the_truth_aware_planners_are_compared_at_equal_coverage():
     a = bench.VOLUMETRIC[0]
     home = [0.0] * 6
 
@@ -205,7 +201,7 @@ def test_straight_paths_and_the_truth_aware_planners_are_compared_at_equal_cover
     assert row["oracle_per_rad_straight_path_ratio"] == math.inf  # it never reached 0.9
 
 
-def test_the_truth_aware_planners_take_the_best_pose_and_trade_it_for_path(bench):
+def test_the_truth_aware_planners_take_the_best_pose_and_trade_it_for_path():
     from agiprobot_measurement.nbv.ground_truth import oracle_path_curve
     from agiprobot_measurement.nbv.station3d import SimulatedNBVStation
 

@@ -1,4 +1,3 @@
-#!/usr/bin/env python3
 """Speed of the 3D NBV map core (nbv/voxel_map.py, nbv/gains.py, nbv/meshing.py) on real simulated PhoXi frames.
 
 Scene: a torus (major radius 60 mm, minor 25 mm) standing on a box on a table, rendered by the ROS-free PhoXi
@@ -11,9 +10,9 @@ simulation (model S, low resolution 1032 x 772, noise on) from 0.45 m at 45 deg 
 (c) labels, growth / candidate voxels, predicted surface, the planning grid;
 (d) the TSDF at 2 mm: integrating the frame and extracting the mesh.
 
-    scripts/bench_nbv_map.py                       # prints a table
-    scripts/bench_nbv_map.py --views 150 --json bench.json
-    scripts/bench_nbv_map.py --cold                # also: a fresh numba cache in a child process (cold JIT)
+    python -m benchmarks.nbv3d.map                       # prints the figures
+    python -m benchmarks.nbv3d.map --views 150 --json bench.json
+    python -m benchmarks.nbv3d.map --cold                # also: a fresh numba cache in a child process (cold JIT)
 """
 
 from __future__ import annotations
@@ -22,22 +21,40 @@ import argparse
 import json
 import math
 import os
-import subprocess
 import sys
 import tempfile
 import time
 
+import numba
 import numpy as np
+import trimesh
+
+from agiprobot_measurement.common.geometry import look_at
+from agiprobot_measurement.nbv.gains import ViewModel, evaluate_views
+from agiprobot_measurement.nbv.meshing import TSDFVolume
+from agiprobot_measurement.nbv.voxel_map import MapConfig, VoxelMap
+from agiprobot_measurement.sensors.phoxi.models import RESOLUTION_LOW, load_scanner_model
+from agiprobot_measurement.sensors.phoxi.renderer import ScanSettings, StructuredLightScanner
+from agiprobot_measurement.sensors.phoxi.scene_geometry import SceneGeometry
+from benchmarks.harness import ChildFailed, load_conditions, run_process, timed, write_json
+
+#: the cold-JIT child: imports, a first fusion, pooling and gains with an empty numba cache (seconds of each)
+COLD_JIT_CODE = (
+    "import time, numpy as np; t=time.perf_counter();"
+    "from agiprobot_measurement.nbv.voxel_map import VoxelMap, MapConfig;"
+    "from agiprobot_measurement.nbv.gains import ViewModel, evaluate_views;"
+    "from agiprobot_measurement.common.geometry import look_at;"
+    "g=VoxelMap([0,0,0],[0.05]*3, MapConfig(resolution_m=0.005)); t1=time.perf_counter();"
+    "g.integrate([0.025,0.025,0.5], np.array([[0.025,0.025,0.025]])); t2=time.perf_counter();"
+    "g.coarse().predicted_surface(g.growth_voxels()); t3=time.perf_counter();"
+    "v=ViewModel(0.7,0.5,0.3,0.6,np.zeros(3)); evaluate_views(g,look_at([0.025,0.025,0.5],[0.025]*3,up=(0,1,0))[None],v);"
+    "t4=time.perf_counter(); print(t1-t, t2-t1, t3-t2, t4-t3)"
+)
+
+DEFAULTS = load_conditions("nbv3d_map").mapping("defaults")
 
 
 def scene_frame():
-    import trimesh
-
-    from agiprobot_measurement.common.geometry import look_at
-    from agiprobot_measurement.sensors.phoxi.models import RESOLUTION_LOW, load_scanner_model
-    from agiprobot_measurement.sensors.phoxi.renderer import ScanSettings, StructuredLightScanner
-    from agiprobot_measurement.sensors.phoxi.scene_geometry import SceneGeometry
-
     table = trimesh.creation.box(extents=[1.0, 1.0, 0.04])
     table.apply_translation([0, 0, -0.02])
     pedestal = trimesh.creation.box(extents=[0.08, 0.08, 0.04])
@@ -77,24 +94,16 @@ def sphere_frame(n=100_000, seed=0):
 CPU_TIMES: dict = {}
 
 
-def timed(fn, repeats, key=None):
+def timed_figures(fn, repeats, key=None):
     """(median, min, max) wall seconds over ``repeats`` calls and the last result; the median CPU seconds of the
     process (all threads) go to CPU_TIMES[key]: on a shared machine wall time includes waiting for a core."""
-    times, cpu = [], []
-    out = None
-    for _ in range(repeats):
-        start, start_cpu = time.perf_counter(), time.process_time()
-        out = fn()
-        times.append(time.perf_counter() - start)
-        cpu.append(time.process_time() - start_cpu)
+    timing = timed(fn, repeats)
     if key:
-        CPU_TIMES[key] = float(np.median(cpu))
-    return float(np.median(times)), float(np.min(times)), float(np.max(times)), out
+        CPU_TIMES[key] = float(timing.cpu_median_s)
+    return float(timing.median_s), float(timing.min_s), float(timing.max_s), timing.result
 
 
 def candidate_poses(centre, n, distance, seed=0):
-    from agiprobot_measurement.common.geometry import look_at
-
     rng = np.random.default_rng(seed)
     poses = []
     while len(poses) < n:
@@ -107,10 +116,6 @@ def candidate_poses(centre, n, distance, seed=0):
 
 
 def run(args) -> dict:
-    from agiprobot_measurement.nbv.gains import ViewModel, evaluate_views
-    from agiprobot_measurement.nbv.meshing import TSDFVolume
-    from agiprobot_measurement.nbv.voxel_map import MapConfig, VoxelMap
-
     results: dict = {}
     t0 = time.perf_counter()
     model, frame, pose, points, normals, sigma, centre, static = scene_frame()
@@ -133,14 +138,14 @@ def run(args) -> dict:
             stats = grid.integrate(sensor, points, normals, sigma)
             return stats
 
-        med, lo, hi, stats = timed(one, args.repeats, f"fuse_phoxi_{res * 1000:g}mm")
+        med, lo, hi, stats = timed_figures(one, args.repeats, f"fuse_phoxi_{res * 1000:g}mm")
         s_sensor, s_pts, s_nrm = sphere_frame()
 
         def sphere(res=res, config=config, s_sensor=s_sensor, s_pts=s_pts, s_nrm=s_nrm):
             grid = VoxelMap(roi_min, roi_max, config)
             return grid.integrate(s_sensor, s_pts, s_nrm)
 
-        s_med, s_lo, s_hi, s_stats = timed(sphere, args.repeats, f"fuse_sphere_{res * 1000:g}mm")
+        s_med, s_lo, s_hi, s_stats = timed_figures(sphere, args.repeats, f"fuse_sphere_{res * 1000:g}mm")
         fuse[f"{res * 1000:g}mm"] = {
             "shape": list(first.shape),
             "phoxi_frame": {
@@ -179,8 +184,8 @@ def run(args) -> dict:
         fine_growth = grid.growth_voxels()
         return len(growth), len(cand), len(fine_growth)
 
-    timed(labels, 1)
-    med, lo, hi, counts = timed(labels, args.repeats, "labels")
+    timed_figures(labels, 1)
+    med, lo, hi, counts = timed_figures(labels, args.repeats, "labels")
     results["labels_coarse_growth_candidates_predicted_s"] = {
         "median_s": med,
         "min_s": lo,
@@ -216,7 +221,7 @@ def run(args) -> dict:
         def evaluate(target=target, n=n):
             return evaluate_views(target, poses[:n], view)
 
-        med, lo, hi, out = timed(evaluate, args.repeats, f"gains_{name}")
+        med, lo, hi, out = timed_figures(evaluate, args.repeats, f"gains_{name}")
         gains[name] = {
             "views": n,
             "median_s": med,
@@ -235,12 +240,14 @@ def run(args) -> dict:
     start = time.perf_counter()
     volume.integrate(depth, frame.intrinsics, pose)
     tsdf_times["first_call_s"] = time.perf_counter() - start
-    med, lo, hi, _ = timed(lambda: volume.integrate(depth, frame.intrinsics, pose), args.repeats, "tsdf_integrate")
+    med, lo, hi, _ = timed_figures(
+        lambda: volume.integrate(depth, frame.intrinsics, pose), args.repeats, "tsdf_integrate"
+    )
     tsdf_times.update({"integrate_median_s": med, "integrate_min_s": lo})
-    med, lo, hi, mesh = timed(volume.mesh, max(1, args.repeats // 2), "tsdf_mesh")
+    med, lo, hi, mesh = timed_figures(volume.mesh, max(1, args.repeats // 2), "tsdf_mesh")
     tsdf_times.update({"mesh_median_s": med, "faces": len(mesh.faces)})
     results["tsdf_2mm"] = tsdf_times
-    results["numba_threads"] = int(__import__("numba").get_num_threads())
+    results["numba_threads"] = int(numba.get_num_threads())
     results["cpu_s_median"] = dict(CPU_TIMES)
     results["load_average_1min"] = os.getloadavg()[0]
     return results
@@ -248,8 +255,12 @@ def run(args) -> dict:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--views", type=int, default=150, help="candidate poses evaluated at 5 mm (default 150)")
-    parser.add_argument("--repeats", type=int, default=3, help="warm repetitions per measurement (median)")
+    parser.add_argument(
+        "--views", type=int, default=DEFAULTS["views"], help="candidate poses evaluated at 5 mm (%(default)s)"
+    )
+    parser.add_argument(
+        "--repeats", type=int, default=DEFAULTS["repeats"], help="warm repetitions per measurement (median)"
+    )
     parser.add_argument("--json", help="write the figures to this JSON file")
     parser.add_argument("--cold", action="store_true", help="also time the first calls with an empty numba cache")
     args = parser.parse_args(argv)
@@ -259,19 +270,10 @@ def main(argv=None) -> int:
     if args.cold:
         with tempfile.TemporaryDirectory() as cache:
             env = dict(os.environ, NUMBA_CACHE_DIR=cache)
-            code = (
-                "import time, numpy as np; t=time.perf_counter();"
-                "from agiprobot_measurement.nbv.voxel_map import VoxelMap, MapConfig;"
-                "from agiprobot_measurement.nbv.gains import ViewModel, evaluate_views;"
-                "from agiprobot_measurement.common.geometry import look_at;"
-                "g=VoxelMap([0,0,0],[0.05]*3, MapConfig(resolution_m=0.005)); t1=time.perf_counter();"
-                "g.integrate([0.025,0.025,0.5], np.array([[0.025,0.025,0.025]])); t2=time.perf_counter();"
-                "g.coarse().predicted_surface(g.growth_voxels()); t3=time.perf_counter();"
-                "v=ViewModel(0.7,0.5,0.3,0.6,np.zeros(3)); evaluate_views(g,look_at([0.025,0.025,0.5],[0.025]*3,up=(0,1,0))[None],v);"
-                "t4=time.perf_counter(); print(t1-t, t2-t1, t3-t2, t4-t3)"
-            )
-            out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
-            imp, fuse, pooling, gains = (float(v) for v in out.stdout.split())
+            done = run_process([sys.executable, "-c", COLD_JIT_CODE], env=env)
+            if done.returncode != 0:
+                raise ChildFailed(f"cold JIT child: exit {done.returncode}: {done.stderr.strip()[-500:]}")
+            imp, fuse, pooling, gains = (float(v) for v in done.stdout.split())
             results["cold_jit_s"] = {
                 "import": imp,
                 "fuse": fuse,
@@ -280,11 +282,9 @@ def main(argv=None) -> int:
             }
     print(json.dumps(results, indent=2))
     if args.json:
-        from agiprobot_measurement.common.files import atomic_write_text
-
-        atomic_write_text(args.json, json.dumps(results, indent=2) + "\n")
+        write_json(args.json, results, indent=2)
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

@@ -1,5 +1,4 @@
-#!/usr/bin/env python3
-"""Benchmark: sampling, viewpoint generation and metrological evaluation (no mechanics).
+"""Sampling, viewpoint generation and metrological evaluation (no mechanics).
 
 Defaults reproduce the original's benchmark work: the 100 mm cube at 0.03 points/mm^2 (1,500 samples),
 12 orientations around the boresight, tilt modes 'none' (18,000 candidates) and 'full' (162,000). The
@@ -9,38 +8,36 @@ original needed about 0.1 s per candidate including its mechanics (1,065 s for 1
 from __future__ import annotations
 
 import argparse
-import resource
 import sys
 import time
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-try:
-    import agiprobot_measurement  # noqa: F401
-except ImportError:  # run from a checkout without the catkin environment
-    sys.path.insert(0, str(ROOT / "src"))
+from agiprobot_measurement.planning.part_loading import load_part
+from agiprobot_measurement.planning.viewpoint import TILT_MODES, generate_viewpoint_poses
+from agiprobot_measurement.sensors.laser_line.model import SensorModel
+from benchmarks.harness import ROOT, load_conditions, peak_rss_mb
 
-from agiprobot_measurement.planning.part_loading import load_part  # noqa: E402
-from agiprobot_measurement.planning.viewpoint import TILT_MODES, generate_viewpoint_poses  # noqa: E402
-from agiprobot_measurement.sensors.laser_line.model import SensorModel  # noqa: E402
-
-
-def peak_rss_mb() -> float:
-    # ru_maxrss is in KiB on Linux
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+CONDITIONS = load_conditions("planning_metrology")
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--part", default=str(ROOT / "parts" / "objectA_wuerfel.stl"), help="mesh file")
-    parser.add_argument("--units", default="mm", help="unit of the mesh file (mm, inch, m, ...)")
-    parser.add_argument("--density", type=float, default=0.03, help="samples per mm^2 (default 0.03)")
-    parser.add_argument("--orientations", type=int, default=12, help="orientations around the boresight")
-    parser.add_argument("--tilt", nargs="+", default=["none", "full"], choices=TILT_MODES, help="tilt modes to run")
+    parser.add_argument("--part", default=str(ROOT / CONDITIONS["part"]), help="mesh file")
+    parser.add_argument("--units", default=CONDITIONS["units"], help="unit of the mesh file (mm, inch, m, ...)")
+    parser.add_argument(
+        "--density", type=float, default=CONDITIONS["density_points_per_mm2"], help="samples per mm^2 (%(default)g)"
+    )
+    parser.add_argument(
+        "--orientations", type=int, default=CONDITIONS["orientations"], help="orientations around the boresight"
+    )
+    parser.add_argument(
+        "--tilt", nargs="+", default=list(CONDITIONS["tilts"]), choices=TILT_MODES, help="tilt modes to run"
+    )
     parser.add_argument(
         "--threshold", type=float, default=None, help="uncertainty threshold in mm (default: the sensor's max)"
     )
-    parser.add_argument("--deflection", type=float, default=500.0, help="maximum deflection in mm")
+    parser.add_argument(
+        "--deflection", type=float, default=CONDITIONS["max_deflection_mm"], help="maximum deflection in mm"
+    )
     parser.add_argument("--seed", type=int, default=0, help="sampling seed")
     parser.add_argument(
         "--cast-all-rays",

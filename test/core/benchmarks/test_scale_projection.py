@@ -1,4 +1,4 @@
-"""scripts/bench_scale.py's projection model on hand-made runs: scatter line, pilot on the workers, chunk work."""
+"""The scale benchmark's projection model on hand-made runs: scatter line, pilot on the workers, chunk work."""
 
 from __future__ import annotations
 
@@ -6,10 +6,7 @@ import math
 
 import pytest
 
-
-@pytest.fixture(scope="module")
-def bench(load_script):
-    return load_script("bench_scale")
+from benchmarks.planning import scale as bench
 
 
 def run(workers=1, scatter_s=1.0):
@@ -27,14 +24,14 @@ def run(workers=1, scatter_s=1.0):
     }
 
 
-def test_scatter_is_a_line_through_two_runs_and_all_per_worker_from_one(bench):
+def test_scatter_is_a_line_through_two_runs_and_all_per_worker_from_one():
     assert bench.scatter_model([run(1, 1.0), run(2, 1.5)]) == pytest.approx((0.5, 0.5))
     assert bench.scatter_model([run(1, 1.2)]) == pytest.approx((0.0, 1.2))
     # a second worker that made the scatter faster is no negative cost per worker
     assert bench.scatter_model([run(1, 1.0), run(2, 0.8)]) == pytest.approx((1.0, 0.0))
 
 
-def test_the_pilot_splits_its_spread_and_runs_a_slice_per_worker(bench):
+def test_the_pilot_splits_its_spread_and_runs_a_slice_per_worker():
     one = run()
     assert bench.pilot_model(one, 1) == pytest.approx(5.5)
     # 8 workers: spread 2/8, the 6 slices at once (0.5 s), the 0.5 s of round trips
@@ -45,7 +42,7 @@ def test_the_pilot_splits_its_spread_and_runs_a_slice_per_worker(bench):
     assert bench.pilot_model(old, 8) == pytest.approx(5.5)
 
 
-def test_the_projection_reproduces_the_run_and_splits_the_chunks(bench):
+def test_the_projection_reproduces_the_run_and_splits_the_chunks():
     one = run()
     scatter = (0.5, 0.5)
     assert bench.projection(one, 1, scatter) == pytest.approx(one["evaluation_s"])

@@ -1,19 +1,17 @@
-#!/usr/bin/env python3
-"""Benchmark collision checking and joint-space planning on the station scene (with the part).
+"""Collision checking and joint-space planning on the station scene (with the part).
 
 Prints full-robot collision checks per second (batch, random and valid states; single calls) and, for N
 seeded pairs of random valid states, the planner's success rate and planning times (median, mean, p90, max).
 By default the planner is RRTConnect with the straight-line shortcut off, so every pair is planned by OMPL.
 
-    scripts/bench_collision_planning.py                      # 100 pairs, RRTConnect
-    scripts/bench_collision_planning.py --pairs 20 --planner PRM --direct
+    python -m benchmarks.motion.collision                      # 100 pairs, RRTConnect
+    python -m benchmarks.motion.collision --pairs 20 --planner PRM --direct
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 
 import numpy as np
@@ -21,6 +19,9 @@ import numpy as np
 from agiprobot_measurement.motion.collision import CollisionChecker
 from agiprobot_measurement.motion.motion_planning import MotionPlanner, available_planners
 from agiprobot_measurement.station import Station
+from benchmarks.harness import load_conditions
+
+DEFAULTS = load_conditions("motion_collision").mapping("defaults")
 
 
 def random_valid_states(checker: CollisionChecker, count: int, rng: np.random.Generator) -> np.ndarray:
@@ -92,11 +93,11 @@ def bench_planning(planner: MotionPlanner, pairs: int = 100, seed: int = 1, plan
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--states", type=int, default=20000, help="states for the collision benchmark")
-    parser.add_argument("--pairs", type=int, default=100, help="state pairs for the planning benchmark")
-    parser.add_argument("--planner", default="RRTConnect", choices=available_planners())
+    parser.add_argument("--states", type=int, default=DEFAULTS["states"], help="states for the collision benchmark")
+    parser.add_argument("--pairs", type=int, default=DEFAULTS["pairs"], help="state pairs for the planning benchmark")
+    parser.add_argument("--planner", default=DEFAULTS["planner"], choices=available_planners())
     parser.add_argument("--direct", action="store_true", help="take the straight line when it is free")
-    parser.add_argument("--budget", type=float, default=5.0, help="time budget per plan (s)")
+    parser.add_argument("--budget", type=float, default=DEFAULTS["budget_s"], help="time budget per plan (s)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
     args = parser.parse_args(argv)
@@ -134,4 +135,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())
