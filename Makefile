@@ -5,7 +5,11 @@ ENV := source $(ROOT)/tools/env.sh
 OUT ?= $(ROOT)/demo_output
 GUI ?= 0
 
-.PHONY: setup demo demo-station test lint format pytest rostest bench clean
+BENCH_OUT ?= $(ROOT)/bench_results
+BENCH_ARGS ?=
+BENCHES := planning parts scale set-cover metrology motion collision nbv3d nbv-map nbv2d mild calibration phoxi
+
+.PHONY: setup demo demo-station test lint format pytest rostest bench $(addprefix bench-,$(BENCHES)) clean
 
 setup:
 	@bash tools/setup.sh
@@ -33,9 +37,54 @@ pytest: setup
 rostest: setup
 	@$(ENV) && bash tools/run_tests.sh --rostest-only
 
-# The speed figures the issues name (minutes, not part of `make test`): planning pipeline on the cube, motion layer.
-bench: setup
-	@$(ENV) && python3 scripts/bench_planning.py && python3 scripts/bench_motion.py
+# Benchmarks (minutes to hours, not part of `make test`; benchmarks/README.md): `make bench-<domain>` runs one with
+# its default conditions, extra options in BENCH_ARGS; the printed figures go to bench_results/<domain>.txt and, where
+# the benchmark writes JSON, to bench_results/<domain>.json. `make bench`: the planning pipeline and the motion core.
+# run_bench NAME MODULE ARGS
+define run_bench
+@$(ENV) && mkdir -p "$(BENCH_OUT)" && set -o pipefail && python3 -m $(2) $(3) $(BENCH_ARGS) | tee "$(BENCH_OUT)/$(1).txt"
+endef
+
+bench: bench-planning bench-motion
+
+bench-planning: setup
+	$(call run_bench,planning,benchmarks.planning.pipeline,--json "$(BENCH_OUT)/planning.json")
+
+bench-parts: setup
+	$(call run_bench,parts,benchmarks.planning.parts,--json "$(BENCH_OUT)/parts.json")
+
+bench-scale: setup
+	$(call run_bench,scale,benchmarks.planning.scale,--json "$(BENCH_OUT)/scale.json")
+
+bench-set-cover: setup
+	$(call run_bench,set-cover,benchmarks.planning.set_cover,)
+
+bench-metrology: setup
+	$(call run_bench,metrology,benchmarks.planning.metrology,)
+
+bench-motion: setup
+	$(call run_bench,motion,benchmarks.motion.core,)
+
+bench-collision: setup
+	$(call run_bench,collision,benchmarks.motion.collision,)
+
+bench-nbv3d: setup
+	$(call run_bench,nbv3d,benchmarks.nbv3d.loop,--json "$(BENCH_OUT)/nbv3d.json")
+
+bench-nbv-map: setup
+	$(call run_bench,nbv-map,benchmarks.nbv3d.map,--json "$(BENCH_OUT)/nbv-map.json")
+
+bench-nbv2d: setup
+	$(call run_bench,nbv2d,benchmarks.nbv2d,--json "$(BENCH_OUT)/nbv2d.json")
+
+bench-mild: setup
+	$(call run_bench,mild,benchmarks.mild,)
+
+bench-calibration: setup
+	$(call run_bench,calibration,benchmarks.calibration,)
+
+bench-phoxi: setup
+	$(call run_bench,phoxi,benchmarks.phoxi,)
 
 clean:
 	rm -rf "$$(bash tools/workspace_path.sh)" .test_results .ros_home demo_output

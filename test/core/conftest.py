@@ -32,7 +32,7 @@ def shared_dir() -> Path:
 
 @pytest.fixture(scope="session")
 def load_script():
-    """``load_script("bench_scale")``: a command of ``scripts/`` as a module (its functions, its ``main``)."""
+    """``load_script("reconstruct")``: a command of ``scripts/`` as a module (its functions, its ``main``)."""
 
     def load(name: str):
         spec = importlib.util.spec_from_file_location(name, PACKAGE_ROOT / "scripts" / f"{name}.py")

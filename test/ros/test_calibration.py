@@ -208,7 +208,7 @@ class CalibrationNodeTest(unittest.TestCase):
         self.assertTrue(all(q.startswith("accepted: flag point") for q in questions), questions)
 
     def test_7_cheap_service_under_load(self):
-        # issue 13: 200 calls from 1 and from 4 concurrent clients, zero failures, the rate printed
+        # 200 calls from 1 and from 4 concurrent clients, zero failures, the rate printed
         for clients in (1, 4):
             counts = [[0, 0] for _ in range(clients)]
 

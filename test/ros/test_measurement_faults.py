@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""rostest: fault injection against the trajectory_manager node (issue 13).
+"""rostest: fault injection against the trajectory_manager node.
 
 The tests run in order: a good plan first, then the probes (an alias-bomb plan file, huge sampling densities,
 overwriting, names that escape the plan folder, refused executions, a bad part transform, a directory as part
