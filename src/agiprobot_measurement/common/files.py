@@ -19,6 +19,7 @@ __all__ = [
     "TEXT_FILE_MAX_BYTES",
     "FileReadError",
     "FileRoot",
+    "FolderNotFoundError",
     "PathPolicyError",
     "atomic_write",
     "atomic_write_bytes",
@@ -26,6 +27,10 @@ __all__ = [
     "current_umask",
     "read_text_file",
 ]
+
+
+class FolderNotFoundError(InputError, FileNotFoundError):
+    """The folder a file is to be written into does not exist (also a ``FileNotFoundError``)."""
 
 
 def current_umask() -> int:
@@ -39,13 +44,13 @@ def atomic_write(path: str | Path, write: Callable[[Path], None], suffix: str = 
     """Call ``write(temporary_path)``, then rename the temporary file to ``path``; returns ``path``.
 
     ``suffix`` is appended to the temporary name for writers that choose a format by extension (e.g. ``.png``).
-    A missing parent folder is an error (``FileNotFoundError``) unless ``make_parents`` is true.
+    A missing parent folder is an error (:class:`FolderNotFoundError`, a ``FileNotFoundError``) unless ``make_parents`` is true.
     """
     path = Path(path)
     if make_parents:
         path.parent.mkdir(parents=True, exist_ok=True)
     elif not path.parent.is_dir():
-        raise FileNotFoundError(f"{path}: folder {path.parent} does not exist")
+        raise FolderNotFoundError(f"{path}: folder {path.parent} does not exist")
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".tmp{suffix}", dir=path.parent)
     os.close(fd)
     try:
@@ -130,7 +135,7 @@ class FileRoot:
             if plain.is_file():
                 return plain
         if not path.is_file():
-            raise FileNotFoundError(f"{self.purpose}: {path} not found (names resolve under {self.root})")
+            raise FileReadError(f"{self.purpose}: {path} not found (names resolve under {self.root})")
         return path
 
     def for_writing(self, name: str | Path, overwrite: bool = False, suffix: str | None = None) -> Path:

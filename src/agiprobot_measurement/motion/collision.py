@@ -26,6 +26,7 @@ from typing import NamedTuple
 import fcl
 import numpy as np
 
+from agiprobot_measurement.motion.errors import MotionInputError, UnknownObjectError
 from agiprobot_measurement.motion.kinematics import KinematicModel
 from agiprobot_measurement.station import (
     CONFIG_DIR,
@@ -419,9 +420,9 @@ class CollisionChecker:
         vertices = np.asarray(vertices_m, dtype=float)
         faces = np.asarray(faces, dtype=np.int64)
         if vertices.ndim != 2 or vertices.shape[1] != 3 or faces.ndim != 2 or faces.shape[1] != 3:
-            raise ValueError(f"mesh '{name}': need vertices (V, 3) and faces (F, 3)")
+            raise MotionInputError(f"mesh '{name}': need vertices (V, 3) and faces (F, 3)")
         if len(faces) == 0 or not np.all(np.isfinite(vertices)):
-            raise ValueError(f"mesh '{name}': empty or non-finite mesh")
+            raise MotionInputError(f"mesh '{name}': empty or non-finite mesh")
         lo, hi = vertices.min(axis=0), vertices.max(axis=0)
         mesh = trimesh.Trimesh(vertices, faces, process=False)
         closed = mesh if mesh.is_watertight else None
@@ -478,7 +479,7 @@ class CollisionChecker:
 
     def remove_object(self, name: str) -> None:
         if name not in self._objects:
-            raise KeyError(f"no object '{name}'; objects: {', '.join(self._objects) or 'none'}")
+            raise UnknownObjectError(f"no object '{name}'; objects: {', '.join(self._objects) or 'none'}")
         del self._objects[name]
         if name == self.part_name:
             self.part_name = None
@@ -490,11 +491,11 @@ class CollisionChecker:
     def _add(self, name, kind, pose, geometry, local_center, half, solid_box, mesh=None) -> None:
         pose = np.asarray(pose, dtype=float)
         if pose.shape != (4, 4) or not np.all(np.isfinite(pose)):
-            raise ValueError(f"object '{name}': pose must be a finite 4x4 matrix")
+            raise MotionInputError(f"object '{name}': pose must be a finite 4x4 matrix")
         if not np.all(np.asarray(half) > 0):
-            raise ValueError(f"object '{name}': dimensions must be positive")
+            raise MotionInputError(f"object '{name}': dimensions must be positive")
         if name in self.robot_links:
-            raise ValueError(f"object '{name}': the name of a robot link")
+            raise MotionInputError(f"object '{name}': the name of a robot link")
         obj = fcl.CollisionObject(geometry, _fcl_transform(pose))
         self._objects[name] = _WorldObject(
             name, kind, pose, obj, pose[:3, :3] @ local_center + pose[:3, 3], pose[:3, :3].copy(),
@@ -506,7 +507,7 @@ class CollisionChecker:
     def allow_collision(self, a: str, b: str, reason: str = "User") -> None:
         """Stop checking the pair (a, b) (link or object names)."""
         if reason not in ALLOWED_REASONS:
-            raise ValueError(f"unknown reason {reason!r}; valid: {', '.join(ALLOWED_REASONS)}")
+            raise MotionInputError(f"unknown reason {reason!r}; valid: {', '.join(ALLOWED_REASONS)}")
         self.config.allowed[frozenset((a, b))] = AllowedEntry(reason)
         self._rebuild()
 
@@ -575,7 +576,7 @@ class CollisionChecker:
         """
         q = np.asarray(q, dtype=float)
         if q.ndim != 1:
-            raise ValueError(f"expected one joint state of {self.model.dof} values, got shape {q.shape}")
+            raise MotionInputError(f"expected one joint state of {self.model.dof} values, got shape {q.shape}")
         return bool(self.check_states(q[None])[0])
 
     def check_states(self, q: np.ndarray) -> np.ndarray:
@@ -717,7 +718,7 @@ class CollisionChecker:
     def _pose_all(self, q: np.ndarray) -> np.ndarray:
         q = np.asarray(q, dtype=float)
         if q.ndim != 1:
-            raise ValueError(f"expected one joint state of {self.model.dof} values, got shape {q.shape}")
+            raise MotionInputError(f"expected one joint state of {self.model.dof} values, got shape {q.shape}")
         poses = self.shape_poses(self._check_q(q))[0]
         for shape, pose in zip(self.shapes, poses, strict=True):
             self._pose_shapes(pose, shape.world, shape.own)

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import PyKDL
 
+from agiprobot_measurement.motion.errors import MotionInputError
 from agiprobot_measurement.station import ConfigError, JointLimits, Station
 from agiprobot_measurement.station.urdf_model import UrdfJoint, UrdfModel
 
@@ -126,9 +127,11 @@ class KinematicModel:
     def _check_q(self, q: np.ndarray) -> np.ndarray:
         q = np.asarray(q, dtype=float)
         if q.shape[-1:] != (self.dof,):
-            raise ValueError(f"expected {self.dof} joint values ({', '.join(self.joint_names)}), got shape {q.shape}")
+            raise MotionInputError(
+                f"expected {self.dof} joint values ({', '.join(self.joint_names)}), got shape {q.shape}"
+            )
         if not np.all(np.isfinite(q)):
-            raise ValueError("joint values must be finite (got NaN or inf)")
+            raise MotionInputError("joint values must be finite (got NaN or inf)")
         return q
 
     def fk_kdl(self, q: np.ndarray) -> np.ndarray:

@@ -18,6 +18,7 @@ from agiprobot_measurement.common.geometry import pose_from_quaternion, pose_to_
 from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.motion.trajectory import JointTrajectory, TrajectoryError, seconds_to_duration
 from agiprobot_measurement.planning.plan_io import ExecutionPlan, PlanError, PlanSegment, kind_at
+from agiprobot_measurement.ros.errors import MessageError
 
 __all__ = [
     "cloud_xyz",
@@ -86,7 +87,7 @@ def cloud_xyz(msg: PointCloud2) -> np.ndarray:
     """(N, 3) float64 points (the cloud's unit, metres) of a PointCloud2 with float32 x, y, z fields."""
     offsets = {f.name: f.offset for f in msg.fields}
     if not {"x", "y", "z"} <= set(offsets):
-        raise ValueError("point cloud without x, y, z fields")
+        raise MessageError("point cloud without x, y, z fields")
     n = msg.width * msg.height
     if n == 0:
         return np.zeros((0, 3))

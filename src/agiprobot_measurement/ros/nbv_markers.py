@@ -16,6 +16,7 @@ from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from agiprobot_measurement.ros.conversions import matrix_to_pose
+from agiprobot_measurement.ros.errors import MessageError
 
 __all__ = [
     "FRONTIER_RGBA",
@@ -103,7 +104,7 @@ def candidate_markers(
     utilities = np.asarray(utilities, dtype=float).reshape(-1)
     reasons = ["" if r is None else str(r) for r in reasons]
     if not (len(poses) == len(utilities) == len(reasons)):
-        raise ValueError(f"{len(poses)} poses, {len(utilities)} utilities and {len(reasons)} reasons")
+        raise MessageError(f"{len(poses)} poses, {len(utilities)} utilities and {len(reasons)} reasons")
     feasible = np.array([r == "" for r in reasons], dtype=bool)
     colors = np.zeros((len(poses), 3))
     if feasible.any():

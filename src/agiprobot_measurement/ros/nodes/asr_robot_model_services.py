@@ -63,7 +63,8 @@ from agiprobot_measurement.mild.robot_model import MildRobotModel
 from agiprobot_measurement.mild.state import RobotState
 from agiprobot_measurement.ros import mild_messages as mild_ros
 from agiprobot_measurement.ros.conversions import matrix_to_pose, transform_to_matrix, xyz_array, xyzw_array
-from agiprobot_measurement.ros.params import file_param
+from agiprobot_measurement.ros.node import run_node
+from agiprobot_measurement.ros.params import file_param, param
 from agiprobot_measurement.srv import CalculateRobotState, CalculateRobotStateResponse
 
 
@@ -88,7 +89,7 @@ def answers_errors(handler):
 class RobotModelServices:
     def __init__(self):
         name = rospy.get_name()
-        params = rospy.get_param("~", {})
+        params = param("~", {})
         settings = settings_from_mapping(params, f"parameters of {name}")
         for warning in settings.warnings:
             rospy.logwarn("asr_robot_model_services: %s", warning)
@@ -309,13 +310,7 @@ class _Corrected:
 
 
 def main():
-    rospy.init_node("asr_robot_model_services")
-    try:
-        RobotModelServices()
-    except AgiprobotError as exc:
-        rospy.logfatal("asr_robot_model_services: %s", exc)
-        raise SystemExit(1) from exc
-    rospy.spin()
+    run_node("asr_robot_model_services", RobotModelServices)
 
 
 # ------------------------------------------------------------------------------------------------------- IK test
@@ -364,7 +359,7 @@ class IKTest:
     The summary ends up in ~result: {solved, total, unsolved (1-based pose numbers)}."""
 
     def __init__(self):
-        params = rospy.get_param("~", {})
+        params = param("~", {})
         self.settings = settings_from_mapping(params, f"parameters of {rospy.get_name()}")
         frames = FrameNames.from_mapping(params, f"parameters of {rospy.get_name()} (frame names)", require_all=False)
         self.model = MildRobotModel(load_kinematics(file_param("~kinematics"), frames), self.settings, None)
@@ -425,9 +420,4 @@ class IKTest:
 
 
 def ik_test_main():
-    rospy.init_node("asr_robot_model_services")
-    try:
-        IKTest().run()
-    except AgiprobotError as exc:
-        rospy.logfatal("asr_robot_model_services_ik_test: %s", exc)
-        raise SystemExit(1) from exc
+    run_node("asr_robot_model_services", lambda: IKTest().run(), label="asr_robot_model_services_ik_test", spin=False)

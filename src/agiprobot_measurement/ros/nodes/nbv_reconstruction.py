@@ -58,7 +58,7 @@ from std_msgs.msg import Header
 from std_srvs.srv import Trigger, TriggerResponse
 from visualization_msgs.msg import Marker, MarkerArray
 
-from agiprobot_measurement.common.config import ConfigError
+from agiprobot_measurement.common.config import ConfigError, number, whole
 from agiprobot_measurement.common.files import FileRoot
 from agiprobot_measurement.errors import AgiprobotError, InputError
 from agiprobot_measurement.msg import (
@@ -73,7 +73,8 @@ from agiprobot_measurement.ros.conversions import xyz_cloud
 from agiprobot_measurement.ros.nbv_interfaces import RosNBVCamera, RosNBVRobot
 from agiprobot_measurement.ros.nbv_messages import candidate_arrays, request_mapping_from_goal
 from agiprobot_measurement.ros.nbv_setup import nbv_station
-from agiprobot_measurement.ros.params import file_param
+from agiprobot_measurement.ros.node import run_node
+from agiprobot_measurement.ros.params import file_param, flag, param, text
 from agiprobot_measurement.srv import SetJointState
 
 __all__ = ["NBVReconstructionNode", "main"]
@@ -101,24 +102,24 @@ def _map_key(request) -> tuple:
 
 class NBVReconstructionNode:
     def __init__(self):
-        self.model = str(rospy.get_param("~model", "") or "")
-        self.use_ground_truth = bool(rospy.get_param("~ground_truth", False))
+        self.model = str(param("~model", "") or "")
+        self.use_ground_truth = param("~ground_truth", False, flag)
         # the station the loop knows (scene, robot with the PhoXi, IK, collision); in simulation also the truth
         self.config, self.station, self.ground_truth = nbv_station(
             file_param("~config"), file_param("~scene"), self.model, self.use_ground_truth
         )
         self.defaults = dict(self.config.get("request", {}))
-        self.world_frame = str(rospy.get_param("~world_frame", "world"))
+        self.world_frame = param("~world_frame", "world", text)
         ros_home = Path(os.environ.get("ROS_HOME") or "~/.ros").expanduser()
-        output_dir = str(rospy.get_param("~output_dir", "") or ros_home / "nbv")
-        allowed = rospy.get_param("~allowed_output_dirs", "") or ["/tmp"]
+        output_dir = str(param("~output_dir", "") or ros_home / "nbv")
+        allowed = param("~allowed_output_dirs", "") or ["/tmp"]
         if isinstance(allowed, str):
             allowed = allowed.replace(",", " ").split()
         Path(output_dir).expanduser().mkdir(parents=True, exist_ok=True)
         self.files = FileRoot(Path(output_dir).expanduser(), tuple(Path(d) for d in allowed), purpose="NBV output")
-        self.max_voxels = float(rospy.get_param("~max_voxels", 2e7))
-        self.cloud_voxel_m = float(rospy.get_param("~cloud_voxel_m", 0.002))
-        self.max_cubes = int(rospy.get_param("~marker_max_cubes", nbv_markers.MAX_CUBES))
+        self.max_voxels = param("~max_voxels", 2e7, number)
+        self.cloud_voxel_m = param("~cloud_voxel_m", 0.002, number)
+        self.max_cubes = param("~marker_max_cubes", nbv_markers.MAX_CUBES, whole)
         if not (self.max_voxels > 0 and self.cloud_voxel_m > 0 and self.max_cubes > 0):
             raise ConfigError("~max_voxels, ~cloud_voxel_m and ~marker_max_cubes must be positive")
 
@@ -127,14 +128,14 @@ class NBVReconstructionNode:
         )
         self.robot = RosNBVRobot(
             list(self.station.limits.names),
-            rospy.get_param("~controller_action", "/robot_sim/execute_trajectory"),
-            settle_s=float(rospy.get_param("~settle_s", 0.1)),
+            param("~controller_action", "/robot_sim/execute_trajectory"),
+            settle_s=param("~settle_s", 0.1, number),
             cancel_requested=self._cancel_requested,
         )
         self.camera = RosNBVCamera(
-            rospy.get_param("~camera_ns", "/phoxi_camera"),
+            param("~camera_ns", "/phoxi_camera"),
             world_frame=self.world_frame,
-            frame_timeout_s=float(rospy.get_param("~frame_timeout_s", 30.0)),
+            frame_timeout_s=param("~frame_timeout_s", 30.0, number),
         )
         self.lock = threading.Lock()  # one goal or reset / save at a time
         self.reconstructor = None
@@ -163,8 +164,8 @@ class NBVReconstructionNode:
             rospy.Service("~reset", Trigger, self.on_reset),
             rospy.Service("~save", Trigger, self.on_save),
         ]
-        if rospy.get_param("~start_at_home", False):
-            self._place_at_home(rospy.get_param("~set_joint_state_service", "/robot_sim/set_joint_state"))
+        if param("~start_at_home", False):
+            self._place_at_home(param("~set_joint_state_service", "/robot_sim/set_joint_state"))
         self.server.start()
         rospy.loginfo(
             "nbv_reconstruction: ready (PhoXi %s, outputs under %s%s)",
@@ -520,10 +521,4 @@ class NBVReconstructionNode:
 
 
 def main():
-    rospy.init_node("nbv_reconstruction")
-    try:
-        NBVReconstructionNode()
-    except AgiprobotError as exc:
-        rospy.logfatal("nbv_reconstruction: %s", exc)
-        raise SystemExit(1) from exc
-    rospy.spin()
+    run_node("nbv_reconstruction", NBVReconstructionNode)

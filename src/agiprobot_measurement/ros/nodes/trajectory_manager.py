@@ -43,6 +43,7 @@ from sensor_msgs.msg import PointCloud, PointCloud2
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
+from agiprobot_measurement.common.config import number
 from agiprobot_measurement.errors import AgiprobotError
 from agiprobot_measurement.msg import (
     ExecuteJointTrajectoryAction,
@@ -63,7 +64,8 @@ from agiprobot_measurement.ros.action_client import ActionClient
 from agiprobot_measurement.ros.conversions import matrix_to_pose, pose_to_matrix, xyz_cloud, xyz_point_cloud
 from agiprobot_measurement.ros.executor import ControllerWatch, RosSegmentExecutor, ScannerClient
 from agiprobot_measurement.ros.joint_states import JointStateCache
-from agiprobot_measurement.ros.params import file_param
+from agiprobot_measurement.ros.node import run_node
+from agiprobot_measurement.ros.params import file_param, param
 from agiprobot_measurement.srv import (
     GetCoverageReport,
     GetCoverageReportResponse,
@@ -72,7 +74,7 @@ from agiprobot_measurement.srv import (
     StorePlan,
     StorePlanResponse,
 )
-from agiprobot_measurement.station import ConfigError, Station
+from agiprobot_measurement.station import Station
 
 __all__ = ["TrajectoryManagerNode", "coverage_summary", "main", "plan_request_from_goal", "yaml_plain"]
 
@@ -141,16 +143,16 @@ class TrajectoryManagerNode:
             scanner=file_param("~scanner"),
             scene=file_param("~scene"),
         )
-        allowed = rospy.get_param("~allowed_plan_dirs", []) or [os.environ.get("ROS_HOME") or "~/.ros", "/tmp"]
+        allowed = param("~allowed_plan_dirs", []) or [os.environ.get("ROS_HOME") or "~/.ros", "/tmp"]
         if isinstance(allowed, str):
             allowed = allowed.split()
         self.session = MeasurementSession(
             station,
-            dict(rospy.get_param("~planning", {})),
-            plan_directory=rospy.get_param("~plan_directory", "plans"),
-            measured_radius_mm=float(rospy.get_param("~measured_radius_mm", 1.0)),
+            dict(param("~planning", {})),
+            plan_directory=param("~plan_directory", "plans"),
+            measured_radius_mm=param("~measured_radius_mm", 1.0, number),
             allowed_directories=[Path(d).expanduser() for d in allowed],
-            work_budget=WorkBudget.from_mapping(rospy.get_param("~budget", {}), "~budget"),
+            work_budget=WorkBudget.from_mapping(param("~budget", {}), "~budget"),
         )
         rospy.set_param("~sensor_model", dict(station.scanner.sensor_parameters))
         self.joint_states = JointStateCache(self.session.joint_names)
@@ -163,12 +165,12 @@ class TrajectoryManagerNode:
         self.part_pub = rospy.Publisher("~part", MarkerArray, **latched)
         # sensor_msgs/PointCloud, as the original published it: scripts and rviz configs for it subscribe so
         self.current_pub = rospy.Publisher("/currently_measured_points", PointCloud, **latched)
-        self.scanner = ScannerClient(rospy.get_param("~scanner_namespace", "/laser_scanner"))
+        self.scanner = ScannerClient(param("~scanner_namespace", "/laser_scanner"))
         self.robot = ActionClient(
-            rospy.get_param("~controller_action", "/robot_sim/execute_trajectory"), ExecuteJointTrajectoryAction
+            param("~controller_action", "/robot_sim/execute_trajectory"), ExecuteJointTrajectoryAction
         )
         self.controller = ControllerWatch(
-            self.joint_states, self.robot, float(rospy.get_param("~controller_heartbeat_timeout_s", 1.0))
+            self.joint_states, self.robot, param("~controller_heartbeat_timeout_s", 1.0, number)
         )
         self.plan_server = actionlib.SimpleActionServer(
             "~plan_measurement", PlanMeasurementAction, execute_cb=self.on_plan, auto_start=False
@@ -485,10 +487,4 @@ def part_markers(part: PlanPart | None, header) -> MarkerArray:
 
 
 def main():
-    rospy.init_node("trajectory_manager")
-    try:
-        TrajectoryManagerNode()
-    except ConfigError as exc:
-        rospy.logfatal("trajectory_manager: %s", exc)
-        raise SystemExit(1) from exc
-    rospy.spin()
+    run_node("trajectory_manager", TrajectoryManagerNode)

@@ -38,6 +38,7 @@ import scipy.sparse
 import trimesh
 
 from agiprobot_measurement.errors import InternalError
+from agiprobot_measurement.sensors.errors import SensorInputError, SensorTypeError, ViewIndexError
 from agiprobot_measurement.station import load_scanner_config
 
 __all__ = [
@@ -110,10 +111,10 @@ class MeasurabilityResult:
     def concatenate(cls, results: Sequence[MeasurabilityResult]) -> MeasurabilityResult:
         """One result whose viewpoints are those of ``results`` in order (all over the same samples)."""
         if not results:
-            raise ValueError("concatenate needs at least one result")
+            raise SensorInputError("concatenate needs at least one result")
         n_points = results[0].n_points
         if any(r.n_points != n_points for r in results):
-            raise ValueError("results to concatenate must be over the same sample points")
+            raise SensorInputError("results to concatenate must be over the same sample points")
         indptr, offset = [np.zeros(1, dtype=np.int64)], 0
         for result in results:
             indptr.append(result.indptr[1:] + offset)
@@ -215,7 +216,7 @@ class MeasurabilityResult:
     def view(self, j: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(point indices, uncertainties mm, t0 mm) of viewpoint ``j``, as the per-viewpoint API returns."""
         if not -self.n_views <= j < self.n_views:
-            raise IndexError(f"viewpoint {j} out of range for {self.n_views} viewpoints")
+            raise ViewIndexError(f"viewpoint {j} out of range for {self.n_views} viewpoints")
         j %= self.n_views
         lo, hi = self.indptr[j], self.indptr[j + 1]
         return (
@@ -426,20 +427,20 @@ class SensorModel:
 
     def __init__(self, parameter_map: Mapping, *, occlusion_tolerance_mm: float = 0.01):
         if not isinstance(parameter_map, Mapping):
-            raise TypeError(f"parameter_map must be a mapping, got {type(parameter_map).__name__}")
+            raise SensorTypeError(f"parameter_map must be a mapping, got {type(parameter_map).__name__}")
         values = {}
         for name, aliases in PARAMETER_NAMES.items():
             given = [key for key in (name, *aliases) if key in parameter_map]
             if not given:
-                raise ValueError(f"sensor parameter_map lacks '{name}' (accepted spellings: {name}, {aliases})")
+                raise SensorInputError(f"sensor parameter_map lacks '{name}' (accepted spellings: {name}, {aliases})")
             if len(given) > 1:
-                raise ValueError(f"sensor parameter_map gives '{name}' more than once: {given}")
+                raise SensorInputError(f"sensor parameter_map gives '{name}' more than once: {given}")
             try:
                 value = float(parameter_map[given[0]])
             except (TypeError, ValueError) as exc:
-                raise ValueError(f"sensor parameter '{given[0]}' must be a number") from exc
+                raise SensorInputError(f"sensor parameter '{given[0]}' must be a number") from exc
             if not math.isfinite(value) or value <= 0.0:
-                raise ValueError(f"sensor parameter '{given[0]}' must be positive and finite, got {value}")
+                raise SensorInputError(f"sensor parameter '{given[0]}' must be positive and finite, got {value}")
             values[name] = value
         self.parameters = dict(parameter_map)
         self.optimal_standoff = values["optimal_standoff_mm"]
@@ -451,14 +452,14 @@ class SensorModel:
         self.alpha = values["alpha_rad"]
         self.fan_angle = values["fan_angle_rad"]
         if not self.minimum_standoff < self.optimal_standoff < self.maximum_standoff:
-            raise ValueError("sensor parameters need minimum_standoff < optimal_standoff < maximum_standoff")
+            raise SensorInputError("sensor parameters need minimum_standoff < optimal_standoff < maximum_standoff")
         for name in ("theta_max", "psi_max", "alpha"):
             if getattr(self, name) >= math.pi / 2:
-                raise ValueError(f"sensor parameter {name} must be below pi/2 rad")
+                raise SensorInputError(f"sensor parameter {name} must be below pi/2 rad")
         if self.fan_angle >= math.pi:
-            raise ValueError("sensor parameter fan_angle must be below pi rad")
+            raise SensorInputError("sensor parameter fan_angle must be below pi rad")
         if not occlusion_tolerance_mm >= 0.0:
-            raise ValueError("occlusion_tolerance_mm must be >= 0")
+            raise SensorInputError("occlusion_tolerance_mm must be >= 0")
         self.occlusion_tolerance = float(occlusion_tolerance_mm)
         self.xi_0 = math.sin(self.alpha) * self.optimal_standoff
         #: Distance emitter -> detector in mm; the detector sits at ``e - distance * x``.
@@ -525,7 +526,7 @@ class SensorModel:
         """
         half_length = float(half_length)
         if not math.isfinite(half_length) or half_length <= 0.0:
-            raise ValueError(f"half_length must be a positive number of mm, got {half_length}")
+            raise SensorInputError(f"half_length must be a positive number of mm, got {half_length}")
         corners = []
         for x in (-half_length, half_length):
             for z in (self.minimum_standoff, self.maximum_standoff):
@@ -552,17 +553,19 @@ class SensorModel:
         them, so the result is the same. ``False`` casts rays for every pair (for comparisons).
         """
         if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-            raise ValueError("set_processing_context needs a trimesh.Trimesh with faces")
+            raise SensorInputError("set_processing_context needs a trimesh.Trimesh with faces")
         points = np.asarray(sampled_surface_points, dtype=float).reshape(-1, 3)
         face_ids = np.asarray(sampled_face_indices).reshape(-1)
         if face_ids.shape[0] != points.shape[0]:
-            raise ValueError(f"{points.shape[0]} sample points but {face_ids.shape[0]} face indices: they must match")
+            raise SensorInputError(
+                f"{points.shape[0]} sample points but {face_ids.shape[0]} face indices: they must match"
+            )
         if not np.all(np.isfinite(points)):
-            raise ValueError("sample points must be finite")
+            raise SensorInputError("sample points must be finite")
         if face_ids.size and (
             not np.issubdtype(face_ids.dtype, np.integer) or face_ids.min() < 0 or face_ids.max() >= len(mesh.faces)
         ):
-            raise ValueError(f"face indices must be integers in [0, {len(mesh.faces)})")
+            raise SensorInputError(f"face indices must be integers in [0, {len(mesh.faces)})")
         face_ids = face_ids.astype(np.int64)
         normals = np.asarray(mesh.face_normals, dtype=float)[face_ids]
         if cull_supporting_faces:
@@ -651,19 +654,19 @@ class SensorModel:
         ctx = self._require_context()
         poses = np.asarray(anchor_poses, dtype=float)
         if poses.ndim != 3 or poses.shape[1:] != (4, 4):
-            raise ValueError(f"anchor_poses must have shape (V, 4, 4), got {poses.shape}")
+            raise SensorInputError(f"anchor_poses must have shape (V, 4, 4), got {poses.shape}")
         if not np.all(np.isfinite(poses)):
-            raise ValueError("anchor_poses must be finite")
+            raise SensorInputError("anchor_poses must be finite")
         rotations = poses[:, :3, :3]
         gram = np.einsum("vji,vjk->vik", rotations, rotations)
         if poses.shape[0] and (np.abs(gram - np.eye(3)).max() > 1e-6 or np.linalg.det(rotations).min() < 0.0):
-            raise ValueError("anchor_poses must be rigid: rotation blocks orthonormal with det +1")
+            raise SensorInputError("anchor_poses must be rigid: rotation blocks orthonormal with det +1")
         threshold = float(uncertainty_threshold)
         deflection = float(maximum_deflection)
         if not threshold > 0.0:
-            raise ValueError(f"uncertainty_threshold must be a positive number of mm, got {threshold}")
+            raise SensorInputError(f"uncertainty_threshold must be a positive number of mm, got {threshold}")
         if not deflection >= 0.0:
-            raise ValueError(f"maximum_deflection must be >= 0 mm, got {deflection}")
+            raise SensorInputError(f"maximum_deflection must be >= 0 mm, got {deflection}")
         n_views, n_points = poses.shape[0], ctx.points.shape[0]
         if n_views == 0 or n_points == 0:
             return MeasurabilityResult(
