@@ -4,11 +4,15 @@ from __future__ import annotations
 
 from agiprobot_measurement.errors import InputError, InternalError
 
-__all__ = ["MessageError", "RvizSnapshotError"]
+__all__ = ["BagReadError", "MessageError", "RvizSnapshotError"]
 
 
 class MessageError(InputError):
     """A ROS message, bag or marker request does not have the content or shape the conversion needs."""
+
+
+class BagReadError(MessageError):
+    """A bag cannot be read (rosbag's own errors, wrapped with the bag's name)."""
 
 
 class RvizSnapshotError(InternalError):
