@@ -26,6 +26,7 @@ from typing import NamedTuple
 import fcl
 import numpy as np
 
+from agiprobot_measurement.common.config import non_negative
 from agiprobot_measurement.motion.errors import MotionInputError, UnknownObjectError
 from agiprobot_measurement.motion.kinematics import KinematicModel
 from agiprobot_measurement.station import (
@@ -120,14 +121,7 @@ def load_collision_config(path: str | Path | None = None) -> CollisionConfig:
     where = str(path)
     if not isinstance(data, dict):
         raise ConfigError(f"{where}: expected a mapping")
-    paddings = {}
-    for key in ("padding_m", "self_padding_m"):
-        try:
-            paddings[key] = float(data.get(key, 0.0))
-        except (TypeError, ValueError) as exc:
-            raise ConfigError(f"{where}: {key} must be a number") from exc
-        if not math.isfinite(paddings[key]) or paddings[key] < 0.0:
-            raise ConfigError(f"{where}: {key} must be a finite number >= 0, got {paddings[key]}")
+    paddings = {key: non_negative(data.get(key, 0.0), f"{where}: {key}") for key in ("padding_m", "self_padding_m")}
     allowed = {}
     entries = data.get("allowed_collisions") or []
     if not isinstance(entries, list):

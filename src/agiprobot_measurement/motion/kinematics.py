@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import PyKDL
 
+from agiprobot_measurement.common.config import number
 from agiprobot_measurement.motion.errors import MotionInputError
 from agiprobot_measurement.station import ConfigError, JointLimits, Station
 from agiprobot_measurement.station.urdf_model import UrdfJoint, UrdfModel
@@ -247,9 +248,7 @@ def load_kinematics_correction(path: str | Path | None = None) -> tuple[bool, Dh
     enabled = require(data, "true_kinematics", where)
     if not isinstance(enabled, bool):
         raise ConfigError(f"{where}: 'true_kinematics' must be true or false")
-    scale = float(data.get("scale", 1.0))
-    if not np.isfinite(scale):
-        raise ConfigError(f"{where}: 'scale' must be a finite number")
+    scale = number(data.get("scale", 1.0), f"{where}: 'scale'")
     deltas = require(data, "dh_delta", where)
     correction = DhCorrection(
         *(

@@ -37,6 +37,7 @@ import numpy as np
 import scipy.sparse
 import trimesh
 
+from agiprobot_measurement.common.config import positive
 from agiprobot_measurement.errors import InternalError
 from agiprobot_measurement.sensors.errors import SensorInputError, SensorTypeError, ViewIndexError
 from agiprobot_measurement.station import load_scanner_config
@@ -435,13 +436,7 @@ class SensorModel:
                 raise SensorInputError(f"sensor parameter_map lacks '{name}' (accepted spellings: {name}, {aliases})")
             if len(given) > 1:
                 raise SensorInputError(f"sensor parameter_map gives '{name}' more than once: {given}")
-            try:
-                value = float(parameter_map[given[0]])
-            except (TypeError, ValueError) as exc:
-                raise SensorInputError(f"sensor parameter '{given[0]}' must be a number") from exc
-            if not math.isfinite(value) or value <= 0.0:
-                raise SensorInputError(f"sensor parameter '{given[0]}' must be positive and finite, got {value}")
-            values[name] = value
+            values[name] = positive(parameter_map[given[0]], f"sensor parameter '{given[0]}'")
         self.parameters = dict(parameter_map)
         self.optimal_standoff = values["optimal_standoff_mm"]
         self.minimum_standoff = values["minimum_standoff_mm"]
