@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from agiprobot_measurement.motion.cartesian_kernels import follow_branches
 from agiprobot_measurement.motion.errors import MotionInputError
 from agiprobot_measurement.motion.ik import IKSolver, check_joint_states, check_poses
 
@@ -101,7 +102,7 @@ def interpolate_poses(
     return np.concatenate(out)
 
 
-#: the compiled walk (numba, imported on first use) takes over after this many paths in a process: loading it
+#: the compiled walk (numba, loaded by cartesian_kernels on first use) takes over after this many paths in a process: loading it
 #: costs about 0.6 s, it saves about 0.35 ms per path
 COMPILED_AFTER_PATHS = 1500
 _paths_followed = 0
@@ -114,8 +115,6 @@ def _follow_all_solutions(ik, start_q: np.ndarray, poses: np.ndarray) -> tuple[n
     solutions = np.where(valid[..., None], solutions, 0.0)
     _paths_followed += 1
     if _paths_followed > COMPILED_AFTER_PATHS:
-        from agiprobot_measurement.motion.cartesian_kernels import follow_branches
-
         chosen, count = follow_branches(
             np.ascontiguousarray(solutions), np.ascontiguousarray(valid), np.asarray(start_q, dtype=np.float64)
         )

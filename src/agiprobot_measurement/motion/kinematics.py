@@ -14,7 +14,8 @@ from pathlib import Path
 import numpy as np
 import PyKDL
 
-from agiprobot_measurement.common.config import number
+from agiprobot_measurement._paths import CONFIG_DIR
+from agiprobot_measurement.common.config import number, read_yaml, require, vector
 from agiprobot_measurement.motion.errors import MotionInputError
 from agiprobot_measurement.station import ConfigError, JointLimits, Station
 from agiprobot_measurement.station.urdf_model import UrdfJoint, UrdfModel
@@ -237,9 +238,6 @@ class DhCorrection:
 def load_kinematics_correction(path: str | Path | None = None) -> tuple[bool, DhCorrection]:
     """``(true_kinematics enabled, correction, deviation scale)`` from a correction file (default
     ``config/ur10e_kinematics_correction.yaml``); ConfigError naming the key on bad content."""
-    from agiprobot_measurement._paths import CONFIG_DIR
-    from agiprobot_measurement.common.config import read_yaml, require, vector
-
     path = Path(path) if path else CONFIG_DIR / "ur10e_kinematics_correction.yaml"
     data = read_yaml(path)
     where = str(path)
