@@ -55,12 +55,14 @@ from asr_robot_model_services.srv import (
 )
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from nav_msgs.msg import OccupancyGrid
+from std_msgs.msg import Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from agiprobot_measurement.errors import AgiprobotError, InputError
 from agiprobot_measurement.mild.config import DEFAULTS, FrameNames, load_kinematics, load_map, settings_from_mapping
 from agiprobot_measurement.mild.robot_model import MildRobotModel
 from agiprobot_measurement.mild.state import RobotState
+from agiprobot_measurement.ros import markers
 from agiprobot_measurement.ros import mild_messages as mild_ros
 from agiprobot_measurement.ros.conversions import matrix_to_pose, transform_to_matrix, xyz_array, xyzw_array
 from agiprobot_measurement.ros.node import run_node
@@ -243,7 +245,7 @@ class RobotModelServices:
             corrected = RobotState(correction.pan, correction.tilt, state.rotation, state.x, state.y)
             pose = model.camera_pose(corrected)
             solution = _Corrected(corrected, correction.view_centre_m, model.view_centre(pose))
-            self._publish_ik(model, solution, position, mild_ros.RED, "_poseCorrection")
+            self._publish_ik(model, solution, position, markers.RED, "_poseCorrection")
         return CalculateCameraPoseCorrectionResponse(correction.pan, correction.tilt)
 
     @answers_errors
@@ -257,7 +259,7 @@ class RobotModelServices:
             source, position, xyzw_array(request.orientation), record_samples=visualize
         )
         if visualize:
-            self._publish_ik(model, solution, position, mild_ros.BLUE, "")
+            self._publish_ik(model, solution, position, markers.BLUE, "")
         response = CalculateRobotStateResponse()
         response.success = solution.ok
         response.message = solution.reason
@@ -275,8 +277,8 @@ class RobotModelServices:
         frame = self.frames.map_frame
         with self.visualization_lock:
             if not suffix:  # a new IK clears the previous picture (the original deleted marker by marker)
-                self.ik_publisher.publish(mild_ros.delete_all(frame, stamp))
-            for marker in mild_ros.ik_markers(model, solution, position, frame, stamp, colour, suffix):
+                self.ik_publisher.publish(markers.clear(Header(frame_id=frame, stamp=stamp)))
+            for marker in markers.ik_markers(model, solution, position, frame, stamp, colour, suffix):
                 self.ik_publisher.publish(marker)
 
     def publish_frustum(self, _event=None):
@@ -287,7 +289,7 @@ class RobotModelServices:
         except tf2_ros.TransformException:
             return  # no robot on tf (yet): nothing to draw
         corners = self.model.frustum_corners(transform_to_matrix(transform))
-        self.frustum_publisher.publish(mild_ros.frustum_marker_array(corners, self.frames.map_frame, rospy.Time.now()))
+        self.frustum_publisher.publish(markers.frustum_marker_array(corners, self.frames.map_frame, rospy.Time.now()))
 
 
 def _flag_param(params: dict, key: str, default: bool) -> bool:
@@ -407,8 +409,8 @@ class IKTest:
             )
             if self.settings.visualize_ik:
                 stamp = rospy.Time.now()
-                self.ik_publisher.publish(mild_ros.delete_all(self.frame, stamp))
-                for marker in mild_ros.ik_markers(self.model, solution, position, self.frame, stamp, mild_ros.BLUE):
+                self.ik_publisher.publish(markers.clear(Header(frame_id=self.frame, stamp=stamp)))
+                for marker in markers.ik_markers(self.model, solution, position, self.frame, stamp, markers.BLUE):
                     self.ik_publisher.publish(marker)
             rospy.sleep(self.step_s)
         rospy.loginfo(

@@ -68,8 +68,8 @@ from agiprobot_measurement.msg import (
     ReconstructObjectResult,
 )
 from agiprobot_measurement.nbv.interfaces import CapturedView
-from agiprobot_measurement.ros import nbv_markers
-from agiprobot_measurement.ros.conversions import xyz_cloud
+from agiprobot_measurement.ros import markers
+from agiprobot_measurement.ros.conversions import pose_stamped, sensor_path, xyz_cloud
 from agiprobot_measurement.ros.nbv_interfaces import RosNBVCamera, RosNBVRobot
 from agiprobot_measurement.ros.nbv_messages import candidate_arrays, request_mapping_from_goal
 from agiprobot_measurement.ros.nbv_setup import nbv_station
@@ -119,7 +119,7 @@ class NBVReconstructionNode:
         self.files = FileRoot(Path(output_dir).expanduser(), tuple(Path(d) for d in allowed), purpose="NBV output")
         self.max_voxels = param("~max_voxels", 2e7, number)
         self.cloud_voxel_m = param("~cloud_voxel_m", 0.002, number)
-        self.max_cubes = param("~marker_max_cubes", nbv_markers.MAX_CUBES, whole)
+        self.max_cubes = param("~marker_max_cubes", markers.MAX_CUBES, whole)
         if not (self.max_voxels > 0 and self.cloud_voxel_m > 0 and self.max_cubes > 0):
             raise ConfigError("~max_voxels, ~cloud_voxel_m and ~marker_max_cubes must be positive")
 
@@ -266,7 +266,7 @@ class NBVReconstructionNode:
             else:
                 pose = self._plan_only(result, reconstructor, output_dir, on_progress)
             if pose is not None:
-                result.next_view = nbv_markers.pose_stamped(pose, self._header())
+                result.next_view = pose_stamped(pose, self._header())
                 self.pubs["next_best_view"].publish(result.next_view)
             self._visual(self._publish_map)
             self._visual(lambda: self._publish_mesh(result.mesh_file))
@@ -331,7 +331,7 @@ class NBVReconstructionNode:
             progress=float(progress.progress),
         )
         if progress.next_view_pose is not None:
-            feedback.next_view = nbv_markers.pose_stamped(progress.next_view_pose, self._header())
+            feedback.next_view = pose_stamped(progress.next_view_pose, self._header())
         return feedback
 
     def _fill_result(self, result, outcome) -> None:
@@ -396,7 +396,7 @@ class NBVReconstructionNode:
     # ------------------------------------------------------------------------------------ visuals
     def _on_view(self, view: CapturedView) -> None:
         self.view_poses.append(np.asarray(view.camera_pose, dtype=float))
-        self.pubs["sensor_path"].publish(nbv_markers.sensor_path(self.view_poses, self._header()))
+        self.pubs["sensor_path"].publish(sensor_path(self.view_poses, self._header()))
 
     def _diagnose(self, message: str, level=DiagnosticStatus.OK, **values) -> None:
         status = DiagnosticStatus(level=level, name="nbv_reconstruction", message=message, hardware_id="none")
@@ -416,11 +416,11 @@ class NBVReconstructionNode:
             if progress.phase in ("evaluate", "plan_motion") and self.reconstructor is not None:
                 poses, utilities, reasons = candidate_arrays(self.reconstructor.candidates_last)
                 self.pubs["candidate_views"].publish(
-                    nbv_markers.candidate_markers(poses, utilities, reasons, self._header())
+                    markers.candidate_markers(poses, utilities, reasons, self._header())
                 )
             if progress.next_view_pose is not None:
                 header = self._header()
-                self.pubs["next_best_view"].publish(nbv_markers.pose_stamped(progress.next_view_pose, header))
+                self.pubs["next_best_view"].publish(pose_stamped(progress.next_view_pose, header))
                 self._publish_frustum(progress.next_view_pose, header)
         except Exception as exc:  # a picture must not end a reconstruction (the loop would stop with "error")
             rospy.logwarn_throttle(10.0, "nbv_reconstruction: markers: %s: %s", type(exc).__name__, exc)
@@ -440,7 +440,7 @@ class NBVReconstructionNode:
 
             try:
                 mesh = trimesh.load(mesh_file, force="mesh")
-                marker = nbv_markers.mesh_marker(mesh.vertices, mesh.faces, self._header())
+                marker = markers.mesh_marker(mesh.vertices, mesh.faces, self._header())
             except Exception as exc:  # trimesh raises many kinds for an unreadable file; a picture is not the result
                 rospy.logwarn("nbv_reconstruction: mesh %s not shown: %s", mesh_file, exc)
         self.pubs["mesh"].publish(marker)
@@ -450,7 +450,7 @@ class NBVReconstructionNode:
         if view_model is None:
             return
         self.pubs["view_frustum"].publish(
-            nbv_markers.frustum_marker(
+            markers.frustum_marker(
                 pose,
                 view_model.fov_h_rad,
                 view_model.fov_v_rad,
@@ -469,12 +469,12 @@ class NBVReconstructionNode:
         size = float(grid.resolution_m)
         layers = (
             ("occupied_voxels", np.argwhere(grid.labels() == 1), None),
-            ("frontier_voxels", grid.candidate_voxels(), nbv_markers.FRONTIER_RGBA),
-            ("occlusion_plane", grid.occlusion_plane(), nbv_markers.OCCLUSION_RGBA),
+            ("frontier_voxels", grid.candidate_voxels(), markers.FRONTIER_RGBA),
+            ("occlusion_plane", grid.occlusion_plane(), markers.OCCLUSION_RGBA),
         )
         for name, indices, rgba in layers:
             centres = grid.index_to_world(np.asarray(indices).reshape(-1, 3))
-            self.pubs[name].publish(nbv_markers.voxel_markers(centres, size, header, name, rgba, self.max_cubes))
+            self.pubs[name].publish(markers.voxel_markers(centres, size, header, name, rgba, self.max_cubes))
         points = np.asarray(grid.raw.xyz_m, dtype=float).reshape(-1, 3)
         if len(points):
             keys = np.floor(points / self.cloud_voxel_m).astype(np.int64)
@@ -486,10 +486,8 @@ class NBVReconstructionNode:
         header = self._header()
         self._published = (None, -1)
         for name in ("occupied_voxels", "frontier_voxels", "occlusion_plane", "candidate_views"):
-            clear = Marker(action=Marker.DELETEALL)
-            clear.header = header
-            self.pubs[name].publish(MarkerArray(markers=[clear]))
-        self.pubs["sensor_path"].publish(nbv_markers.sensor_path([], header))
+            self.pubs[name].publish(MarkerArray(markers=[markers.clear(header)]))
+        self.pubs["sensor_path"].publish(sensor_path([], header))
         self.pubs["fused_cloud"].publish(xyz_cloud(np.zeros((0, 3)), header))
 
     # ------------------------------------------------------------------------------------ services
