@@ -1,5 +1,5 @@
 """The ``nbv_reconstruction`` node (nodes/nbv_reconstruction): next-best-view reconstruction of an unknown part on the
-station, the ROS layer over :class:`agiprobot_measurement.nbv.reconstruction.Reconstructor` (issue 17).
+station, the ROS layer over :class:`agiprobot_measurement.nbv.reconstruction.Reconstructor`.
 
 The loop is ROS-free; this node gives it the station's robot (:class:`~agiprobot_measurement.ros.nbv_interfaces.
 RosNBVRobot`: robot_sim's ExecuteJointTrajectory action and /joint_states) and the PhoXi on the flange
