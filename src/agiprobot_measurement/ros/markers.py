@@ -1,4 +1,5 @@
-"""Every rviz marker of the package: colours, clear markers, primitives and the builders per domain, in one place.
+"""Every rviz marker of the package: colours, clear markers, primitives and the builders per domain, in one place
+(each domain's colours head its section).
 
 - primitives: :func:`clear` (a DELETEALL, so a smaller set replaces a larger one), :func:`arrow`, :func:`sphere`;
 - station scene: :func:`scene_marker_array` (table, obstacles, chessboards, part);
@@ -52,24 +53,6 @@ __all__ = [
     "utility_colors",
     "voxel_markers",
 ]
-
-# ------------------------------------------------------------------------------------------------------- colours
-GREEN = (0.1, 0.8, 0.1, 1.0)
-BLUE = (0.1, 0.3, 1.0, 1.0)
-RED = (0.9, 0.1, 0.1, 1.0)
-MILD_FRUSTUM_RGBA = (1.0, 0.6, 0.0, 1.0)
-NBV_FRUSTUM_RGBA = (0.2, 0.9, 1.0, 0.8)
-SCAN_LINE_RGBA = (1.0, 0.55, 0.0, 1.0)
-PATH_RGBA = (0.3, 0.8, 1.0, 0.8)
-PART_RGBA = (0.8, 0.8, 0.2, 1.0)
-FRONTIER_RGBA = (1.0, 0.85, 0.0, 0.6)
-OCCLUSION_RGBA = (0.9, 0.2, 0.9, 0.35)
-REJECTED_RGBA = (0.55, 0.55, 0.55, 0.5)
-MESH_RGBA = (0.75, 0.75, 0.8, 1.0)
-#: a CUBE_LIST larger than this is thinned to every k-th voxel (rviz and the wire stay responsive)
-MAX_CUBES = 200_000
-#: a mesh larger than this is shown with every k-th triangle
-MAX_TRIANGLES = 150_000
 
 
 # ---------------------------------------------------------------------------------------------------- primitives
@@ -166,6 +149,12 @@ def scene_marker_array(scene: Scene, namespace: str = "scene") -> MarkerArray:
 
 
 # ---------------------------------------------------------------------------------------------- measurement plan
+#: measurement planning: scan lines, the scanner's path, the part
+SCAN_LINE_RGBA = (1.0, 0.55, 0.0, 1.0)
+PATH_RGBA = (0.3, 0.8, 1.0, 0.8)
+PART_RGBA = (0.8, 0.8, 0.2, 1.0)
+
+
 def scan_line_markers(scan_lines_mm, header) -> MarkerArray:
     """An arrow and a number per scan line ((start, end) mm), after a DELETEALL of the previous plan's."""
     markers = MarkerArray(markers=[clear(header)])
@@ -221,6 +210,13 @@ def part_markers(part, header) -> MarkerArray:
 
 
 # ---------------------------------------------------------------------------------------------------------- MILD
+#: MILD: the IK's picture (requested view green; solutions blue, pose corrections red) and the camera frustum
+GREEN = (0.1, 0.8, 0.1, 1.0)
+BLUE = (0.1, 0.3, 1.0, 1.0)
+RED = (0.9, 0.1, 0.1, 1.0)
+MILD_FRUSTUM_RGBA = (1.0, 0.6, 0.0, 1.0)
+
+
 def frustum_marker_array(corners: np.ndarray, frame_id: str, stamp, ns: str = "camera_frustum") -> MarkerArray:
     """The frustum's 12 edges (LINE_LIST) from the 8 corners of MildRobotModel.frustum_corners."""
     lines = _marker(frame_id, stamp, ns, 0, Marker.LINE_LIST, MILD_FRUSTUM_RGBA, (0.01, 0.0, 0.0))
@@ -270,6 +266,18 @@ def ik_markers(model, solution, requested_position, frame_id: str, stamp, colour
 
 
 # ---------------------------------------------------------------------------------------- 3D next-best-view
+#: 3D next-best-view: the view frustum, frontier and occlusion voxels, rejected candidates, the fused mesh
+NBV_FRUSTUM_RGBA = (0.2, 0.9, 1.0, 0.8)
+FRONTIER_RGBA = (1.0, 0.85, 0.0, 0.6)
+OCCLUSION_RGBA = (0.9, 0.2, 0.9, 0.35)
+REJECTED_RGBA = (0.55, 0.55, 0.55, 0.5)
+MESH_RGBA = (0.75, 0.75, 0.8, 1.0)
+#: a CUBE_LIST larger than this is thinned to every k-th voxel (rviz and the wire stay responsive)
+MAX_CUBES = 200_000
+#: a mesh larger than this is shown with every k-th triangle
+MAX_TRIANGLES = 150_000
+
+
 def _height_colors(z: np.ndarray) -> np.ndarray:
     """(K, 3) colours by height (blue low ... red high), as octomap_server colours its cells."""
     span = float(np.ptp(z)) if len(z) else 0.0
