@@ -46,6 +46,8 @@ def run_cli(args, cwd, timeout=120):
         # a command-line user's files go where they are named: only what cannot be written is refused
         ([CUBE, "-o", "/no_such_dir/plan"], "output directory does not exist: /no_such_dir"),
         ([CUBE, "--report", "../no_such_dir/report.png"], "output directory does not exist: ../no_such_dir"),
+        ([CUBE, "--summary", "/no_such_dir/summary.txt"], "output directory does not exist: /no_such_dir"),
+        ([CUBE, "-o", "~/no_such_dir_of_plans/plan"], "output directory does not exist: ~/no_such_dir_of_plans"),
         ([CUBE, "--output-dir", "no_such_dir", "-o", "plan"], "--output-dir no_such_dir is not a directory"),
     ],
 )

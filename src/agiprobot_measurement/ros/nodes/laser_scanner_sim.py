@@ -33,7 +33,7 @@ from agiprobot_measurement.errors import AgiprobotError
 from agiprobot_measurement.planning.part_loading import PartLoadError, load_part
 from agiprobot_measurement.ros.conversions import transform_to_matrix, xyz_cloud
 from agiprobot_measurement.ros.node import run_node
-from agiprobot_measurement.ros.params import param
+from agiprobot_measurement.ros.params import Param, param, read_params
 from agiprobot_measurement.sensors.laser_line.model import SensorModel
 from agiprobot_measurement.sensors.laser_line.simulator import LaserLineScannerSimulator, StitchedCloud, voxel_thin
 from agiprobot_measurement.srv import SetScanTarget, SetScanTargetResponse, SetStitching, SetStitchingResponse
@@ -52,15 +52,27 @@ class LaserScannerSim:
     def __init__(self):
         scanner = load_scanner_config(param("~scanner", None) or None)
         params = scanner.sensor_parameters
-        self.world_frame = param("~world_frame", "world")
-        self.emitter_frame = param("~emitter_frame", "laser_emitter_frame")
-        self.rate_hz = param("~profile_rate_hz", params.get("profile_rate_hz", 100.0), number)
-        self.voxel_mm = param("~measured_cloud_voxel_mm", 1.0, number)
+        # the node's parameters (name, default, validator), read once; two defaults come from the scanner file
+        settings = read_params(
+            (
+                Param("~world_frame", "world"),
+                Param("~emitter_frame", "laser_emitter_frame"),
+                Param("~profile_rate_hz", params.get("profile_rate_hz", 100.0), number),
+                Param("~measured_cloud_voxel_mm", 1.0, number),
+                Param("~points_per_profile", params.get("points_per_profile", 640), whole),
+                Param("~seed", 0, whole),
+                Param("~noise_scale", 1.0, number),
+            )
+        )
+        self.world_frame = settings.world_frame
+        self.emitter_frame = settings.emitter_frame
+        self.rate_hz = settings.profile_rate_hz
+        self.voxel_mm = settings.measured_cloud_voxel_mm
         self.simulator = LaserLineScannerSimulator(
             SensorModel(params),
-            points_per_profile=param("~points_per_profile", params.get("points_per_profile", 640), whole),
-            seed=param("~seed", 0, whole),
-            noise_scale=param("~noise_scale", 1.0, number),
+            points_per_profile=settings.points_per_profile,
+            seed=settings.seed,
+            noise_scale=settings.noise_scale,
         )
         self.lock = threading.Lock()
         # the timer's scan and a stitching switch must not interleave: a switch resets the profile clock that a

@@ -74,7 +74,7 @@ from agiprobot_measurement.ros.nbv_interfaces import RosNBVCamera, RosNBVRobot
 from agiprobot_measurement.ros.nbv_messages import candidate_arrays, request_mapping_from_goal
 from agiprobot_measurement.ros.nbv_setup import nbv_station
 from agiprobot_measurement.ros.node import run_node
-from agiprobot_measurement.ros.params import file_param, flag, param, text
+from agiprobot_measurement.ros.params import Param, file_param, flag, read_params, text
 from agiprobot_measurement.srv import SetJointState
 
 __all__ = ["NBVReconstructionNode", "main"]
@@ -100,26 +100,46 @@ def _map_key(request) -> tuple:
     return (*roi, request.resolution_m, request.planning_resolution_m, request.gain, request.candidates)
 
 
+#: the node's parameters (name, default, validator), read once at start
+PARAMETERS = (
+    Param("~model", ""),
+    Param("~ground_truth", False, flag),
+    Param("~world_frame", "world", text),
+    Param("~output_dir", ""),
+    Param("~allowed_output_dirs", ""),
+    Param("~max_voxels", 2e7, number),
+    Param("~cloud_voxel_m", 0.002, number),
+    Param("~marker_max_cubes", markers.MAX_CUBES, whole),
+    Param("~controller_action", "/robot_sim/execute_trajectory"),
+    Param("~settle_s", 0.1, number),
+    Param("~camera_ns", "/phoxi_camera"),
+    Param("~frame_timeout_s", 30.0, number),
+    Param("~start_at_home", False),
+    Param("~set_joint_state_service", "/robot_sim/set_joint_state"),
+)
+
+
 class NBVReconstructionNode:
     def __init__(self):
-        self.model = str(param("~model", "") or "")
-        self.use_ground_truth = param("~ground_truth", False, flag)
+        settings = read_params(PARAMETERS)
+        self.model = str(settings.model or "")
+        self.use_ground_truth = settings.ground_truth
         # the station the loop knows (scene, robot with the PhoXi, IK, collision); in simulation also the truth
         self.config, self.station, self.ground_truth = nbv_station(
             file_param("~config"), file_param("~scene"), self.model, self.use_ground_truth
         )
         self.defaults = dict(self.config.get("request", {}))
-        self.world_frame = param("~world_frame", "world", text)
+        self.world_frame = settings.world_frame
         ros_home = Path(os.environ.get("ROS_HOME") or "~/.ros").expanduser()
-        output_dir = str(param("~output_dir", "") or ros_home / "nbv")
-        allowed = param("~allowed_output_dirs", "") or ["/tmp"]
+        output_dir = str(settings.output_dir or ros_home / "nbv")
+        allowed = settings.allowed_output_dirs or ["/tmp"]
         if isinstance(allowed, str):
             allowed = allowed.replace(",", " ").split()
         Path(output_dir).expanduser().mkdir(parents=True, exist_ok=True)
         self.files = FileRoot(Path(output_dir).expanduser(), tuple(Path(d) for d in allowed), purpose="NBV output")
-        self.max_voxels = param("~max_voxels", 2e7, number)
-        self.cloud_voxel_m = param("~cloud_voxel_m", 0.002, number)
-        self.max_cubes = param("~marker_max_cubes", markers.MAX_CUBES, whole)
+        self.max_voxels = settings.max_voxels
+        self.cloud_voxel_m = settings.cloud_voxel_m
+        self.max_cubes = settings.marker_max_cubes
         if not (self.max_voxels > 0 and self.cloud_voxel_m > 0 and self.max_cubes > 0):
             raise ConfigError("~max_voxels, ~cloud_voxel_m and ~marker_max_cubes must be positive")
 
@@ -128,14 +148,14 @@ class NBVReconstructionNode:
         )
         self.robot = RosNBVRobot(
             list(self.station.limits.names),
-            param("~controller_action", "/robot_sim/execute_trajectory"),
-            settle_s=param("~settle_s", 0.1, number),
+            settings.controller_action,
+            settle_s=settings.settle_s,
             cancel_requested=self._cancel_requested,
         )
         self.camera = RosNBVCamera(
-            param("~camera_ns", "/phoxi_camera"),
+            settings.camera_ns,
             world_frame=self.world_frame,
-            frame_timeout_s=param("~frame_timeout_s", 30.0, number),
+            frame_timeout_s=settings.frame_timeout_s,
         )
         self.lock = threading.Lock()  # one goal or reset / save at a time
         self.reconstructor = None
@@ -164,8 +184,8 @@ class NBVReconstructionNode:
             rospy.Service("~reset", Trigger, self.on_reset),
             rospy.Service("~save", Trigger, self.on_save),
         ]
-        if param("~start_at_home", False):
-            self._place_at_home(param("~set_joint_state_service", "/robot_sim/set_joint_state"))
+        if settings.start_at_home:
+            self._place_at_home(settings.set_joint_state_service)
         self.server.start()
         rospy.loginfo(
             "nbv_reconstruction: ready (PhoXi %s, outputs under %s%s)",
