@@ -12,8 +12,6 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
-import pytest
-
 from agiprobot_measurement._paths import PACKAGE_ROOT
 
 SOURCE = PACKAGE_ROOT / "src" / "agiprobot_measurement"
@@ -41,9 +39,6 @@ INNER_IMPORTS = {
     "ros/nodes/nbv_reconstruction.py:_make_reconstructor": "the nbv 3D modules are being split; as above",
     "ros/nodes/nbv_reconstruction.py:_plan_only": "the nbv 3D modules are being split; as above",
 }
-
-#: whether README.md is being rewritten as a map on another branch; False once that is merged
-README_BEING_REWRITTEN = True
 
 
 def source_files() -> list[Path]:
@@ -118,7 +113,6 @@ def test_the_inner_import_scan_sees_nested_and_relative_imports():
     assert sorted(inner_imports(tree)) == [("f", 6), ("f", 7), ("g", 6)]
 
 
-@pytest.mark.skipif(README_BEING_REWRITTEN, reason="README.md is being rewritten as a map on another branch")
 def test_the_readme_is_a_map():
     lines = (PACKAGE_ROOT / "README.md").read_text().splitlines()
     assert len(lines) <= README_MAX_LINES, f"README.md has {len(lines)} lines (at most {README_MAX_LINES})"
