@@ -64,7 +64,7 @@ from agiprobot_measurement.ros.executor import ControllerWatch, RosSegmentExecut
 from agiprobot_measurement.ros.joint_states import JointStateCache
 from agiprobot_measurement.ros.markers import part_markers, path_marker, scan_line_markers
 from agiprobot_measurement.ros.node import run_node
-from agiprobot_measurement.ros.params import file_param, param
+from agiprobot_measurement.ros.params import Param, file_param, read_params
 from agiprobot_measurement.srv import (
     GetCoverageReport,
     GetCoverageReportResponse,
@@ -130,8 +130,22 @@ def yaml_plain(value):
     return value
 
 
+#: the node's parameters (name, default, validator) besides the station files, read once at start
+PARAMETERS = (
+    Param("~allowed_plan_dirs", []),
+    Param("~planning", {}),
+    Param("~plan_directory", "plans"),
+    Param("~measured_radius_mm", 1.0, number),
+    Param("~budget", {}),
+    Param("~scanner_namespace", "/laser_scanner"),
+    Param("~controller_action", "/robot_sim/execute_trajectory"),
+    Param("~controller_heartbeat_timeout_s", 1.0, number),
+)
+
+
 class TrajectoryManagerNode:
     def __init__(self):
+        settings = read_params(PARAMETERS)
         station = Station.load(
             robot=file_param("~robot_config"),
             joint_limits=file_param("~joint_limits"),
@@ -139,16 +153,16 @@ class TrajectoryManagerNode:
             scanner=file_param("~scanner"),
             scene=file_param("~scene"),
         )
-        allowed = param("~allowed_plan_dirs", []) or [os.environ.get("ROS_HOME") or "~/.ros", "/tmp"]
+        allowed = settings.allowed_plan_dirs or [os.environ.get("ROS_HOME") or "~/.ros", "/tmp"]
         if isinstance(allowed, str):
             allowed = allowed.split()
         self.session = MeasurementSession(
             station,
-            dict(param("~planning", {})),
-            plan_directory=param("~plan_directory", "plans"),
-            measured_radius_mm=param("~measured_radius_mm", 1.0, number),
+            dict(settings.planning),
+            plan_directory=settings.plan_directory,
+            measured_radius_mm=settings.measured_radius_mm,
             allowed_directories=[Path(d).expanduser() for d in allowed],
-            work_budget=WorkBudget.from_mapping(param("~budget", {}), "~budget"),
+            work_budget=WorkBudget.from_mapping(settings.budget, "~budget"),
         )
         rospy.set_param("~sensor_model", dict(station.scanner.sensor_parameters))
         self.joint_states = JointStateCache(self.session.joint_names)
@@ -161,13 +175,9 @@ class TrajectoryManagerNode:
         self.part_pub = rospy.Publisher("~part", MarkerArray, **latched)
         # sensor_msgs/PointCloud, as the original published it: scripts and rviz configs for it subscribe so
         self.current_pub = rospy.Publisher("/currently_measured_points", PointCloud, **latched)
-        self.scanner = ScannerClient(param("~scanner_namespace", "/laser_scanner"))
-        self.robot = ActionClient(
-            param("~controller_action", "/robot_sim/execute_trajectory"), ExecuteJointTrajectoryAction
-        )
-        self.controller = ControllerWatch(
-            self.joint_states, self.robot, param("~controller_heartbeat_timeout_s", 1.0, number)
-        )
+        self.scanner = ScannerClient(settings.scanner_namespace)
+        self.robot = ActionClient(settings.controller_action, ExecuteJointTrajectoryAction)
+        self.controller = ControllerWatch(self.joint_states, self.robot, settings.controller_heartbeat_timeout_s)
         self.plan_server = actionlib.SimpleActionServer(
             "~plan_measurement", PlanMeasurementAction, execute_cb=self.on_plan, auto_start=False
         )
