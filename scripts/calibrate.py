@@ -11,13 +11,28 @@ Prints H (camera -> robot base, metres), the residual per sample and in total (m
 ``--write-data`` writes the samples, criteria and the result (H_coarse in cal_coarse, H_final in cal_fine) as a data
 file in ``--write-format`` (``original``: what the original calibration's reader reads), ``--write-targets`` the flag
 samples' robot positions as a flag point (target) file.
-Bad input (a missing or malformed file, an unwritable output): an 'error:' line and exit status 2.
+Output files go where they are named (absolute, or relative to the working directory); an existing one is replaced
+only with ``--overwrite``. Bad input (a missing or malformed file, an unwritable or existing output): an 'error:'
+line and exit status 2.
 """
 
 import argparse
 import sys
 
 import numpy as np
+
+from agiprobot_measurement.calibration.registration import (
+    DATA_FORMATS,
+    calibrate_data,
+    pose_error,
+    read_data_file,
+    read_result_yaml,
+    write_data_file,
+    write_flag_points,
+    write_result_yaml,
+)
+from agiprobot_measurement.common.cli import EXIT_OK, EXIT_USAGE, run_main
+from agiprobot_measurement.common.files import output_path
 
 
 def main(argv=None) -> int:
@@ -32,35 +47,29 @@ def main(argv=None) -> int:
     parser.add_argument(
         "--write-format", default="project", help="layout of --write-data / --write-targets: project | original"
     )
+    parser.add_argument("--overwrite", action="store_true", help="replace existing output files")
     parser.add_argument("--base-frame", default="base_link")
     parser.add_argument("--camera-frame", default="PhoXi3Dscanner_sensor")
     args = parser.parse_args(argv)
-
-    from agiprobot_measurement.calibration.registration import (
-        DATA_FORMATS,
-        calibrate_data,
-        pose_error,
-        read_data_file,
-        read_result_yaml,
-        write_data_file,
-        write_flag_points,
-        write_result_yaml,
-    )
-    from agiprobot_measurement.errors import AgiprobotError, is_input_error
 
     if args.write_format not in DATA_FORMATS:
         print(
             f"error: --write-format must be one of {', '.join(DATA_FORMATS)}, got {args.write_format!r}",
             file=sys.stderr,
         )
-        return 2
-    try:
-        data = read_data_file(args.data_file)
-        result = calibrate_data(data, args.mode, threshold_m=args.threshold_mm / 1000.0)
-        truth = read_result_yaml(args.truth_yaml) if args.truth_yaml else None
-    except AgiprobotError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2 if is_input_error(exc) else 1
+        return EXIT_USAGE
+    outputs = {
+        flag: output_path(name, args.overwrite, what=flag, make_parents=True)
+        for flag, name in (
+            ("-o", args.output),
+            ("--write-data", args.write_data),
+            ("--write-targets", args.write_targets),
+        )
+        if name
+    }
+    data = read_data_file(args.data_file)
+    result = calibrate_data(data, args.mode, threshold_m=args.threshold_mm / 1000.0)
+    truth = read_result_yaml(args.truth_yaml) if args.truth_yaml else None
     np.set_printoptions(precision=6, suppress=True)
     print(f"{args.mode}: {len(result.inliers)} samples, {result.method}")
     print(f"H ({args.base_frame} <- {args.camera_frame}, metres):\n{result.transform}")
@@ -68,31 +77,25 @@ def main(argv=None) -> int:
     if truth is not None:
         t_mm, r_deg = pose_error(result.transform, truth)
         print(f"error against the truth: translation {t_mm:.3f} mm, rotation {r_deg:.4f} deg")
-    if args.output:
-        try:
-            path = write_result_yaml(args.output, result, args.base_frame, args.camera_frame, args.mode)
-        except OSError as exc:  # the folder cannot be created or written
-            print(f"error: {exc}", file=sys.stderr)
-            return 2
+    if "-o" in outputs:
+        path = write_result_yaml(outputs["-o"], result, args.base_frame, args.camera_frame, args.mode)
         print(f"result: {path}")
-    try:
-        if args.write_data:
-            if args.mode == "cal_coarse":
-                data.h_coarse = result.transform
-            else:
-                data.h_final = result.transform
-            print(f"data file ({args.write_format}): {write_data_file(args.write_data, data, args.write_format)}")
-        if args.write_targets:
-            flags = [s.p_robot_m for s in data.samples if s.flag]
-            if not flags:
-                print("error: --write-targets: the data file marks no flag samples", file=sys.stderr)
-                return 2
-            print(f"targets ({args.write_format}): {write_flag_points(args.write_targets, flags, args.write_format)}")
-    except OSError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    return 0
+    if "--write-data" in outputs:
+        if args.mode == "cal_coarse":
+            data.h_coarse = result.transform
+        else:
+            data.h_final = result.transform
+        written = write_data_file(outputs["--write-data"], data, args.write_format)
+        print(f"data file ({args.write_format}): {written}")
+    if "--write-targets" in outputs:
+        flags = [s.p_robot_m for s in data.samples if s.flag]
+        if not flags:
+            print("error: --write-targets: the data file marks no flag samples", file=sys.stderr)
+            return EXIT_USAGE
+        written = write_flag_points(outputs["--write-targets"], flags, args.write_format)
+        print(f"targets ({args.write_format}): {written}")
+    return EXIT_OK
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_main(main))

@@ -7,7 +7,10 @@ scripts/coverage_from_bag.py demo_output/measurement_demo.bag [--radius-mm 1.0]
 import argparse
 import sys
 
+from agiprobot_measurement.common.cli import run_main
+from agiprobot_measurement.errors import AgiprobotError
 from agiprobot_measurement.ros.bag_coverage import coverage_from_bag
+from agiprobot_measurement.ros.errors import BagReadError
 
 
 def main() -> int:
@@ -18,12 +21,10 @@ def main() -> int:
     args = parser.parse_args()
     try:
         result = coverage_from_bag(args.bag, args.radius_mm, args.execution)
-    except (OSError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    except (AgiprobotError, OSError):
+        raise
     except Exception as exc:  # rosbag raises its own types for unreadable bags
-        print(f"error: cannot read {args.bag}: {exc}", file=sys.stderr)
-        return 2
+        raise BagReadError(f"cannot read {args.bag}: {exc}") from exc
     print(
         f"measured coverage {100 * result.measured_coverage:.2f} % ({result.measured} of {result.coverable} coverable "
         f"samples; {result.profiles} profiles, {result.measured_points} measured points)"
@@ -32,4 +33,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_main(main))

@@ -16,6 +16,7 @@ import sys
 import time
 from pathlib import Path
 
+from agiprobot_measurement.errors import InternalError
 from agiprobot_measurement.station import PACKAGE_ROOT
 
 
@@ -37,7 +38,7 @@ def wait_for_action_server(env, timeout_s=30.0):
         if "/robot_sim/execute_trajectory/status" in topics:
             return
         time.sleep(0.5)
-    raise RuntimeError("the station did not come up (no /robot_sim/execute_trajectory action server)")
+    raise InternalError("the station did not come up (no /robot_sim/execute_trajectory action server)")
 
 
 def bag_summary(bag_path: Path) -> str:

@@ -11,9 +11,13 @@ whose free inside cannot be reached, and an unexplored (unknown) corner. Rectang
 """
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
+
+from agiprobot_measurement.common.cli import run_main
+from agiprobot_measurement.common.files import write_output
 
 RESOLUTION_M = 0.05
 ORIGIN_M = (-1.0, -1.0)
@@ -54,11 +58,10 @@ def main() -> int:
     out.mkdir(parents=True, exist_ok=True)
     image = draw()
     pgm = out / f"{args.name}.pgm"
-    with pgm.open("wb") as stream:
-        stream.write(f"P5\n# {args.name}: drawn by scripts/generate_mild_map.py\n".encode())
-        stream.write(f"{image.shape[1]} {image.shape[0]}\n255\n".encode())
-        stream.write(image.tobytes())
-    (out / f"{args.name}.yaml").write_text(
+    header = f"P5\n# {args.name}: drawn by scripts/generate_mild_map.py\n{image.shape[1]} {image.shape[0]}\n255\n"
+    write_output(pgm, header.encode() + image.tobytes())
+    write_output(
+        out / f"{args.name}.yaml",
         "# map_server map of the MILD example lab (drawn by scripts/generate_mild_map.py).\n"
         "# resolution: m/cell; origin: [x m, y m, yaw rad] of the lower-left cell's corner in the map frame.\n"
         f"image: {pgm.name}\n"
@@ -66,11 +69,11 @@ def main() -> int:
         f"origin: [{ORIGIN_M[0]}, {ORIGIN_M[1]}, 0.0]\n"
         "negate: 0\n"
         "occupied_thresh: 0.65\n"
-        "free_thresh: 0.196\n"
+        "free_thresh: 0.196\n",
     )
     print(f"map: {pgm} ({image.shape[1]} x {image.shape[0]} cells)")
     return 0
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    sys.exit(run_main(main))

@@ -15,11 +15,12 @@ import numpy as np
 import rospy
 from sensor_msgs.msg import JointState
 
+from agiprobot_measurement.common.cli import run_main
 from agiprobot_measurement.motion.point_to_point import point_to_point
 from agiprobot_measurement.msg import ExecuteJointTrajectoryAction, ExecuteJointTrajectoryGoal
 from agiprobot_measurement.ros.action_client import ActionClient
 from agiprobot_measurement.ros.conversions import joint_trajectory_to_msg
-from agiprobot_measurement.station import ConfigError, load_joint_limits, load_named_states
+from agiprobot_measurement.station import load_joint_limits, load_named_states
 
 
 def current_state(joint_names, timeout_s=5.0):
@@ -36,12 +37,8 @@ def main() -> int:
     parser.add_argument("--action", default="/robot_sim/execute_trajectory", help="controller action name")
     args = parser.parse_args(rospy.myargv()[1:])
     rospy.init_node("move_to_named_state", anonymous=True)
-    try:
-        limits = load_joint_limits()
-        named = load_named_states()
-    except ConfigError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    limits = load_joint_limits()
+    named = load_named_states()
     unknown = [s for s in args.states if s not in named]
     if unknown:
         print(f"error: unknown named state(s) {unknown}; known: {', '.join(named)}", file=sys.stderr)
@@ -66,4 +63,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_main(main))

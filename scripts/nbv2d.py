@@ -10,6 +10,8 @@ prints a summary line; ``--summary`` collects every run's summary in one JSON fi
     scripts/nbv2d.py --object-image body.png --script fullpix --noise 0.3 --seed 1 --out /tmp/nbv --summary s.json
 
 Lengths are in cells (1 cell = 1 mm by default), noise is the standard deviation of the depth along the laser.
+Files go where they are named (absolute, or relative to the working directory); a run whose picture, points or
+summary file exists is refused before any work unless --overwrite.
 """
 
 from __future__ import annotations
@@ -18,8 +20,11 @@ import argparse
 import json
 import math
 import sys
+from functools import partial
 from pathlib import Path
 
+from agiprobot_measurement.common.cli import run_main
+from agiprobot_measurement.common.files import output_path, write_output
 from agiprobot_measurement.nbv.errors import NbvInputError
 
 
@@ -41,11 +46,28 @@ def _parse(argv):
     p.add_argument("--max-time", type=float, default=None, help="time budget in seconds (default none)")
     p.add_argument("--out", type=Path, required=True, help="output directory")
     p.add_argument("--summary", type=Path, default=None, help="write all summaries to this JSON file")
+    p.add_argument("--overwrite", action="store_true", help="replace existing output files")
     return p.parse_args(argv)
 
 
+def _outputs(out: Path, stem: str, overwrite: bool) -> dict[str, Path]:
+    """The checked paths of one run's picture and points (see :func:`output_path`)."""
+    names = {"picture": f"{stem}.png", "points_csv": f"{stem}_points.csv", "points_ply": f"{stem}_points.ply"}
+    return {
+        key: output_path(name, overwrite, what="output file", base=out, make_parents=True)
+        for key, name in names.items()
+    }
+
+
 def main(argv=None) -> int:
+    return run_main(lambda: _main(argv), prog="nbv2d")
+
+
+def _main(argv=None) -> int:
     args = _parse(argv)
+    summary_path = (
+        output_path(args.summary, args.overwrite, what="--summary", make_parents=True) if args.summary else None
+    )
     try:
         from agiprobot_measurement.nbv.evaluation import coverage, measurable_boundary, plannable_boundary, summarize
         from agiprobot_measurement.nbv.loop import RunConfig, run
@@ -76,6 +98,11 @@ def main(argv=None) -> int:
             bodies = [(n, make_object(n)) for n in OBJECT_NAMES]
         else:
             bodies = [(args.object, make_object(args.object))]
+        stem_of = {
+            name: f"{name}_{cfg.script}_{cfg.aim}_L{rf.rf_length_cells:.0f}_n{cfg.noise_sigma_cells:g}_s{cfg.seed}"
+            for name, _ in bodies
+        }
+        outputs = {name: _outputs(args.out, stem, args.overwrite) for name, stem in stem_of.items()}
         args.out.mkdir(parents=True, exist_ok=True)
         summaries = []
         for name, truth in bodies:
@@ -84,15 +111,19 @@ def main(argv=None) -> int:
             measurable = plannable_boundary(truth, rf, cfg.aim)
             summary = summarize(result, measurable, name)
             summary["coverage_any_ray"] = coverage(result.model, measurable_boundary(truth, rf))
-            stem = f"{name}_{cfg.script}_{cfg.aim}_L{rf.rf_length_cells:.0f}_n{cfg.noise_sigma_cells:g}_s{cfg.seed}"
             title = (
                 f"{name} / {cfg.script} / aim {cfg.aim} / RFlength {rf.rf_length_cells:.0f} / noise "
                 f"{cfg.noise_sigma_cells:g}: coverage {summary['coverage']:.1%}, {summary['measurements']} "
                 f"measurements, path {summary['path_length_cells']:.0f}, {summary['transfers']} transfers"
             )
-            summary["picture"] = str(paint_rf(result, args.out / f"{stem}.png", title, measurable))
-            summary["points_csv"] = str(result.points.export_csv(args.out / f"{stem}_points.csv", result.model))
-            summary["points_ply"] = str(result.points.export_ply(args.out / f"{stem}_points.ply", result.model))
+            files = outputs[name]
+            writers = {
+                "picture": partial(paint_rf, result, title=title, measurable=measurable),
+                "points_csv": partial(result.points.export_csv, model=result.model),
+                "points_ply": partial(result.points.export_ply, model=result.model),
+            }
+            for key, write in writers.items():
+                summary[key] = str(write_output(files[key], write, suffix=files[key].suffix))
             summaries.append(summary)
             print(
                 f"{name:14s} {cfg.script:8s} coverage {summary['coverage']:6.1%} of {summary['measurable_cells']} "
@@ -100,9 +131,8 @@ def main(argv=None) -> int:
                 f"transfers {summary['transfers']:3d} | D0 {summary['d0_count']} | unmeasurable "
                 f"{summary['unmeasurable_candidates']:3d} | {summary['termination']} | {summary['run_time_s']:.1f} s"
             )
-        if args.summary is not None:
-            args.summary.parent.mkdir(parents=True, exist_ok=True)
-            args.summary.write_text(json.dumps(summaries, indent=2))
+        if summary_path is not None:
+            write_output(summary_path, json.dumps(summaries, indent=2))
     except NbvInputError as exc:
         print(f"nbv2d: error: {exc}", file=sys.stderr)
         return 2

@@ -11,7 +11,9 @@ the observed surface and remaining frontier areas and (simulation) the coverage,
 import argparse
 import sys
 
+from agiprobot_measurement.common.cli import run_main
 from agiprobot_measurement.errors import AgiprobotError
+from agiprobot_measurement.ros.errors import BagReadError
 
 
 def main() -> int:
@@ -30,12 +32,10 @@ def main() -> int:
         config, station, truth = nbv_station(args.config, args.scene, ground_truth=not args.no_ground_truth)
         rebuilt = reconstruction_from_bag(args.bag, args.run, config, station, truth)
         files = rebuilt.reconstructor.save_outputs(args.out) if args.out else {}
-    except (AgiprobotError, OSError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    except (AgiprobotError, OSError):
+        raise
     except Exception as exc:  # rosbag raises its own types for unreadable bags
-        print(f"error: cannot rebuild from {args.bag}: {type(exc).__name__}: {exc}", file=sys.stderr)
-        return 2
+        raise BagReadError(f"cannot rebuild from {args.bag}: {type(exc).__name__}: {exc}") from exc
     coverage = "" if rebuilt.coverage is None else f", coverage {100 * rebuilt.coverage:.2f} %"
     print(
         f"rebuilt from {rebuilt.views} views: observed {rebuilt.observed_surface_area_m2 * 1e4:.1f} cm^2, "
@@ -56,4 +56,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_main(main))

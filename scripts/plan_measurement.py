@@ -15,9 +15,9 @@ placement: the part's CAD frame goes to the scene's part pose (config/scene.yaml
 --transform's rotation and shifted by its translation. A part that overlaps the table, the fixture, another
 scene object or the robot is refused with the object, the depth and the lift that clears it.
 
-files: -o, --report and --summary follow the package's file policy: names resolve under --output-dir (default:
-the working directory); absolute names must lie inside it; '..' and '~' are refused; an existing file is
-replaced only with --overwrite. A request beyond the work budget (config/trajectory_manager.yaml, section
+files: -o, --report and --summary are written where they are named: absolute, or relative to --output-dir (default:
+the working directory), '..' and '~' included; every file is written atomically; an existing file is replaced only
+with --overwrite. A request beyond the work budget (config/trajectory_manager.yaml, section
 budget: samples, candidate viewpoints, memory) is refused before any work, with the estimate.
 
 exit status: 0 planned; 2 bad input or nothing plannable (one 'error: ...' line); 1 internal error;
@@ -44,7 +44,8 @@ except ImportError:  # run from a checkout without the catkin environment
 
 import numpy as np  # noqa: E402
 
-from agiprobot_measurement.common.files import FileRoot, PathPolicyError, atomic_write_text  # noqa: E402
+from agiprobot_measurement.common.cli import EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE  # noqa: E402
+from agiprobot_measurement.common.files import output_path, write_output  # noqa: E402
 from agiprobot_measurement.common.geometry import pose_matrix  # noqa: E402
 from agiprobot_measurement.common.units import UNIT_SCALES_TO_M  # noqa: E402
 
@@ -61,7 +62,6 @@ from agiprobot_measurement.planning.request import (  # noqa: E402
     load_work_budget,
 )
 
-EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 #: how the request's fields are named in messages: by their options
 OPTION_LABELS = {
     "part_file": "part",
@@ -201,7 +201,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--report", help="write a coverage picture here (.png)")
     parser.add_argument("--summary", help="write the summary here (.yaml/.yml: YAML, else text)")
     parser.add_argument(
-        "--output-dir", default=".", help="the folder -o, --report and --summary names resolve in (working directory)"
+        "--output-dir",
+        default=".",
+        help="the folder relative -o, --report and --summary names resolve in (working directory)",
     )
     parser.add_argument("--overwrite", action="store_true", help="replace existing output files")
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress output")
@@ -210,19 +212,15 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _output(
-    path: str | None, what: str, files: FileRoot, overwrite: bool, suffixes: tuple[str, ...] = ()
+    path: str | None, what: str, output_dir: Path, overwrite: bool, suffixes: tuple[str, ...] = ()
 ) -> Path | None:
-    """The confined path of an output file (see :class:`FileRoot`), checked before any work starts."""
+    """The path of an output file (see :func:`output_path`), checked before any work starts."""
     if path is None:
         return None
     try:
-        target = files.for_writing(path, overwrite=overwrite)
-    except PathPolicyError as exc:
-        raise UsageError(f"{exc}{' (--overwrite replaces it)' if 'exists' in str(exc) else ''}") from exc
-    if not target.parent.is_dir():
-        raise UsageError(f"output directory does not exist: {Path(path).parent} (for {what} {path})")
-    if not os.access(target.parent, os.W_OK):
-        raise UsageError(f"output directory is not writable: {target.parent} (for {what} {path})")
+        target = output_path(path, overwrite, what=what, base=output_dir)
+    except InputError as exc:
+        raise UsageError(str(exc)) from exc
     if suffixes and target.suffix.lower() not in suffixes:
         raise UsageError(f"{what} {path} must end in {' or '.join(suffixes)}")
     return target
@@ -271,10 +269,11 @@ def validate(args: argparse.Namespace) -> PlanRequest:
     output_dir = Path(args.output_dir).expanduser()
     if not output_dir.is_dir():
         raise UsageError(f"--output-dir {output_dir} is not a directory")
-    files = FileRoot(output_dir.resolve(), purpose="output file")
-    args.output = _output(None if args.output is None else str(plan_path(args.output)), "plan", files, args.overwrite)
-    args.report = _output(args.report, "report", files, args.overwrite, (".png",))
-    args.summary = _output(args.summary, "summary", files, args.overwrite)
+    args.output = _output(
+        None if args.output is None else str(plan_path(args.output)), "plan", output_dir, args.overwrite
+    )
+    args.report = _output(args.report, "report", output_dir, args.overwrite, (".png",))
+    args.summary = _output(args.summary, "summary", output_dir, args.overwrite)
     args.work_budget = load_work_budget()
     return request
 
@@ -528,9 +527,9 @@ def run(args: argparse.Namespace, request: PlanRequest, progress: StageProgress)
         if args.summary.suffix.lower() in (".yaml", ".yml"):
             import yaml
 
-            atomic_write_text(args.summary, yaml.safe_dump(data, sort_keys=False))
+            write_output(args.summary, yaml.safe_dump(data, sort_keys=False))
         else:
-            atomic_write_text(args.summary, table + "\n")
+            write_output(args.summary, table + "\n")
     print(table, flush=True)
     return EXIT_OK
 

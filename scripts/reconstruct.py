@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Reconstruct a part on the simulated station by next-best-view planning (issue 17; no roscore needed).
+"""Reconstruct a part on the simulated station by next-best-view planning (no roscore needed).
 
 The part (a mesh file in --units, or a procedural shape: u_channel, cup, two_towers, l_bracket, torus) is placed on
 the fixture, hidden from the planner, and scanned by the simulated PhoXi (model S, noise on) on the UR10e's flange,
@@ -13,7 +13,8 @@ examples:
 outputs in --out: cloud.ply (fused points, world frame), map.npz (+ map.bt with an OctoMap binding), mesh.ply
 (TSDF), views.yaml (poses, joints, gains, timings, termination reason). --summary FILE.json: the views, the
 coverage of the observable surface after each view, the planning time per view, the termination reason and the
-Chamfer distance. Progress goes to stderr. A non-empty --out is refused unless --force.
+Chamfer distance. Progress goes to stderr. Files go where they are named (absolute, or relative to the working
+directory); a non-empty --out or an existing --summary is refused unless --overwrite.
 
 exit status: 0 done; 2 bad input (one 'error: ...' line); 1 internal error; 130 interrupted.
 """
@@ -32,6 +33,8 @@ try:
 except ImportError:  # run from a checkout without the catkin environment
     sys.path.insert(0, str(ROOT / "src"))
 
+from agiprobot_measurement.common.cli import run_main  # noqa: E402
+from agiprobot_measurement.common.files import output_path, write_output  # noqa: E402
 from agiprobot_measurement.common.units import UNIT_SCALES_TO_M  # noqa: E402
 from agiprobot_measurement.errors import InputError  # noqa: E402
 
@@ -56,7 +59,13 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--no-noise", action="store_true", help="switch the scanner noise off")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", required=True, help="output folder (created)")
-    parser.add_argument("--force", action="store_true", help="write into a non-empty --out")
+    parser.add_argument(
+        "--overwrite",
+        "--force",
+        dest="overwrite",
+        action="store_true",
+        help="write into a non-empty --out, replace an existing --summary",
+    )
     parser.add_argument("--summary", default=None, help="write a JSON summary here")
     parser.add_argument("--no-ground-truth", action="store_true", help="skip the coverage ground truth (faster)")
     parser.add_argument("-v", "--verbose", action="store_true")
@@ -65,25 +74,16 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 def main(argv=None) -> int:
     args = parse_args(argv)
-    try:
-        return run(args)
-    except InputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
+    return run_main(lambda: run(args))
 
 
 def run(args) -> int:
     out = Path(args.out).expanduser()
     if out.exists() and not out.is_dir():
         raise InputError(f"--out {out} exists and is not a folder")
-    if out.is_dir() and any(out.iterdir()) and not args.force:
-        raise InputError(f"--out {out} is not empty (use --force to write into it)")
-    summary_path = Path(args.summary).expanduser() if args.summary else None
-    if summary_path is not None and not summary_path.parent.is_dir():
-        raise InputError(f"--summary: folder {summary_path.parent} does not exist")
+    if out.is_dir() and any(out.iterdir()) and not args.overwrite:
+        raise InputError(f"--out {out} is not empty (use --overwrite to write into it)")
+    summary_path = output_path(args.summary, args.overwrite, what="--summary") if args.summary else None
     from agiprobot_measurement.nbv.reconstruction import ReconstructionRequest
 
     overrides = {
@@ -137,9 +137,7 @@ def run(args) -> int:
         file=sys.stderr,
     )
     if summary_path is not None:
-        from agiprobot_measurement.common.files import atomic_write_text
-
-        atomic_write_text(summary_path, json.dumps(summary, indent=1, default=float))
+        write_output(summary_path, json.dumps(summary, indent=1, default=float))
     if summary["termination_reason"] == "error":
         print(f"error: {summary['error']}", file=sys.stderr)
         return 1

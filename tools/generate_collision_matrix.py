@@ -23,13 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from agiprobot_measurement.motion.collision import (
-    AllowedEntry,
-    CollisionChecker,
-    CollisionConfig,
-    adjacent_link_pairs,
-    load_collision_config,
-)
+from agiprobot_measurement.motion.collision import CollisionChecker, adjacent_link_pairs
+from agiprobot_measurement.motion.collision_config import AllowedEntry, CollisionConfig, load_collision_config
 from agiprobot_measurement.motion.kinematics import KinematicModel
 from agiprobot_measurement.station import CONFIG_DIR, Station
 

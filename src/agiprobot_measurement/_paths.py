@@ -10,6 +10,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from agiprobot_measurement.errors import InternalError
+
 PACKAGE_NAME = "agiprobot_measurement"
 
 
@@ -32,7 +34,7 @@ def find_package_root(start: Path | None = None) -> Path:
         share = folder / "share" / PACKAGE_NAME
         if _is_package_root(share):
             return share
-    raise RuntimeError(f"cannot find the {PACKAGE_NAME} package root (package.xml + config/) above {here}")
+    raise InternalError(f"cannot find the {PACKAGE_NAME} package root (package.xml + config/) above {here}")
 
 
 PACKAGE_ROOT = find_package_root()

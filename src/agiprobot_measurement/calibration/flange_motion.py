@@ -15,7 +15,9 @@ import numpy as np
 
 from agiprobot_measurement.calibration.config import tool_rotation
 from agiprobot_measurement.calibration.interfaces import JointDriver, UnreachableError
+from agiprobot_measurement.motion.collision import CollisionChecker
 from agiprobot_measurement.motion.kinematics import KinematicModel
+from agiprobot_measurement.motion.motion_planning import MotionPlanner, collision_free_trajectory
 from agiprobot_measurement.motion.point_to_point import point_to_point
 from agiprobot_measurement.motion.trajectory import JointTrajectory
 
@@ -78,9 +80,6 @@ def joint_motion(
     function returning a MotionPlanner). :class:`UnreachableError` when the goal collides or no path is found."""
     if collision is None:
         return point_to_point(start_rad, goal_rad, limits, velocity_scaling, velocity_scaling)
-    # lazily: motion_planning loads OMPL, which only collision-checked motions need
-    from agiprobot_measurement.motion.motion_planning import collision_free_trajectory
-
     problem = collision.explain(goal_rad)
     if problem:
         raise UnreachableError(f"{what}: {problem}")
@@ -101,9 +100,6 @@ def joint_motion(
 def flange_collision_checker(station):
     """The collision checker of a flange station (:func:`~agiprobot_measurement.calibration.config.flange_station`):
     robot, scene obstacles, no part; the disc may touch wrist_3_link, on which it sits."""
-    # lazily: FCL is loaded only when collisions are checked
-    from agiprobot_measurement.motion.collision import CollisionChecker
-
     model = KinematicModel.from_station(station, tip_frame="tool0")
     collision = CollisionChecker.from_station(station, model=model, load_part=False)
     collision.allow_collision("wrist_3_link", "flange_disc_link", "Adjacent")
@@ -146,8 +142,6 @@ class PlannedFlangeRobot:
     def planner(self):
         """The motion planner, built at the first blocked straight move (OMPL setup takes a while)."""
         if self._planner is None:
-            from agiprobot_measurement.motion.motion_planning import MotionPlanner  # lazily: OMPL
-
             self._planner = MotionPlanner(self.collision, seed=self.planner_seed)
         return self._planner
 

@@ -23,6 +23,7 @@ import numpy as np
 from agiprobot_measurement.calibration.chessboard_test import chessboard_corners_board, detect_corners
 from agiprobot_measurement.calibration.registration import CalibrationError
 from agiprobot_measurement.common.geometry import invert_pose
+from agiprobot_measurement.sensors.phoxi.scene_geometry import chessboard_geometry
 
 __all__ = [
     "HAND_EYE_METHODS",
@@ -82,8 +83,6 @@ class FlangeBoard:
 
     def geometry(self):
         """The plate as renderer geometry in the tool0 frame (sensors.phoxi.scene_geometry.SceneGeometry)."""
-        from agiprobot_measurement.sensors.phoxi.scene_geometry import chessboard_geometry
-
         return chessboard_geometry(self.tool0_from_board, self.inner_corners, self.square_m, self.thickness_m)
 
 

@@ -29,7 +29,12 @@ from agiprobot_measurement.calibration.interfaces import CameraFrame, StepError
 from agiprobot_measurement.common.config import read_yaml
 from agiprobot_measurement.common.geometry import look_at
 from agiprobot_measurement.motion.ik import make_ik_solver
-from agiprobot_measurement.motion.kinematics import DhCorrection, KinematicModel, TrueKinematics
+from agiprobot_measurement.motion.kinematics import (
+    DhCorrection,
+    KinematicModel,
+    TrueKinematics,
+    load_kinematics_correction,
+)
 from agiprobot_measurement.motion.trajectory import JointTrajectory
 from agiprobot_measurement.sensors.phoxi.renderer import (
     RobotGeometry,
@@ -143,8 +148,6 @@ def true_kinematics_from_config(path=None) -> dict:
     """The :class:`SimulatedStation` keyword arguments of a kinematics correction file (default
     ``config/ur10e_kinematics_correction.yaml``): ``true_kinematics`` and ``deviation_scale`` when the file's
     ``true_kinematics`` is true, else none (the nominal robot)."""
-    from agiprobot_measurement.motion.kinematics import load_kinematics_correction
-
     enabled, correction, scale = load_kinematics_correction(path)
     return {"true_kinematics": correction, "deviation_scale": scale} if enabled else {}
 

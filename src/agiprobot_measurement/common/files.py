@@ -1,5 +1,10 @@
 """The one way the package writes a file: atomically, with the permissions a plain ``open()`` would give.
 
+Two policies choose the path. A command-line user owns their files, like ``cp`` or ``gcc -o``: :func:`output_path`
+takes a name as given (absolute, relative to the working directory or a base folder, ``..`` and ``~`` allowed) and
+only refuses to replace an existing file without ``overwrite``. A node confines what remote clients ask it to read
+or write to its configured folders: :class:`FileRoot`.
+
 The data goes to a temporary file in the target's folder and is renamed over the target, so a reader sees the old
 file or the new one, never half of one, and a failure leaves the old file untouched. ``mkstemp`` creates files
 0600; the result is given ``0666 & ~umask`` (0644 under the usual umask 022), like any other file the user writes.
@@ -19,13 +24,21 @@ __all__ = [
     "TEXT_FILE_MAX_BYTES",
     "FileReadError",
     "FileRoot",
+    "FolderNotFoundError",
+    "OutputExistsError",
     "PathPolicyError",
     "atomic_write",
     "atomic_write_bytes",
     "atomic_write_text",
     "current_umask",
+    "output_path",
     "read_text_file",
+    "write_output",
 ]
+
+
+class FolderNotFoundError(InputError, FileNotFoundError):
+    """The folder a file is to be written into does not exist (also a ``FileNotFoundError``)."""
 
 
 def current_umask() -> int:
@@ -39,13 +52,13 @@ def atomic_write(path: str | Path, write: Callable[[Path], None], suffix: str = 
     """Call ``write(temporary_path)``, then rename the temporary file to ``path``; returns ``path``.
 
     ``suffix`` is appended to the temporary name for writers that choose a format by extension (e.g. ``.png``).
-    A missing parent folder is an error (``FileNotFoundError``) unless ``make_parents`` is true.
+    A missing parent folder is an error (:class:`FolderNotFoundError`, a ``FileNotFoundError``) unless ``make_parents`` is true.
     """
     path = Path(path)
     if make_parents:
         path.parent.mkdir(parents=True, exist_ok=True)
     elif not path.parent.is_dir():
-        raise FileNotFoundError(f"{path}: folder {path.parent} does not exist")
+        raise FolderNotFoundError(f"{path}: folder {path.parent} does not exist")
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".tmp{suffix}", dir=path.parent)
     os.close(fd)
     try:
@@ -78,6 +91,59 @@ def atomic_write_text(path: str | Path, text: str, encoding: str = "utf-8", make
 class PathPolicyError(InputError):
     """A requested file name breaks the file policy: outside the allowed roots, ``..``, ``~``, or an existing file
     that the request did not ask to overwrite."""
+
+
+class OutputExistsError(PathPolicyError):
+    """A command-line output file exists and the user did not ask to overwrite it."""
+
+
+def output_path(
+    name: str | Path,
+    overwrite: bool = False,
+    what: str = "output file",
+    base: str | Path | None = None,
+    suffix: str | None = None,
+    make_parents: bool = False,
+) -> Path:
+    """The absolute path a command-line tool writes ``name`` to, checked before any work starts.
+
+    ``name`` is taken as the user gives it: absolute, or relative to ``base`` (default: the working directory);
+    ``..`` and ``~`` are followed. ``suffix`` (e.g. ``.yaml``) is appended when the name has none. Refused with an
+    :class:`InputError` naming ``what``: an empty name, a directory, an existing file unless ``overwrite``
+    (:class:`OutputExistsError`), a missing folder unless ``make_parents`` (:class:`FolderNotFoundError`), a
+    folder that is not writable."""
+    text = str(name).strip() if name is not None else ""
+    if not text or "\x00" in text:
+        raise PathPolicyError(f"{what}: empty or invalid file name {name!r}")
+    path = Path(text).expanduser()
+    if suffix and not path.suffix:
+        path = path.with_name(path.name + suffix)
+    if not path.is_absolute():
+        path = Path(base).expanduser() / path if base is not None else Path.cwd() / path
+    path = Path(os.path.normpath(path.absolute()))
+    if path.is_dir():
+        raise PathPolicyError(f"{what}: {path} is a directory")
+    if path.exists() and not overwrite:
+        raise OutputExistsError(f"{what}: {path} exists (--overwrite replaces it)")
+    folder = path.parent
+    while make_parents and not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    if not folder.is_dir():
+        raise FolderNotFoundError(f"output directory does not exist: {Path(text).parent} (for {what} {text})")
+    if not os.access(folder, os.W_OK):
+        raise PathPolicyError(f"output directory is not writable: {folder} (for {what} {text})")
+    return path
+
+
+def write_output(path: str | Path, data: str | bytes | Callable[[Path], None], suffix: str = "") -> Path:
+    """Write a command-line tool's output to ``path`` (from :func:`output_path`) atomically: text, bytes, or a
+    writer ``data(temporary_path)`` (``suffix`` is then the temporary name's extension, for writers that choose a
+    format by it); the folder is created when missing."""
+    if callable(data):
+        return atomic_write(path, data, suffix=suffix, make_parents=True)
+    if isinstance(data, str):
+        return atomic_write_text(path, data, make_parents=True)
+    return atomic_write_bytes(path, data, make_parents=True)
 
 
 @dataclass(frozen=True)
@@ -130,7 +196,7 @@ class FileRoot:
             if plain.is_file():
                 return plain
         if not path.is_file():
-            raise FileNotFoundError(f"{self.purpose}: {path} not found (names resolve under {self.root})")
+            raise FileReadError(f"{self.purpose}: {path} not found (names resolve under {self.root})")
         return path
 
     def for_writing(self, name: str | Path, overwrite: bool = False, suffix: str | None = None) -> Path:

@@ -9,7 +9,10 @@ import math
 
 import numpy as np
 
+from agiprobot_measurement.errors import InputError
+
 __all__ = [
+    "GeometryError",
     "fit_plane",
     "invert_pose",
     "look_at",
@@ -26,6 +29,11 @@ __all__ = [
     "wrap_to_pi",
     "yaw_quaternion",
 ]
+
+
+class GeometryError(InputError):
+    """A pose, quaternion or viewing direction that has no well-defined geometry (coincident points, zero
+    quaternion, non-finite values)."""
 
 
 def rpy_to_matrix(rpy: np.ndarray) -> np.ndarray:
@@ -63,11 +71,11 @@ def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
     eye, target, up = (np.asarray(v, dtype=float) for v in (eye, target, up))
     z = target - eye
     if np.linalg.norm(z) < 1e-9:
-        raise ValueError("look_at: eye and target coincide")
+        raise GeometryError("look_at: eye and target coincide")
     z /= np.linalg.norm(z)
     x = np.cross(z, up)
     if np.linalg.norm(x) < 1e-9:
-        raise ValueError("look_at: the viewing direction is parallel to 'up'")
+        raise GeometryError("look_at: the viewing direction is parallel to 'up'")
     x /= np.linalg.norm(x)
     pose = np.eye(4)
     pose[:3, :3] = np.column_stack([x, np.cross(z, x), z])
@@ -130,12 +138,12 @@ def pose_from_quaternion(translation, quaternion_xyzw) -> np.ndarray:
     q = np.asarray(quaternion_xyzw, dtype=float)
     t = np.asarray(translation, dtype=float)
     if q.shape != (4,) or t.shape != (3,):
-        raise ValueError(f"expected a translation (3,) and a quaternion (4,), got {t.shape} and {q.shape}")
+        raise GeometryError(f"expected a translation (3,) and a quaternion (4,), got {t.shape} and {q.shape}")
     if not (np.all(np.isfinite(q)) and np.all(np.isfinite(t))):
-        raise ValueError("translation and quaternion must be finite")
+        raise GeometryError("translation and quaternion must be finite")
     norm = np.linalg.norm(q)
     if norm < 1e-6:
-        raise ValueError("zero quaternion (the identity is x = y = z = 0, w = 1)")
+        raise GeometryError("zero quaternion (the identity is x = y = z = 0, w = 1)")
     pose = np.eye(4)
     pose[:3, :3] = quaternion_to_matrix(q / norm)
     pose[:3, 3] = t

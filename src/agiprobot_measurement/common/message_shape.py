@@ -9,7 +9,13 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-__all__ = ["MessageShape", "MessageTime", "message_shape"]
+from agiprobot_measurement.errors import InputError
+
+__all__ = ["MessageShape", "MessageTime", "ReadOnlySnapshotError", "message_shape"]
+
+
+class ReadOnlySnapshotError(InputError, AttributeError):
+    """An attribute of a :class:`MessageShape` snapshot is assigned (also an ``AttributeError``)."""
 
 
 class MessageTime:
@@ -40,7 +46,7 @@ class MessageShape:
             object.__setattr__(self, str(key), message_shape(value))
 
     def __setattr__(self, name, value):
-        raise AttributeError(
+        raise ReadOnlySnapshotError(
             f"{type(self).__name__} is a snapshot of a plan segment; change the segment's trajectory instead"
         )
 

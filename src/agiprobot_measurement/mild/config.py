@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from agiprobot_measurement._paths import CONFIG_DIR
-from agiprobot_measurement.common.config import ConfigError, read_yaml, vector
+from agiprobot_measurement.common.config import ConfigError, non_negative, number, positive, read_yaml, vector
 from agiprobot_measurement.mild.occupancy_map import OccupancyMap
 
 __all__ = [
@@ -145,12 +145,7 @@ def load_kinematics(path: str | Path | None = None, frames: FrameNames | str | P
 
     if "camera_baseline_m" not in data:
         raise ConfigError(f"{where}: missing key 'camera_baseline_m'")
-    try:
-        baseline = float(data["camera_baseline_m"])
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(f"{where}: camera_baseline_m must be a number") from exc
-    if not (math.isfinite(baseline) and baseline >= 0):
-        raise ConfigError(f"{where}: camera_baseline_m must be a non-negative number, got {baseline}")
+    baseline = non_negative(data["camera_baseline_m"], f"{where}: camera_baseline_m")
     joints = data.get("joint_names", {}) or {}
     if not isinstance(joints, dict):
         raise ConfigError(f"{where}: joint_names must be a mapping with 'pan' and 'tilt'")
@@ -325,24 +320,14 @@ def _costmap_radii(mapping: dict, where: str) -> tuple[float, float, float]:
 
 
 def _number(mapping: dict, key: str, where: str, default=_REQUIRED, minimum=None, strictly_positive=False) -> float:
+    """``mapping[key]`` checked by :func:`common.config.number` (``default`` when absent, unless required)."""
     if key not in mapping:
         if default is _REQUIRED:
             raise ConfigError(f"{where}: missing key '{key}'")
         return default
-    value = mapping[key]
-    if isinstance(value, bool):
-        raise ConfigError(f"{where}: '{key}' must be a number, got {value!r}")
-    try:
-        number = float(value)
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(f"{where}: '{key}' must be a number, got {value!r}") from exc
-    if not math.isfinite(number):
-        raise ConfigError(f"{where}: '{key}' must be finite, got {value!r}")
-    if strictly_positive and number <= 0:
-        raise ConfigError(f"{where}: '{key}' must be positive, got {value!r}")
-    if minimum is not None and number < minimum:
-        raise ConfigError(f"{where}: '{key}' must be >= {minimum}, got {value!r}")
-    return number
+    if strictly_positive:
+        return number(positive(mapping[key], f"{where}: '{key}'"), f"{where}: '{key}'", low=minimum)
+    return number(mapping[key], f"{where}: '{key}'", low=minimum)
 
 
 def _flag(mapping: dict, key: str, where: str, default=_REQUIRED) -> bool:

@@ -1,1 +1,8 @@
-"""Robot motion: kinematics, inverse kinematics, Cartesian paths, collision checking, OMPL planning, trajectories."""
+"""Robot motion: kinematics, inverse kinematics, Cartesian paths, collision checking, OMPL planning, trajectories.
+
+Modules: ``kinematics`` (forward kinematics, the true-kinematics correction), ``ik`` (inverse kinematics),
+``cartesian`` with ``cartesian_kernels`` (straight tip paths; the compiled branch walk), ``collision`` with
+``collision_config`` (the FCL checker; its allowed-collision matrix and paddings), ``motion_planning`` (OMPL),
+``point_to_point`` (synchronised joint moves), ``time_parameterization`` (TOPP-RA), ``trajectory`` (joint
+trajectories), ``controller_sim`` (the simulated controller), ``errors`` (the subpackage's input errors).
+"""

@@ -18,6 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from agiprobot_measurement.motion.cartesian_kernels import follow_branches
+from agiprobot_measurement.motion.errors import MotionInputError
 from agiprobot_measurement.motion.ik import IKSolver, check_joint_states, check_poses
 
 __all__ = [
@@ -100,7 +102,7 @@ def interpolate_poses(
     return np.concatenate(out)
 
 
-#: the compiled walk (numba, imported on first use) takes over after this many paths in a process: loading it
+#: the compiled walk (numba, loaded by cartesian_kernels on first use) takes over after this many paths in a process: loading it
 #: costs about 0.6 s, it saves about 0.35 ms per path
 COMPILED_AFTER_PATHS = 1500
 _paths_followed = 0
@@ -113,8 +115,6 @@ def _follow_all_solutions(ik, start_q: np.ndarray, poses: np.ndarray) -> tuple[n
     solutions = np.where(valid[..., None], solutions, 0.0)
     _paths_followed += 1
     if _paths_followed > COMPILED_AFTER_PATHS:
-        from agiprobot_measurement.motion.cartesian_kernels import follow_branches
-
         chosen, count = follow_branches(
             np.ascontiguousarray(solutions), np.ascontiguousarray(valid), np.asarray(start_q, dtype=np.float64)
         )
@@ -174,16 +174,16 @@ def compute_cartesian_path(
     model = ik.model
     start_q = check_joint_states(start_q, model.dof, model.joint_names, "start_q")
     if start_q.ndim != 1:
-        raise ValueError(f"start_q: expected one joint state, got shape {start_q.shape}")
+        raise MotionInputError(f"start_q: expected one joint state, got shape {start_q.shape}")
     if not model.within_limits(start_q, tolerance=1e-9):
-        raise ValueError(f"start_q {start_q.tolist()} lies outside the joint limits")
+        raise MotionInputError(f"start_q {start_q.tolist()} lies outside the joint limits")
     waypoints, _ = check_poses(waypoints, "waypoints")
     if not (math.isfinite(step_mm) and step_mm > 0.0):
-        raise ValueError(f"step_mm must be a positive number of millimetres, got {step_mm}")
+        raise MotionInputError(f"step_mm must be a positive number of millimetres, got {step_mm}")
     if not (math.isfinite(max_rotation_step_rad) and max_rotation_step_rad > 0.0):
-        raise ValueError(f"max_rotation_step_rad must be positive, got {max_rotation_step_rad}")
+        raise MotionInputError(f"max_rotation_step_rad must be positive, got {max_rotation_step_rad}")
     if not jump_threshold_rad > 0.0:
-        raise ValueError(f"jump_threshold_rad must be positive, got {jump_threshold_rad}")
+        raise MotionInputError(f"jump_threshold_rad must be positive, got {jump_threshold_rad}")
 
     poses = interpolate_poses(model.fk(start_q), waypoints, step_mm * 1e-3, max_rotation_step_rad)
     total_steps = len(poses) - 1
@@ -209,7 +209,7 @@ def compute_cartesian_path(
     if validity_checker is not None:
         ok = np.asarray(validity_checker(joint_path))
         if ok.shape != (len(joint_path),):
-            raise ValueError(
+            raise MotionInputError(
                 f"validity_checker must return one bool per state, shape ({len(joint_path)},), got {ok.shape}"
             )
         invalid = np.flatnonzero(~ok.astype(bool))

@@ -1,19 +1,32 @@
 """Compiled branch following for :mod:`agiprobot_measurement.motion.cartesian`.
 
-A module of its own so that numba is imported (about 0.6 s with the cached kernel) only by processes that check
-enough scan lines for the compiled walk to pay off.
+This module owns the laziness of numba: it is imported (about 0.6 s with the cached kernel) at the first call of
+:func:`follow_branches`, so only processes that check enough scan lines for the compiled walk to pay off load it.
 """
 
 from __future__ import annotations
 
-import numba
+import functools
+
 import numpy as np
 
 __all__ = ["follow_branches"]
 
 
-@numba.njit(cache=True)
-def follow_branches(solutions, valid, start_q):  # pragma: no cover - compiled
+def follow_branches(solutions, valid, start_q):
+    """(chosen branch per waypoint (M,), number of waypoints followed) for closed-form solutions (M, B, dof) rad
+    with validity (M, B), compiled at the first call; see :func:`_follow_branches`."""
+    return _compiled()(solutions, valid, start_q)
+
+
+@functools.cache
+def _compiled():
+    import numba  # lazily, see the module docstring
+
+    return numba.njit(cache=True)(_follow_branches)
+
+
+def _follow_branches(solutions, valid, start_q):  # pragma: no cover - compiled
     """(chosen branch per waypoint (M,), number of waypoints followed) for closed-form solutions (M, B, dof) rad
     with validity (M, B): at each waypoint the valid solution nearest the previous choice (norm of the joint
     differences wrapped to [-pi, pi)), starting from ``start_q``; stops at the first waypoint with none."""

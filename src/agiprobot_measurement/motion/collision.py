@@ -19,136 +19,37 @@ back into Python for every candidate pair. A checker is not thread-safe (it move
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import NamedTuple
 
 import fcl
 import numpy as np
 
+from agiprobot_measurement.motion.collision_config import (
+    ALLOWED_REASONS,
+    AllowedEntry,
+    CollisionConfig,
+    load_collision_config,
+)
+from agiprobot_measurement.motion.errors import MotionInputError, UnknownObjectError
 from agiprobot_measurement.motion.kinematics import KinematicModel
 from agiprobot_measurement.station import (
-    CONFIG_DIR,
     ConfigError,
     PartPlacement,
     Scene,
     SceneObject,
     Station,
-    read_yaml,
 )
 
 __all__ = [
-    "ALLOWED_REASONS",
-    "AllowedEntry",
     "Clearance",
     "CollisionChecker",
-    "CollisionConfig",
     "adjacent_link_pairs",
-    "load_collision_config",
 ]
-
-#: Reasons a pair may be listed in the allowed-collision matrix (those of MoveIt's SRDF).
-ALLOWED_REASONS = ("Adjacent", "Never", "Always", "User")
 
 _EPS = 1e-12
 _CHUNK = 4096  # states posed at once: bounds the broad phase's temporary arrays to a few tens of MB
-
-
-# ------------------------------------------------------------------------------------------ configuration
-@dataclass(frozen=True)
-class AllowedEntry:
-    """Why a pair is not checked, and which of its collision elements.
-
-    ``elements`` None: the whole pair. Otherwise a set of element pairs ``((name_a, i), (name_b, j))`` with
-    indices into each link's collision elements in URDF order (a scene object is element 0): only those are
-    not checked, so e.g. the joint housings of two adjacent links may overlap while the forearm folding back
-    onto the shoulder housing is still caught.
-    """
-
-    reason: str
-    elements: frozenset | None = None
-
-    def allows(self, a: str, i: int, b: str, j: int) -> bool:
-        return self.elements is None or frozenset(((a, i), (b, j))) in self.elements
-
-
-@dataclass
-class CollisionConfig:
-    """Paddings (m) and the allowed-collision matrix: unordered name pair -> :class:`AllowedEntry`.
-
-    ``padding_m`` inflates the robot against scene objects and the part (their poses are uncertain);
-    ``self_padding_m`` inflates it against itself (its own geometry is known, and a large value would forbid
-    wrist poses that are physically fine).
-    """
-
-    padding_m: float = 0.01
-    self_padding_m: float = 0.005
-    allowed: dict[frozenset, AllowedEntry] = field(default_factory=dict)
-    generation: dict = field(default_factory=dict)
-    source: Path | None = None
-
-    def is_allowed(self, a: str, b: str, i: int | None = None, j: int | None = None) -> bool:
-        """Whether the pair (a, b) is not checked: as a whole, or (with i, j) for elements i of a, j of b."""
-        entry = self.allowed.get(frozenset((a, b)))
-        if entry is None:
-            return False
-        if i is None or j is None:
-            return entry.elements is None
-        return entry.allows(a, i, b, j)
-
-
-def _element_pairs(value: object, a: str, b: str, where: str) -> frozenset:
-    if not isinstance(value, list) or not value:
-        raise ConfigError(f"{where}.elements: expected a non-empty list of [index_a, index_b] pairs")
-    pairs = set()
-    for item in value:
-        if (
-            not isinstance(item, list | tuple)
-            or len(item) != 2
-            or not all(isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in item)
-        ):
-            raise ConfigError(f"{where}.elements: expected pairs of element indices >= 0, got {item!r}")
-        pairs.add(frozenset(((a, item[0]), (b, item[1]))))
-    return frozenset(pairs)
-
-
-def load_collision_config(path: str | Path | None = None) -> CollisionConfig:
-    """Read ``config/collision.yaml`` (or ``path``); errors name the file and the bad entry."""
-    path = Path(path) if path else CONFIG_DIR / "collision.yaml"
-    data = read_yaml(path)
-    where = str(path)
-    if not isinstance(data, dict):
-        raise ConfigError(f"{where}: expected a mapping")
-    paddings = {}
-    for key in ("padding_m", "self_padding_m"):
-        try:
-            paddings[key] = float(data.get(key, 0.0))
-        except (TypeError, ValueError) as exc:
-            raise ConfigError(f"{where}: {key} must be a number") from exc
-        if not math.isfinite(paddings[key]) or paddings[key] < 0.0:
-            raise ConfigError(f"{where}: {key} must be a finite number >= 0, got {paddings[key]}")
-    allowed = {}
-    entries = data.get("allowed_collisions") or []
-    if not isinstance(entries, list):
-        raise ConfigError(f"{where}: allowed_collisions must be a list")
-    for k, entry in enumerate(entries):
-        here = f"{where}: allowed_collisions[{k}]"
-        if not isinstance(entry, dict) or not {"a", "b", "reason"} <= set(entry):
-            raise ConfigError(f"{here}: expected a mapping with keys a, b, reason; got {entry!r}")
-        a, b, reason = str(entry["a"]), str(entry["b"]), str(entry["reason"])
-        if a == b:
-            raise ConfigError(f"{here}: a pair needs two different names, got '{a}' twice")
-        if reason not in ALLOWED_REASONS:
-            raise ConfigError(f"{here}: unknown reason {reason!r}; valid: {', '.join(ALLOWED_REASONS)}")
-        key = frozenset((a, b))
-        if key in allowed:
-            raise ConfigError(f"{here}: pair {a} - {b} listed twice")
-        elements = _element_pairs(entry["elements"], a, b, here) if "elements" in entry else None
-        allowed[key] = AllowedEntry(reason, elements)
-    generation = data.get("generation") or {}
-    if not isinstance(generation, dict):
-        raise ConfigError(f"{where}: generation must be a mapping")
-    return CollisionConfig(**paddings, allowed=allowed, generation=dict(generation), source=path)
 
 
 # --------------------------------------------------------------------------------------------- geometry
@@ -419,9 +320,9 @@ class CollisionChecker:
         vertices = np.asarray(vertices_m, dtype=float)
         faces = np.asarray(faces, dtype=np.int64)
         if vertices.ndim != 2 or vertices.shape[1] != 3 or faces.ndim != 2 or faces.shape[1] != 3:
-            raise ValueError(f"mesh '{name}': need vertices (V, 3) and faces (F, 3)")
+            raise MotionInputError(f"mesh '{name}': need vertices (V, 3) and faces (F, 3)")
         if len(faces) == 0 or not np.all(np.isfinite(vertices)):
-            raise ValueError(f"mesh '{name}': empty or non-finite mesh")
+            raise MotionInputError(f"mesh '{name}': empty or non-finite mesh")
         lo, hi = vertices.min(axis=0), vertices.max(axis=0)
         mesh = trimesh.Trimesh(vertices, faces, process=False)
         closed = mesh if mesh.is_watertight else None
@@ -478,7 +379,7 @@ class CollisionChecker:
 
     def remove_object(self, name: str) -> None:
         if name not in self._objects:
-            raise KeyError(f"no object '{name}'; objects: {', '.join(self._objects) or 'none'}")
+            raise UnknownObjectError(f"no object '{name}'; objects: {', '.join(self._objects) or 'none'}")
         del self._objects[name]
         if name == self.part_name:
             self.part_name = None
@@ -490,11 +391,11 @@ class CollisionChecker:
     def _add(self, name, kind, pose, geometry, local_center, half, solid_box, mesh=None) -> None:
         pose = np.asarray(pose, dtype=float)
         if pose.shape != (4, 4) or not np.all(np.isfinite(pose)):
-            raise ValueError(f"object '{name}': pose must be a finite 4x4 matrix")
+            raise MotionInputError(f"object '{name}': pose must be a finite 4x4 matrix")
         if not np.all(np.asarray(half) > 0):
-            raise ValueError(f"object '{name}': dimensions must be positive")
+            raise MotionInputError(f"object '{name}': dimensions must be positive")
         if name in self.robot_links:
-            raise ValueError(f"object '{name}': the name of a robot link")
+            raise MotionInputError(f"object '{name}': the name of a robot link")
         obj = fcl.CollisionObject(geometry, _fcl_transform(pose))
         self._objects[name] = _WorldObject(
             name, kind, pose, obj, pose[:3, :3] @ local_center + pose[:3, 3], pose[:3, :3].copy(),
@@ -506,7 +407,7 @@ class CollisionChecker:
     def allow_collision(self, a: str, b: str, reason: str = "User") -> None:
         """Stop checking the pair (a, b) (link or object names)."""
         if reason not in ALLOWED_REASONS:
-            raise ValueError(f"unknown reason {reason!r}; valid: {', '.join(ALLOWED_REASONS)}")
+            raise MotionInputError(f"unknown reason {reason!r}; valid: {', '.join(ALLOWED_REASONS)}")
         self.config.allowed[frozenset((a, b))] = AllowedEntry(reason)
         self._rebuild()
 
@@ -575,7 +476,7 @@ class CollisionChecker:
         """
         q = np.asarray(q, dtype=float)
         if q.ndim != 1:
-            raise ValueError(f"expected one joint state of {self.model.dof} values, got shape {q.shape}")
+            raise MotionInputError(f"expected one joint state of {self.model.dof} values, got shape {q.shape}")
         return bool(self.check_states(q[None])[0])
 
     def check_states(self, q: np.ndarray) -> np.ndarray:
@@ -717,7 +618,7 @@ class CollisionChecker:
     def _pose_all(self, q: np.ndarray) -> np.ndarray:
         q = np.asarray(q, dtype=float)
         if q.ndim != 1:
-            raise ValueError(f"expected one joint state of {self.model.dof} values, got shape {q.shape}")
+            raise MotionInputError(f"expected one joint state of {self.model.dof} values, got shape {q.shape}")
         poses = self.shape_poses(self._check_q(q))[0]
         for shape, pose in zip(self.shapes, poses, strict=True):
             self._pose_shapes(pose, shape.world, shape.own)

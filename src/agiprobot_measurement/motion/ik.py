@@ -22,6 +22,7 @@ from typing import Protocol
 import numpy as np
 import PyKDL
 
+from agiprobot_measurement.motion.errors import MotionInputError
 from agiprobot_measurement.motion.kinematics import KinematicModel, frame_to_matrix
 from agiprobot_measurement.station import ConfigError, RobotConfig, Station, load_robot_config
 
@@ -70,18 +71,18 @@ def check_poses(poses: np.ndarray, name: str = "poses") -> tuple[np.ndarray, boo
     if single:
         poses = poses[None]
     if poses.ndim != 3 or poses.shape[1:] != (4, 4):
-        raise ValueError(f"{name}: expected a 4x4 pose or an (N, 4, 4) array, got shape {poses.shape}")
+        raise MotionInputError(f"{name}: expected a 4x4 pose or an (N, 4, 4) array, got shape {poses.shape}")
     finite = np.isfinite(poses).all(axis=(1, 2))
     if not finite.all():
         bad = np.flatnonzero(~finite)
-        raise ValueError(f"{name}: pose(s) {bad[:10].tolist()} contain NaN or inf")
+        raise MotionInputError(f"{name}: pose(s) {bad[:10].tolist()} contain NaN or inf")
     bottom_ok = np.all(np.abs(poses[:, 3] - np.array([0.0, 0.0, 0.0, 1.0])) < 1e-9, axis=1)
     rot = poses[:, :3, :3]
     gram = np.einsum("nji,njk->nik", rot, rot)
     orthonormal = np.all(np.abs(gram - np.eye(3)) < 1e-6, axis=(1, 2)) & (np.linalg.det(rot) > 0.0)
     bad = np.flatnonzero(~(bottom_ok & orthonormal))
     if bad.size:
-        raise ValueError(
+        raise MotionInputError(
             f"{name}: pose(s) {bad[:10].tolist()} are not rigid transforms "
             "(bottom row must be 0 0 0 1 and the rotation part orthonormal with determinant +1)"
         )
@@ -92,9 +93,9 @@ def check_joint_states(q: np.ndarray, dof: int, joint_names: list[str], name: st
     """Validate joint states (dof,) or (N, dof) in rad; raises ValueError for wrong size or NaN/inf."""
     q = np.asarray(q, dtype=float)
     if q.ndim not in (1, 2) or q.shape[-1] != dof:
-        raise ValueError(f"{name}: expected {dof} joint values ({', '.join(joint_names)}), got shape {q.shape}")
+        raise MotionInputError(f"{name}: expected {dof} joint values ({', '.join(joint_names)}), got shape {q.shape}")
     if not np.all(np.isfinite(q)):
-        raise ValueError(f"{name}: joint values must be finite (got NaN or inf)")
+        raise MotionInputError(f"{name}: joint values must be finite (got NaN or inf)")
     return q
 
 
@@ -106,7 +107,7 @@ def _seeds_for(seeds: np.ndarray | None, n: int, model: KinematicModel, name: st
     if seeds.ndim == 1:
         return np.broadcast_to(seeds, (n, model.dof))
     if seeds.shape[0] != n:
-        raise ValueError(f"{name}: got {seeds.shape[0]} seed states for {n} poses")
+        raise MotionInputError(f"{name}: got {seeds.shape[0]} seed states for {n} poses")
     return seeds
 
 
@@ -277,7 +278,7 @@ class URAnalyticIK:
         """The solution nearest ``seed`` for one pose (6,) rad, or None when the pose is unreachable."""
         poses, _ = check_poses(pose, "pose")
         if poses.shape[0] != 1:
-            raise ValueError(f"pose: expected a single 4x4 pose, got shape {np.shape(pose)}")
+            raise MotionInputError(f"pose: expected a single 4x4 pose, got shape {np.shape(pose)}")
         q, ok = self.solve_nearest(poses[0], seed)
         return q if ok else None
 
@@ -370,7 +371,7 @@ class KDLIK:
         max_iterations: int = 200,
     ):
         if max_restarts < 0:
-            raise ValueError(f"max_restarts must be >= 0, got {max_restarts}")
+            raise MotionInputError(f"max_restarts must be >= 0, got {max_restarts}")
         self.model = kinematic_model
         self.max_restarts = int(max_restarts)
         self.rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
@@ -385,7 +386,7 @@ class KDLIK:
         """A solution (dof,) rad for one tip pose (4, 4), found from ``seed`` first; None if none found."""
         poses, _ = check_poses(pose, "pose")
         if poses.shape[0] != 1:
-            raise ValueError(f"pose: expected a single 4x4 pose, got shape {np.shape(pose)}")
+            raise MotionInputError(f"pose: expected a single 4x4 pose, got shape {np.shape(pose)}")
         seed = _seeds_for(seed, 1, self.model, "seed")[0]
         return self._solve_one(poses[0], seed)
 

@@ -14,6 +14,9 @@ from pathlib import Path
 import numpy as np
 import PyKDL
 
+from agiprobot_measurement._paths import CONFIG_DIR
+from agiprobot_measurement.common.config import number, read_yaml, require, vector
+from agiprobot_measurement.motion.errors import MotionInputError
 from agiprobot_measurement.station import ConfigError, JointLimits, Station
 from agiprobot_measurement.station.urdf_model import UrdfJoint, UrdfModel
 
@@ -126,9 +129,11 @@ class KinematicModel:
     def _check_q(self, q: np.ndarray) -> np.ndarray:
         q = np.asarray(q, dtype=float)
         if q.shape[-1:] != (self.dof,):
-            raise ValueError(f"expected {self.dof} joint values ({', '.join(self.joint_names)}), got shape {q.shape}")
+            raise MotionInputError(
+                f"expected {self.dof} joint values ({', '.join(self.joint_names)}), got shape {q.shape}"
+            )
         if not np.all(np.isfinite(q)):
-            raise ValueError("joint values must be finite (got NaN or inf)")
+            raise MotionInputError("joint values must be finite (got NaN or inf)")
         return q
 
     def fk_kdl(self, q: np.ndarray) -> np.ndarray:
@@ -233,9 +238,6 @@ class DhCorrection:
 def load_kinematics_correction(path: str | Path | None = None) -> tuple[bool, DhCorrection]:
     """``(true_kinematics enabled, correction, deviation scale)`` from a correction file (default
     ``config/ur10e_kinematics_correction.yaml``); ConfigError naming the key on bad content."""
-    from agiprobot_measurement._paths import CONFIG_DIR
-    from agiprobot_measurement.common.config import read_yaml, require, vector
-
     path = Path(path) if path else CONFIG_DIR / "ur10e_kinematics_correction.yaml"
     data = read_yaml(path)
     where = str(path)
@@ -244,9 +246,7 @@ def load_kinematics_correction(path: str | Path | None = None) -> tuple[bool, Dh
     enabled = require(data, "true_kinematics", where)
     if not isinstance(enabled, bool):
         raise ConfigError(f"{where}: 'true_kinematics' must be true or false")
-    scale = float(data.get("scale", 1.0))
-    if not np.isfinite(scale):
-        raise ConfigError(f"{where}: 'scale' must be a finite number")
+    scale = number(data.get("scale", 1.0), f"{where}: 'scale'")
     deltas = require(data, "dh_delta", where)
     correction = DhCorrection(
         *(

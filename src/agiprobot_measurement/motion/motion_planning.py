@@ -24,6 +24,7 @@ from ompl import geometric as og
 from ompl import util as ou
 
 from agiprobot_measurement.motion.collision import CollisionChecker
+from agiprobot_measurement.motion.errors import MotionInputError
 from agiprobot_measurement.motion.point_to_point import point_to_point
 from agiprobot_measurement.motion.time_parameterization import time_optimal_trajectory
 from agiprobot_measurement.motion.trajectory import JointTrajectory
@@ -75,7 +76,7 @@ def _seed_ompl(seed: int) -> None:
 
 def _planner_class(name: str) -> type:
     if name not in PLANNERS:
-        raise ValueError(f"unknown planner '{name}'; valid planners: {', '.join(available_planners())}")
+        raise MotionInputError(f"unknown planner '{name}'; valid planners: {', '.join(available_planners())}")
     return PLANNERS[name]
 
 
@@ -107,9 +108,9 @@ def interpolate_path(path: np.ndarray, max_step_rad: float) -> np.ndarray:
     """
     path = np.asarray(path, dtype=float)
     if path.ndim != 2 or len(path) == 0:
-        raise ValueError(f"expected (K, dof) waypoints, got shape {path.shape}")
+        raise MotionInputError(f"expected (K, dof) waypoints, got shape {path.shape}")
     if not max_step_rad > 0:
-        raise ValueError(f"max_step_rad must be positive, got {max_step_rad}")
+        raise MotionInputError(f"max_step_rad must be positive, got {max_step_rad}")
     pieces = [path[:1]]
     for a, b in itertools.pairwise(path):
         steps = max(1, math.ceil(float(np.max(np.abs(b - a))) / max_step_rad - 1e-9))
@@ -196,15 +197,15 @@ class MotionPlanner:
     ):
         _planner_class(planner)
         if simplify not in (True, False, "full"):
-            raise ValueError(f"simplify must be True, False or 'full', got {simplify!r}")
+            raise MotionInputError(f"simplify must be True, False or 'full', got {simplify!r}")
         if not resolution_rad > 0:
-            raise ValueError(f"resolution_rad must be positive, got {resolution_rad}")
+            raise MotionInputError(f"resolution_rad must be positive, got {resolution_rad}")
         if not time_budget_s > 0:
-            raise ValueError(f"time_budget_s must be positive, got {time_budget_s}")
+            raise MotionInputError(f"time_budget_s must be positive, got {time_budget_s}")
         if int(max_attempts) < 1:
-            raise ValueError(f"max_attempts must be >= 1, got {max_attempts}")
+            raise MotionInputError(f"max_attempts must be >= 1, got {max_attempts}")
         if int(best_of) < 1:
-            raise ValueError(f"best_of must be >= 1, got {best_of}")
+            raise MotionInputError(f"best_of must be >= 1, got {best_of}")
         self.checker = checker
         self.model = checker.model
         self.dof = self.model.dof
@@ -246,11 +247,11 @@ class MotionPlanner:
     def _check_input(self, q, what: str) -> np.ndarray:
         q = np.asarray(q, dtype=float)
         if q.shape != (self.dof,):
-            raise ValueError(
+            raise MotionInputError(
                 f"{what}: expected {self.dof} joint values ({', '.join(self.model.joint_names)}), got shape {q.shape}"
             )
         if not np.all(np.isfinite(q)):
-            raise ValueError(f"{what}: joint values must be finite, got {q}")
+            raise MotionInputError(f"{what}: joint values must be finite, got {q}")
         return q
 
     def check_path(self, path: np.ndarray, resolution_rad: float | None = None) -> int:
@@ -292,7 +293,7 @@ class MotionPlanner:
         goal = self._check_input(goal, "goal")
         budget = self.time_budget_s if time_budget_s is None else float(time_budget_s)
         if not budget > 0:
-            raise ValueError(f"time_budget_s must be positive, got {budget}")
+            raise MotionInputError(f"time_budget_s must be positive, got {budget}")
         deadline = started + budget
         validator = self._motion_validator
         checks_before, states_before = validator.motion_checks, validator.states_checked

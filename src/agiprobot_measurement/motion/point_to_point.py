@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from agiprobot_measurement.motion.errors import MotionInputError
 from agiprobot_measurement.motion.trajectory import JointTrajectory
 from agiprobot_measurement.station import JointLimits
 
@@ -31,18 +32,18 @@ def point_to_point(
     goal = np.asarray(goal, dtype=float)
     n = len(limits.names)
     if start.shape != (n,) or goal.shape != (n,):
-        raise ValueError(f"expected {n} joint values for start and goal, got {start.shape} and {goal.shape}")
+        raise MotionInputError(f"expected {n} joint values for start and goal, got {start.shape} and {goal.shape}")
     if not (np.all(np.isfinite(start)) and np.all(np.isfinite(goal))):
-        raise ValueError("start and goal must be finite")
+        raise MotionInputError("start and goal must be finite")
     for name, value in (
         ("velocity_scaling", velocity_scaling),
         ("acceleration_scaling", acceleration_scaling),
     ):
         if not 0.0 < value <= 1.0:
-            raise ValueError(f"{name} must lie in (0, 1], got {value}")
+            raise MotionInputError(f"{name} must lie in (0, 1], got {value}")
     for label, state in (("start", start), ("goal", goal)):
         if not limits.within_position_limits(state, 1e-9):
-            raise ValueError(f"{label} state is outside the joint limits")
+            raise MotionInputError(f"{label} state is outside the joint limits")
     delta = goal - start
     distance = np.abs(delta)
     v_max = limits.max_velocity * velocity_scaling

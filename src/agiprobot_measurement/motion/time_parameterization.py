@@ -28,6 +28,7 @@ import toppra.algorithm
 import toppra.constraint
 from scipy.interpolate import CubicSpline
 
+from agiprobot_measurement.common.config import ConfigError, number
 from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.motion.trajectory import JointTrajectory, motion_peaks
 from agiprobot_measurement.station import JointLimits
@@ -100,13 +101,11 @@ def _limits_in_order(limits: JointLimits, joint_names) -> tuple[list[str], Joint
 
 
 def _scaling(value: float, name: str) -> float:
+    """A scaling factor in (0, 1], checked by :func:`common.config.number`."""
     try:
-        value = float(value)
-    except (TypeError, ValueError) as exc:
-        raise TimeParameterizationError(f"{name} must be a number in (0, 1], got {value!r}") from exc
-    if not (np.isfinite(value) and 0.0 < value <= 1.0):
-        raise TimeParameterizationError(f"{name} must lie in (0, 1], got {value}")
-    return value
+        return number(value, name, low=0.0, high=1.0, low_inclusive=False)
+    except ConfigError as exc:
+        raise TimeParameterizationError(str(exc)) from exc
 
 
 def _waypoints(waypoints_rad, limits: JointLimits, names: list[str]) -> np.ndarray:

@@ -16,6 +16,7 @@ import rosbag
 
 from agiprobot_measurement.planning.report.coverage import is_uncoverable_color
 from agiprobot_measurement.ros.conversions import cloud_xyz
+from agiprobot_measurement.ros.errors import MessageError
 from agiprobot_measurement.sensors.laser_line.simulator import measured_samples
 
 __all__ = [
@@ -79,7 +80,7 @@ def coverage_from_bag(bag_path: str | Path, radius_mm: float = 1.0, execution_in
             try:
                 begin, end = windows[order[execution_index]]
             except IndexError:
-                raise ValueError(f"{bag_path}: no execution {execution_index} (the bag has {len(order)})") from None
+                raise MessageError(f"{bag_path}: no execution {execution_index} (the bag has {len(order)})") from None
         else:
             begin, end = None, float("inf")
         samples_msg, chunks, profiles, whole = None, [], 0, None
@@ -102,7 +103,7 @@ def coverage_from_bag(bag_path: str | Path, radius_mm: float = 1.0, execution_in
         if whole is not None:
             chunks = [cloud_xyz(whole) * 1000.0]
     if samples_msg is None:
-        raise ValueError(f"{bag_path}: no sample points ({SAMPLES_TOPIC}) before the execution")
+        raise MessageError(f"{bag_path}: no sample points ({SAMPLES_TOPIC}) before the execution")
     samples = cloud_xyz(samples_msg) * 1000.0
     colors = _rgb(samples_msg)
     # red samples are not coverable: no viewpoint measures them (the node colours them UNCOVERABLE_RGB)

@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 import rospy
-from geometry_msgs.msg import Point, Point32, Pose, Quaternion, Transform, TransformStamped, Vector3
+from geometry_msgs.msg import Point, Point32, Pose, PoseStamped, Quaternion, Transform, TransformStamped, Vector3
+from nav_msgs.msg import Path
 from sensor_msgs.msg import PointCloud, PointCloud2, PointField
 from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory as JointTrajectoryMsg
@@ -18,6 +19,7 @@ from agiprobot_measurement.common.geometry import pose_from_quaternion, pose_to_
 from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.motion.trajectory import JointTrajectory, TrajectoryError, seconds_to_duration
 from agiprobot_measurement.planning.plan.plan_io import ExecutionPlan, PlanError, PlanSegment, kind_at
+from agiprobot_measurement.ros.errors import MessageError
 
 __all__ = [
     "cloud_xyz",
@@ -27,7 +29,9 @@ __all__ = [
     "matrix_to_transform",
     "plan_from_joint_trajectory_msgs",
     "plan_to_joint_trajectory_msgs",
+    "pose_stamped",
     "pose_to_matrix",
+    "sensor_path",
     "transform_stamped",
     "transform_to_matrix",
     "xyz_array",
@@ -86,7 +90,7 @@ def cloud_xyz(msg: PointCloud2) -> np.ndarray:
     """(N, 3) float64 points (the cloud's unit, metres) of a PointCloud2 with float32 x, y, z fields."""
     offsets = {f.name: f.offset for f in msg.fields}
     if not {"x", "y", "z"} <= set(offsets):
-        raise ValueError("point cloud without x, y, z fields")
+        raise MessageError("point cloud without x, y, z fields")
     n = msg.width * msg.height
     if n == 0:
         return np.zeros((0, 3))
@@ -197,3 +201,12 @@ def plan_from_joint_trajectory_msgs(messages, metadata: dict | None = None) -> E
         except (TrajectoryError, ValueError, AttributeError) as exc:
             raise PlanError(f"segment {index}: {exc}") from exc
     return ExecutionPlan(dict(metadata or {}), segments)
+
+
+def pose_stamped(pose: np.ndarray, header: Header) -> PoseStamped:
+    return PoseStamped(header=header, pose=matrix_to_pose(np.asarray(pose, dtype=float)))
+
+
+def sensor_path(poses, header: Header) -> Path:
+    """nav_msgs/Path of the sensor's poses (world <- sensor, 4x4) in the order they were taken."""
+    return Path(header=header, poses=[pose_stamped(p, header) for p in poses])

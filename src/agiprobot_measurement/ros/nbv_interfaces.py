@@ -32,6 +32,7 @@ from agiprobot_measurement.ros.conversions import joint_trajectory_to_msg, trans
 from agiprobot_measurement.ros.executor import ControllerWatch
 from agiprobot_measurement.ros.joint_states import JointStateCache
 from agiprobot_measurement.ros.nbv_messages import captured_view
+from agiprobot_measurement.ros.params import param, text
 
 __all__ = ["MotionCancelled", "RosNBVCamera", "RosNBVRobot"]
 
@@ -163,15 +164,15 @@ class RosNBVCamera:
 
     def _check_driver(self) -> None:
         """The settings the conversion relies on (refused before a frame is taken)."""
-        space = rospy.get_param(f"{self.camera_ns}/coordinate_space", CAMERA_SPACE)
+        space = param(f"{self.camera_ns}/coordinate_space", CAMERA_SPACE)
         if int(space) != CAMERA_SPACE:
             raise CaptureError(
                 f"{self.camera_ns}: coordinate_space is {space}; the map needs camera space (1): its points in the "
                 "sensor frame, placed by tf"
             )
-        if not rospy.get_param(f"{self.camera_ns}/organized_cloud", True):
+        if not param(f"{self.camera_ns}/organized_cloud", True):
             raise CaptureError(f"{self.camera_ns}: organized_cloud is false; the map needs the organised cloud")
-        if not rospy.get_param(f"{self.camera_ns}/send_point_cloud", True) or not rospy.get_param(
+        if not param(f"{self.camera_ns}/send_point_cloud", True) or not param(
             f"{self.camera_ns}/send_confidence_map", True
         ):
             raise CaptureError(f"{self.camera_ns}: send_point_cloud and send_confidence_map must be true")
@@ -187,7 +188,7 @@ class RosNBVCamera:
         driver's newest tf time, which may lie a little before this listener's first message."""
         if self._tf_ready:
             return
-        frame = str(rospy.get_param(f"{self.camera_ns}/frame_id", "PhoXi3Dscanner_sensor"))
+        frame = param(f"{self.camera_ns}/frame_id", "PhoXi3Dscanner_sensor", text)
         if not self.tf_buffer.can_transform(self.world_frame, frame, rospy.Time(0), rospy.Duration(10.0)):
             raise CaptureError(
                 f"no pose of {frame} in {self.world_frame} on tf: is the robot (robot_state_publisher) up?"

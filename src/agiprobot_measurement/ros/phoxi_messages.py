@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from agiprobot_measurement.ros.errors import MessageError
 from agiprobot_measurement.sensors.phoxi.models import CameraIntrinsics
 
 __all__ = [
@@ -85,7 +86,7 @@ def pointcloud2_arrays(msg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     offsets = {f.name: f.offset for f in msg.fields}
     missing = [name for name, _ in POINT_FIELDS if name not in offsets]
     if missing:
-        raise ValueError(f"PointCloud2 lacks fields {missing}")
+        raise MessageError(f"PointCloud2 lacks fields {missing}")
     dtype = np.dtype(
         {
             "names": [name for name, _ in POINT_FIELDS],
@@ -110,7 +111,7 @@ def image(array: np.ndarray, encoding: str, header):
     if array.ndim == 2:
         array = array[:, :, None]
     if array.shape[2] != channels:
-        raise ValueError(f"{encoding} needs {channels} channel(s), got {array.shape[2]}")
+        raise MessageError(f"{encoding} needs {channels} channel(s), got {array.shape[2]}")
     msg = Image()
     msg.header = header
     msg.height, msg.width = int(array.shape[0]), int(array.shape[1])
@@ -124,7 +125,7 @@ def image(array: np.ndarray, encoding: str, header):
 def image_array(msg) -> np.ndarray:
     """(H, W) or (H, W, C) array of an Image in one of :data:`IMAGE_ENCODINGS`."""
     if msg.encoding not in IMAGE_ENCODINGS:
-        raise ValueError(f"unsupported encoding {msg.encoding!r}")
+        raise MessageError(f"unsupported encoding {msg.encoding!r}")
     dtype, channels = IMAGE_ENCODINGS[msg.encoding]
     dtype = np.dtype(dtype).newbyteorder(">" if msg.is_bigendian else "<")
     row = np.frombuffer(bytes(msg.data), dtype=np.uint8).reshape(msg.height, msg.step)

@@ -17,7 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from agiprobot_measurement.common.files import atomic_write
+from agiprobot_measurement.common.files import FileReadError, atomic_write
+from agiprobot_measurement.ros.errors import RvizSnapshotError
 
 __all__ = [
     "CONVERT",
@@ -55,7 +56,7 @@ def image_stats(path: Path, background_rgb: np.ndarray, top_px: int = 60, bottom
 
     image = cv2.imread(str(path), cv2.IMREAD_COLOR)
     if image is None:
-        raise RuntimeError(f"cannot read screenshot {path}")
+        raise RvizSnapshotError(f"cannot read screenshot {path}")
     rgb = image[:, :, ::-1].astype(float)
     view = rgb[top_px : rgb.shape[0] - bottom_px]  # skip menu/tool bars
     differs = np.abs(view - background_rgb).max(axis=2) > 12
@@ -68,12 +69,12 @@ class OffscreenRviz:
     def __init__(self, config: str | Path, width: int = 1024, height: int = 768, log_dir: str | Path | None = None):
         self.config = Path(config).resolve()
         if not self.config.is_file():
-            raise FileNotFoundError(f"rviz config not found: {self.config}")
+            raise FileReadError(f"rviz config not found: {self.config}")
         for tool in ("Xvfb", "xwd", "rviz"):
             if shutil.which(tool) is None:
-                raise RuntimeError(f"'{tool}' is not installed (run `make setup`)")
+                raise RvizSnapshotError(f"'{tool}' is not installed (run `make setup`)")
         if not Path(CONVERT).exists():
-            raise RuntimeError(f"{CONVERT} is missing (Debian package imagemagick; run `make setup`)")
+            raise RvizSnapshotError(f"{CONVERT} is missing (Debian package imagemagick; run `make setup`)")
         self.size = (width, height)
         self.background = _rviz_background(self.config)
         self.log_dir = Path(log_dir or tempfile.mkdtemp(prefix="rviz_snapshot_"))
@@ -112,7 +113,7 @@ class OffscreenRviz:
         with os.fdopen(read_fd) as stream:
             number = stream.readline().strip()
         if not number:
-            raise RuntimeError(f"Xvfb did not start (see {self.log_dir / 'xvfb.log'})")
+            raise RvizSnapshotError(f"Xvfb did not start (see {self.log_dir / 'xvfb.log'})")
         self.display = f":{number}"
         env = dict(os.environ, DISPLAY=self.display)
         self.rviz = subprocess.Popen(
@@ -133,7 +134,9 @@ class OffscreenRviz:
         tmp = output.with_suffix(".tmp.png")
         while True:
             if self.rviz.poll() is not None:
-                raise RuntimeError(f"rviz exited with code {self.rviz.returncode} (log: {self.log_dir / 'rviz.log'})")
+                raise RvizSnapshotError(
+                    f"rviz exited with code {self.rviz.returncode} (log: {self.log_dir / 'rviz.log'})"
+                )
             self._screenshot(tmp)
             stats = image_stats(tmp, self.background)
             key = stats.non_background_pixels

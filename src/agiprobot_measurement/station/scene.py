@@ -11,6 +11,7 @@ from agiprobot_measurement._paths import CONFIG_DIR, PACKAGE_ROOT
 from agiprobot_measurement.common.config import ConfigError, positive, read_yaml, require, vector
 from agiprobot_measurement.common.geometry import pose_matrix
 from agiprobot_measurement.common.units import UNIT_SCALES_TO_M
+from agiprobot_measurement.errors import InputError
 
 __all__ = [
     "CHESSBOARD_MARGIN_SQUARES",
@@ -18,6 +19,7 @@ __all__ = [
     "PartPlacement",
     "Scene",
     "SceneObject",
+    "SceneObjectError",
     "chessboard_board_size",
     "chessboard_dark_squares",
     "load_scene",
@@ -33,6 +35,10 @@ SCENE_OBJECT_TYPES = {
     "chessboard": ("inner_corners", "square_m"),
 }
 CHESSBOARD_MARGIN_SQUARES = 1  # white border around the squares (the quiet zone OpenCV's detector needs)
+
+
+class SceneObjectError(InputError):
+    """A scene object is asked for a shape it does not have."""
 
 
 def chessboard_board_size(inner_corners: tuple[int, int], square_m: float, thickness_m: float) -> np.ndarray:
@@ -78,7 +84,7 @@ class SceneObject:
             behind = np.eye(4)
             behind[2, 3] = -self.thickness_m / 2.0
             return np.asarray(self.size_m, dtype=float), self.pose @ behind
-        raise ValueError(f"scene object '{self.name}' ({self.type}) is not box-shaped")
+        raise SceneObjectError(f"scene object '{self.name}' ({self.type}) is not box-shaped")
 
 
 @dataclass(frozen=True)

@@ -18,6 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import sparse
 
+from agiprobot_measurement.errors import InputError
+
 __all__ = [
     "ALPHA_RAD",
     "FAN_ANGLE_RAD",
@@ -158,7 +160,7 @@ def cube_instance(
     ``scan_speed_mm_s`` plus a random approach/settle time.
     """
     if n_tilts not in (1, 9):
-        raise ValueError(f"n_tilts must be 1 or 9, got {n_tilts}")
+        raise InputError(f"n_tilts must be 1 or 9, got {n_tilts}")
     rng = np.random.default_rng(seed)
     points, normals = sample_cube_points(n_points, side_mm, rng)
     tilts = [(0.0, 0.0)] if n_tilts == 1 else [(a, b) for a in (-1, 0, 1) for b in (-1, 0, 1)]

@@ -188,6 +188,11 @@ def strongly_connected(graph: dict[str, set[str]]) -> list[list[str]]:
     return [sorted(c) for c in components if len(c) > 1]
 
 
+def test_string_imports_are_read():
+    tree = ast.parse("import importlib\nimportlib.import_module('a.b')\n__import__('c')\nimport_module(name)\n")
+    assert [name for _, name in imported_names(tree, "x", False)] == ["importlib", "a.b", "c"]
+
+
 def test_strongly_connected_finds_a_cycle():
     # the checker itself: a hand-made cycle a -> b -> c -> a is found, a chain is not
     assert strongly_connected({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]

@@ -196,7 +196,7 @@ def test_data_file_errors(tmp_path):
 
 
 def test_unreadable_data_files_name_the_problem(tmp_path):
-    # issue 13 row 12: binary bytes used to give only "'utf-8' codec can't decode byte 0x80"
+    # binary bytes used to give only "'utf-8' codec can't decode byte 0x80"
     binary = tmp_path / "calibration_data.txt"
     binary.write_bytes(b"p_robot\x80\x81\x00 binary")
     with pytest.raises(CalibrationError, match=r"calibration_data\.txt: the data file is not UTF-8 text \(byte 0x80"):

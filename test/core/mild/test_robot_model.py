@@ -275,7 +275,7 @@ def test_settings_file_error_names_the_file_and_key(tmp_path):
     data["mSigma"] = "wide"
     path = tmp_path / "settings.yaml"
     path.write_text("\n".join(f"{k}: {v}" for k, v in data.items()))
-    with pytest.raises(ConfigError, match=r"settings\.yaml: 'mSigma' must be a number"):
+    with pytest.raises(ConfigError, match=r"settings\.yaml: 'mSigma': expected a number"):
         load_settings(path)
 
 

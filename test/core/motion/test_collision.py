@@ -6,13 +6,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from agiprobot_measurement.motion.collision import (
-    AllowedEntry,
-    CollisionChecker,
-    CollisionConfig,
-    adjacent_link_pairs,
-    load_collision_config,
-)
+from agiprobot_measurement.motion.collision import CollisionChecker, adjacent_link_pairs
+from agiprobot_measurement.motion.collision_config import AllowedEntry, CollisionConfig, load_collision_config
 from agiprobot_measurement.station import ConfigError
 
 # Arm lowered into the table: shoulder lift +0.5 rad from home (the arm reaches out over the table).

@@ -43,11 +43,11 @@ def run_cli(args, cwd, timeout=120):
         ([CUBE, "--report", "no_such_dir/report.png"], "output directory does not exist: no_such_dir"),
         ([CUBE, "--report", "report.jpg"], "must end in .png"),
         ([CUBE, "--scene", "no_scene.yaml"], "scene file not found: no_scene.yaml"),
-        # the file policy: names resolve under --output-dir (the working directory)
-        ([CUBE, "-o", "../escaped_plan"], "'..' is not allowed"),
-        ([CUBE, "-o", "~/escaped_plan"], "'~' is not expanded"),
-        ([CUBE, "-o", "/etc/escaped_plan"], "outside the allowed folder"),
-        ([CUBE, "--report", "/etc/escaped.png"], "outside the allowed folder"),
+        # a command-line user's files go where they are named: only what cannot be written is refused
+        ([CUBE, "-o", "/no_such_dir/plan"], "output directory does not exist: /no_such_dir"),
+        ([CUBE, "--report", "../no_such_dir/report.png"], "output directory does not exist: ../no_such_dir"),
+        ([CUBE, "--summary", "/no_such_dir/summary.txt"], "output directory does not exist: /no_such_dir"),
+        ([CUBE, "-o", "~/no_such_dir_of_plans/plan"], "output directory does not exist: ~/no_such_dir_of_plans"),
         ([CUBE, "--output-dir", "no_such_dir", "-o", "plan"], "--output-dir no_such_dir is not a directory"),
     ],
 )
@@ -149,6 +149,21 @@ def test_existing_outputs_are_kept_unless_overwrite(tmp_path):
     assert result.returncode == 0, result.stderr
     assert load_execution_plan(out / "plan.yaml").segments
     assert existing.read_text() == "keep me"
+
+
+def test_outputs_go_where_the_user_names_them(tmp_path):
+    # absolute (outside the working directory), and '..' relative to it: both written, atomically, as named
+    work = tmp_path / "work"
+    work.mkdir()
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    result = run_cli([CUBE, *FAST, "-o", elsewhere / "plan.yaml", "--summary", "../summary.txt", "-q"], work)
+    assert result.returncode == 0, result.stderr
+    assert load_execution_plan(elsewhere / "plan.yaml").segments
+    assert (tmp_path / "summary.txt").is_file() and not any(work.iterdir())
+    assert not [p for p in elsewhere.iterdir() if p.name.startswith(".")], "no temporary file is left"
+    result = run_cli([CUBE, *FAST, "-o", elsewhere / "plan.yaml", "-q"], work)
+    assert result.returncode == 2 and "exists" in result.stderr and "--overwrite" in result.stderr, result.stderr
 
 
 def test_a_huge_density_is_refused_before_any_work(tmp_path):

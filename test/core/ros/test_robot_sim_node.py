@@ -142,7 +142,7 @@ def test_set_joint_state_replies():
 
 
 def test_publish_after_shutdown_is_quiet(monkeypatch):
-    # issue 13 row 15: the timer firing while shutdown closes the topic printed a traceback
+    # the timer firing while shutdown closes the topic printed a traceback
     node = _node(_Server())
 
     def closed():

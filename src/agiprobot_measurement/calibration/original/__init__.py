@@ -1,4 +1,4 @@
-"""The original calibration's Code API (seed 004, "Code API"), ROS-free part, on this project's implementation.
+"""The original calibration's documented Code API, ROS-free part, on this project's implementation.
 
 ``utils`` and ``calibration`` mirror the original's ``utils.py`` and ``calibration.py`` (same names, inputs and
 outputs); the robot and camera functions of its ``cal_main.py`` need the running station and live in

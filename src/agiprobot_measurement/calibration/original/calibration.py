@@ -1,4 +1,4 @@
-"""The original calibration's ``calibration.py`` (seed 004, Code API): circle fitting on saved point clouds, the
+"""The original calibration's ``calibration.py`` (its documented Code API): circle fitting on saved point clouds, the
 acceptance criteria, the RANSAC calibration of a data file.
 
 Same names, inputs and outputs as documented, on this project's implementation: the flange centre is

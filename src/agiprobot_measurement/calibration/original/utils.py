@@ -1,4 +1,4 @@
-"""The original calibration's ``utils.py`` (seed 004, Code API): point pairs, the data file, random draws.
+"""The original calibration's ``utils.py`` (its documented Code API): point pairs, the data file, random draws.
 
 Same names, inputs and outputs as documented; the data file is this project's reader and writer
 (:func:`~agiprobot_measurement.calibration.registration.read_data_file` reads the original's layout and the

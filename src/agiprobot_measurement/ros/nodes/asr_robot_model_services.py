@@ -55,15 +55,18 @@ from asr_robot_model_services.srv import (
 )
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from nav_msgs.msg import OccupancyGrid
+from std_msgs.msg import Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from agiprobot_measurement.errors import AgiprobotError, InputError
 from agiprobot_measurement.mild.config import DEFAULTS, FrameNames, load_kinematics, load_map, settings_from_mapping
 from agiprobot_measurement.mild.robot_model import MildRobotModel
 from agiprobot_measurement.mild.state import RobotState
+from agiprobot_measurement.ros import markers
 from agiprobot_measurement.ros import mild_messages as mild_ros
 from agiprobot_measurement.ros.conversions import matrix_to_pose, transform_to_matrix, xyz_array, xyzw_array
-from agiprobot_measurement.ros.params import file_param
+from agiprobot_measurement.ros.node import run_node
+from agiprobot_measurement.ros.params import file_param, param
 from agiprobot_measurement.srv import CalculateRobotState, CalculateRobotStateResponse
 
 
@@ -88,7 +91,7 @@ def answers_errors(handler):
 class RobotModelServices:
     def __init__(self):
         name = rospy.get_name()
-        params = rospy.get_param("~", {})
+        params = param("~", {})
         settings = settings_from_mapping(params, f"parameters of {name}")
         for warning in settings.warnings:
             rospy.logwarn("asr_robot_model_services: %s", warning)
@@ -242,7 +245,7 @@ class RobotModelServices:
             corrected = RobotState(correction.pan, correction.tilt, state.rotation, state.x, state.y)
             pose = model.camera_pose(corrected)
             solution = _Corrected(corrected, correction.view_centre_m, model.view_centre(pose))
-            self._publish_ik(model, solution, position, mild_ros.RED, "_poseCorrection")
+            self._publish_ik(model, solution, position, markers.RED, "_poseCorrection")
         return CalculateCameraPoseCorrectionResponse(correction.pan, correction.tilt)
 
     @answers_errors
@@ -256,7 +259,7 @@ class RobotModelServices:
             source, position, xyzw_array(request.orientation), record_samples=visualize
         )
         if visualize:
-            self._publish_ik(model, solution, position, mild_ros.BLUE, "")
+            self._publish_ik(model, solution, position, markers.BLUE, "")
         response = CalculateRobotStateResponse()
         response.success = solution.ok
         response.message = solution.reason
@@ -274,8 +277,8 @@ class RobotModelServices:
         frame = self.frames.map_frame
         with self.visualization_lock:
             if not suffix:  # a new IK clears the previous picture (the original deleted marker by marker)
-                self.ik_publisher.publish(mild_ros.delete_all(frame, stamp))
-            for marker in mild_ros.ik_markers(model, solution, position, frame, stamp, colour, suffix):
+                self.ik_publisher.publish(markers.clear(Header(frame_id=frame, stamp=stamp)))
+            for marker in markers.ik_markers(model, solution, position, frame, stamp, colour, suffix):
                 self.ik_publisher.publish(marker)
 
     def publish_frustum(self, _event=None):
@@ -286,7 +289,7 @@ class RobotModelServices:
         except tf2_ros.TransformException:
             return  # no robot on tf (yet): nothing to draw
         corners = self.model.frustum_corners(transform_to_matrix(transform))
-        self.frustum_publisher.publish(mild_ros.frustum_marker_array(corners, self.frames.map_frame, rospy.Time.now()))
+        self.frustum_publisher.publish(markers.frustum_marker_array(corners, self.frames.map_frame, rospy.Time.now()))
 
 
 def _flag_param(params: dict, key: str, default: bool) -> bool:
@@ -309,13 +312,7 @@ class _Corrected:
 
 
 def main():
-    rospy.init_node("asr_robot_model_services")
-    try:
-        RobotModelServices()
-    except AgiprobotError as exc:
-        rospy.logfatal("asr_robot_model_services: %s", exc)
-        raise SystemExit(1) from exc
-    rospy.spin()
+    run_node("asr_robot_model_services", RobotModelServices)
 
 
 # ------------------------------------------------------------------------------------------------------- IK test
@@ -364,7 +361,7 @@ class IKTest:
     The summary ends up in ~result: {solved, total, unsolved (1-based pose numbers)}."""
 
     def __init__(self):
-        params = rospy.get_param("~", {})
+        params = param("~", {})
         self.settings = settings_from_mapping(params, f"parameters of {rospy.get_name()}")
         frames = FrameNames.from_mapping(params, f"parameters of {rospy.get_name()} (frame names)", require_all=False)
         self.model = MildRobotModel(load_kinematics(file_param("~kinematics"), frames), self.settings, None)
@@ -412,8 +409,8 @@ class IKTest:
             )
             if self.settings.visualize_ik:
                 stamp = rospy.Time.now()
-                self.ik_publisher.publish(mild_ros.delete_all(self.frame, stamp))
-                for marker in mild_ros.ik_markers(self.model, solution, position, self.frame, stamp, mild_ros.BLUE):
+                self.ik_publisher.publish(markers.clear(Header(frame_id=self.frame, stamp=stamp)))
+                for marker in markers.ik_markers(self.model, solution, position, self.frame, stamp, markers.BLUE):
                     self.ik_publisher.publish(marker)
             rospy.sleep(self.step_s)
         rospy.loginfo(
@@ -425,9 +422,4 @@ class IKTest:
 
 
 def ik_test_main():
-    rospy.init_node("asr_robot_model_services")
-    try:
-        IKTest().run()
-    except AgiprobotError as exc:
-        rospy.logfatal("asr_robot_model_services_ik_test: %s", exc)
-        raise SystemExit(1) from exc
+    run_node("asr_robot_model_services", lambda: IKTest().run(), label="asr_robot_model_services_ik_test", spin=False)

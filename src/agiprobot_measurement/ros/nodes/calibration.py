@@ -64,6 +64,7 @@ from agiprobot_measurement.calibration.procedure import (
 )
 from agiprobot_measurement.calibration.registration import CalibrationError, write_result_yaml
 from agiprobot_measurement.calibration.session import CalibrationSession, detector_config
+from agiprobot_measurement.common.config import number
 from agiprobot_measurement.errors import AgiprobotError, InputError
 from agiprobot_measurement.motion.ik import make_ik_solver
 from agiprobot_measurement.motion.kinematics import KinematicModel
@@ -72,6 +73,8 @@ from agiprobot_measurement.msg import ExecuteJointTrajectoryAction, ExecuteJoint
 from agiprobot_measurement.ros.action_client import ActionClient
 from agiprobot_measurement.ros.conversions import cloud_xyz, joint_trajectory_to_msg, transform_stamped
 from agiprobot_measurement.ros.joint_states import JointStateCache
+from agiprobot_measurement.ros.node import run_node
+from agiprobot_measurement.ros.params import flag, has_param, param, text
 from agiprobot_measurement.ros.phoxi_messages import image_array, pointcloud2_arrays
 from agiprobot_measurement.station import load_joint_limits
 
@@ -188,11 +191,11 @@ class _RosLog:
 
 class CalibrationNode:
     def __init__(self):
-        config_path = rospy.get_param("~config", "") or None
+        config_path = param("~config", "") or None
         self.config = load_calibration_config(config_path)
         for key in OVERRIDES:
-            if rospy.has_param(f"~{key}"):
-                self.config[key] = rospy.get_param(f"~{key}")
+            if has_param(f"~{key}"):
+                self.config[key] = param(f"~{key}")
         self.mode = check_mode(self.config.get("mode", "cal_fine"))
         self.use_auto_judge = bool(self.config.get("use_auto_judge", True))
         self.base_frame = str(self.config.get("base_frame", "base_link"))
@@ -210,26 +213,24 @@ class CalibrationNode:
         self.log = _RosLog()
 
         # the station with the bare flange disc on tool0 (station.launch tool:=flange_disc), for IK and collisions
-        self.station = flange_station(rospy.get_param("~scene", "") or None)
+        self.station = flange_station(param("~scene", "") or None)
         kinematics = KinematicModel.from_station(self.station, tip_frame="tool0", base_frame=self.base_frame)
         limits = load_joint_limits()
-        collision = flange_collision_checker(self.station) if rospy.get_param("~check_collisions", True) else None
+        collision = flange_collision_checker(self.station) if param("~check_collisions", True) else None
         self.robot = PlannedFlangeRobot(
-            RosJointDriver(list(limits.names), rospy.get_param("~controller_action", "/robot_sim/execute_trajectory")),
+            RosJointDriver(list(limits.names), param("~controller_action", "/robot_sim/execute_trajectory")),
             kinematics,
             make_ik_solver(kinematics, self.station.robot),
             limits,
             self.config["tool_z_towards_m"],
             collision=collision,
-            velocity_scaling=float(rospy.get_param("~velocity_scaling", 0.3)),
+            velocity_scaling=param("~velocity_scaling", 0.3, number),
         )
-        self.camera = RosCamera(
-            rospy.get_param("~camera_ns", "/phoxi_camera"), float(rospy.get_param("~frame_timeout_s", 60.0))
-        )
+        self.camera = RosCamera(param("~camera_ns", "/phoxi_camera"), param("~frame_timeout_s", 60.0, number))
         self.tf_broadcaster = tf2_ros.StaticTransformBroadcaster()
         self.status_pub = rospy.Publisher("~status", String, queue_size=1, latch=True)
         self.detection_pub = rospy.Publisher("~flange_detection", PointStamped, queue_size=1, latch=True)
-        self.judge_timeout = float(rospy.get_param("~judge_timeout_s", 600.0))
+        self.judge_timeout = param("~judge_timeout_s", 600.0, number)
         self.pending_question = ""
         self.judgement = None
         self.judgement_event = threading.Event()
@@ -373,7 +374,7 @@ class CalibrationNode:
 
     def run(self, _request):
         """The automatic collection (flag points, coarse, zig-zag path, fine) or, in mode test, the test mode."""
-        self.mode = check_mode(rospy.get_param("~mode", self.mode))
+        self.mode = check_mode(param("~mode", self.mode))
         self.config["mode"] = self.mode
         if self.mode == "test":
             outcome = run_test_mode(
@@ -386,9 +387,9 @@ class CalibrationNode:
                 log=self.log,
             )
             return TriggerResponse(success=outcome.success, message=outcome.message)
-        self.use_auto_judge = bool(rospy.get_param("~use_auto_judge", self.use_auto_judge))
-        self.config["flag_points_file"] = str(rospy.get_param("~flag_points_file", self.config["flag_points_file"]))
-        self.config["zigzag"] = rospy.get_param("~zigzag", self.config.get("zigzag", {}))
+        self.use_auto_judge = param("~use_auto_judge", self.use_auto_judge, flag)
+        self.config["flag_points_file"] = param("~flag_points_file", self.config["flag_points_file"], text)
+        self.config["zigzag"] = param("~zigzag", self.config.get("zigzag", {}))
         self.flag_points, self.flag_candidates = [], []
         outcome = run_collection(
             self.robot,
@@ -403,10 +404,4 @@ class CalibrationNode:
 
 
 def main():
-    rospy.init_node("calibration")
-    try:
-        CalibrationNode()
-    except AgiprobotError as exc:
-        rospy.logfatal("calibration: %s", exc)
-        raise SystemExit(1) from exc
-    rospy.spin()
+    run_node("calibration", CalibrationNode)

@@ -28,13 +28,16 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Bool, Header
 from std_srvs.srv import Empty, EmptyResponse, Trigger, TriggerResponse
 
+from agiprobot_measurement.common.config import number, whole
 from agiprobot_measurement.errors import AgiprobotError
 from agiprobot_measurement.planning.part_loading import PartLoadError, load_part
 from agiprobot_measurement.ros.conversions import transform_to_matrix, xyz_cloud
+from agiprobot_measurement.ros.node import run_node
+from agiprobot_measurement.ros.params import Param, param, read_params
 from agiprobot_measurement.sensors.laser_line.model import SensorModel
 from agiprobot_measurement.sensors.laser_line.simulator import LaserLineScannerSimulator, StitchedCloud, voxel_thin
 from agiprobot_measurement.srv import SetScanTarget, SetScanTargetResponse, SetStitching, SetStitchingResponse
-from agiprobot_measurement.station import ConfigError, load_scanner_config
+from agiprobot_measurement.station import load_scanner_config
 
 __all__ = ["LaserScannerSim", "main"]
 
@@ -47,17 +50,29 @@ TF_STALL_S = 1.0
 
 class LaserScannerSim:
     def __init__(self):
-        scanner = load_scanner_config(rospy.get_param("~scanner", None) or None)
+        scanner = load_scanner_config(param("~scanner", None) or None)
         params = scanner.sensor_parameters
-        self.world_frame = rospy.get_param("~world_frame", "world")
-        self.emitter_frame = rospy.get_param("~emitter_frame", "laser_emitter_frame")
-        self.rate_hz = float(rospy.get_param("~profile_rate_hz", params.get("profile_rate_hz", 100.0)))
-        self.voxel_mm = float(rospy.get_param("~measured_cloud_voxel_mm", 1.0))
+        # the node's parameters (name, default, validator), read once; two defaults come from the scanner file
+        settings = read_params(
+            (
+                Param("~world_frame", "world"),
+                Param("~emitter_frame", "laser_emitter_frame"),
+                Param("~profile_rate_hz", params.get("profile_rate_hz", 100.0), number),
+                Param("~measured_cloud_voxel_mm", 1.0, number),
+                Param("~points_per_profile", params.get("points_per_profile", 640), whole),
+                Param("~seed", 0, whole),
+                Param("~noise_scale", 1.0, number),
+            )
+        )
+        self.world_frame = settings.world_frame
+        self.emitter_frame = settings.emitter_frame
+        self.rate_hz = settings.profile_rate_hz
+        self.voxel_mm = settings.measured_cloud_voxel_mm
         self.simulator = LaserLineScannerSimulator(
             SensorModel(params),
-            points_per_profile=int(rospy.get_param("~points_per_profile", params.get("points_per_profile", 640))),
-            seed=int(rospy.get_param("~seed", 0)),
-            noise_scale=float(rospy.get_param("~noise_scale", 1.0)),
+            points_per_profile=settings.points_per_profile,
+            seed=settings.seed,
+            noise_scale=settings.noise_scale,
         )
         self.lock = threading.Lock()
         # the timer's scan and a stitching switch must not interleave: a switch resets the profile clock that a
@@ -205,10 +220,4 @@ class LaserScannerSim:
 
 
 def main():
-    rospy.init_node("laser_scanner")
-    try:
-        LaserScannerSim()
-    except (ConfigError, ValueError) as exc:
-        rospy.logfatal("laser_scanner_sim: %s", exc)
-        raise SystemExit(1) from exc
-    rospy.spin()
+    run_node("laser_scanner", LaserScannerSim, label="laser_scanner_sim")

@@ -21,7 +21,7 @@ import tf2_ros
 from asr_robot_model_services.msg import RobotStateMessage
 from sensor_msgs.msg import JointState
 
-from agiprobot_measurement.common.config import ConfigError
+from agiprobot_measurement.common.config import ConfigError, number
 from agiprobot_measurement.common.geometry import pose_from_quaternion, yaw_quaternion
 from agiprobot_measurement.errors import AgiprobotError
 from agiprobot_measurement.mild.config import load_kinematics, load_settings
@@ -29,7 +29,8 @@ from agiprobot_measurement.mild.sim import MildMotion, MotionRefused
 from agiprobot_measurement.mild.state import RobotState
 from agiprobot_measurement.ros.conversions import transform_stamped
 from agiprobot_measurement.ros.mild_messages import state_from_msg, state_to_msg
-from agiprobot_measurement.ros.params import file_param
+from agiprobot_measurement.ros.node import run_node
+from agiprobot_measurement.ros.params import file_param, param
 from agiprobot_measurement.srv import SetMildState, SetMildStateResponse
 
 __all__ = ["MildSim", "main"]
@@ -44,7 +45,7 @@ class MildSim:
     def __init__(self):
         self.kinematics = load_kinematics(file_param("~kinematics"), file_param("~frames"))
         settings = load_settings(file_param("~settings"))
-        initial = rospy.get_param("~initial_state", [0.0, 0.0, 0.0, 1.0, 1.0])
+        initial = param("~initial_state", [0.0, 0.0, 0.0, 1.0, 1.0])
         try:
             state = RobotState.from_array(initial)
         except ValueError as exc:
@@ -62,7 +63,7 @@ class MildSim:
         self.broadcaster = tf2_ros.TransformBroadcaster()
         rospy.Subscriber("~command", RobotStateMessage, self.on_command, queue_size=1)
         rospy.Service("~set_state", SetMildState, self.set_state)
-        self.rate_hz = float(rospy.get_param("~publish_rate_hz", 50.0))
+        self.rate_hz = param("~publish_rate_hz", 50.0, number)
         self.timer = rospy.Timer(rospy.Duration(1.0 / self.rate_hz), self.tick)
         rospy.loginfo("mild_sim: MILD at %s (pan, tilt, rotation, x, y)", np.round(state.as_array(), 4).tolist())
 
@@ -96,10 +97,4 @@ class MildSim:
 
 
 def main():
-    rospy.init_node("mild_sim")
-    try:
-        MildSim()
-    except AgiprobotError as exc:
-        rospy.logfatal("mild_sim: %s", exc)
-        raise SystemExit(1) from exc
-    rospy.spin()
+    run_node("mild_sim", MildSim)

@@ -1,5 +1,5 @@
 """The ``nbv_reconstruction`` node (nodes/nbv_reconstruction): next-best-view reconstruction of an unknown part on the
-station, the ROS layer over :class:`agiprobot_measurement.nbv.reconstruction.Reconstructor` (issue 17).
+station, the ROS layer over :class:`agiprobot_measurement.nbv.reconstruction.Reconstructor`.
 
 The loop is ROS-free; this node gives it the station's robot (:class:`~agiprobot_measurement.ros.nbv_interfaces.
 RosNBVRobot`: robot_sim's ExecuteJointTrajectory action and /joint_states) and the PhoXi on the flange
@@ -58,7 +58,7 @@ from std_msgs.msg import Header
 from std_srvs.srv import Trigger, TriggerResponse
 from visualization_msgs.msg import Marker, MarkerArray
 
-from agiprobot_measurement.common.config import ConfigError
+from agiprobot_measurement.common.config import ConfigError, number, whole
 from agiprobot_measurement.common.files import FileRoot
 from agiprobot_measurement.errors import AgiprobotError, InputError
 from agiprobot_measurement.msg import (
@@ -68,12 +68,13 @@ from agiprobot_measurement.msg import (
     ReconstructObjectResult,
 )
 from agiprobot_measurement.nbv.interfaces import CapturedView
-from agiprobot_measurement.ros import nbv_markers
-from agiprobot_measurement.ros.conversions import xyz_cloud
+from agiprobot_measurement.ros import markers
+from agiprobot_measurement.ros.conversions import pose_stamped, sensor_path, xyz_cloud
 from agiprobot_measurement.ros.nbv_interfaces import RosNBVCamera, RosNBVRobot
 from agiprobot_measurement.ros.nbv_messages import candidate_arrays, request_mapping_from_goal
 from agiprobot_measurement.ros.nbv_setup import nbv_station
-from agiprobot_measurement.ros.params import file_param
+from agiprobot_measurement.ros.node import run_node
+from agiprobot_measurement.ros.params import Param, file_param, flag, read_params, text
 from agiprobot_measurement.srv import SetJointState
 
 __all__ = ["NBVReconstructionNode", "main"]
@@ -99,26 +100,46 @@ def _map_key(request) -> tuple:
     return (*roi, request.resolution_m, request.planning_resolution_m, request.gain, request.candidates)
 
 
+#: the node's parameters (name, default, validator), read once at start
+PARAMETERS = (
+    Param("~model", ""),
+    Param("~ground_truth", False, flag),
+    Param("~world_frame", "world", text),
+    Param("~output_dir", ""),
+    Param("~allowed_output_dirs", ""),
+    Param("~max_voxels", 2e7, number),
+    Param("~cloud_voxel_m", 0.002, number),
+    Param("~marker_max_cubes", markers.MAX_CUBES, whole),
+    Param("~controller_action", "/robot_sim/execute_trajectory"),
+    Param("~settle_s", 0.1, number),
+    Param("~camera_ns", "/phoxi_camera"),
+    Param("~frame_timeout_s", 30.0, number),
+    Param("~start_at_home", False),
+    Param("~set_joint_state_service", "/robot_sim/set_joint_state"),
+)
+
+
 class NBVReconstructionNode:
     def __init__(self):
-        self.model = str(rospy.get_param("~model", "") or "")
-        self.use_ground_truth = bool(rospy.get_param("~ground_truth", False))
+        settings = read_params(PARAMETERS)
+        self.model = str(settings.model or "")
+        self.use_ground_truth = settings.ground_truth
         # the station the loop knows (scene, robot with the PhoXi, IK, collision); in simulation also the truth
         self.config, self.station, self.ground_truth = nbv_station(
             file_param("~config"), file_param("~scene"), self.model, self.use_ground_truth
         )
         self.defaults = dict(self.config.get("request", {}))
-        self.world_frame = str(rospy.get_param("~world_frame", "world"))
+        self.world_frame = settings.world_frame
         ros_home = Path(os.environ.get("ROS_HOME") or "~/.ros").expanduser()
-        output_dir = str(rospy.get_param("~output_dir", "") or ros_home / "nbv")
-        allowed = rospy.get_param("~allowed_output_dirs", "") or ["/tmp"]
+        output_dir = str(settings.output_dir or ros_home / "nbv")
+        allowed = settings.allowed_output_dirs or ["/tmp"]
         if isinstance(allowed, str):
             allowed = allowed.replace(",", " ").split()
         Path(output_dir).expanduser().mkdir(parents=True, exist_ok=True)
         self.files = FileRoot(Path(output_dir).expanduser(), tuple(Path(d) for d in allowed), purpose="NBV output")
-        self.max_voxels = float(rospy.get_param("~max_voxels", 2e7))
-        self.cloud_voxel_m = float(rospy.get_param("~cloud_voxel_m", 0.002))
-        self.max_cubes = int(rospy.get_param("~marker_max_cubes", nbv_markers.MAX_CUBES))
+        self.max_voxels = settings.max_voxels
+        self.cloud_voxel_m = settings.cloud_voxel_m
+        self.max_cubes = settings.marker_max_cubes
         if not (self.max_voxels > 0 and self.cloud_voxel_m > 0 and self.max_cubes > 0):
             raise ConfigError("~max_voxels, ~cloud_voxel_m and ~marker_max_cubes must be positive")
 
@@ -127,14 +148,14 @@ class NBVReconstructionNode:
         )
         self.robot = RosNBVRobot(
             list(self.station.limits.names),
-            rospy.get_param("~controller_action", "/robot_sim/execute_trajectory"),
-            settle_s=float(rospy.get_param("~settle_s", 0.1)),
+            settings.controller_action,
+            settle_s=settings.settle_s,
             cancel_requested=self._cancel_requested,
         )
         self.camera = RosNBVCamera(
-            rospy.get_param("~camera_ns", "/phoxi_camera"),
+            settings.camera_ns,
             world_frame=self.world_frame,
-            frame_timeout_s=float(rospy.get_param("~frame_timeout_s", 30.0)),
+            frame_timeout_s=settings.frame_timeout_s,
         )
         self.lock = threading.Lock()  # one goal or reset / save at a time
         self.reconstructor = None
@@ -163,8 +184,8 @@ class NBVReconstructionNode:
             rospy.Service("~reset", Trigger, self.on_reset),
             rospy.Service("~save", Trigger, self.on_save),
         ]
-        if rospy.get_param("~start_at_home", False):
-            self._place_at_home(rospy.get_param("~set_joint_state_service", "/robot_sim/set_joint_state"))
+        if settings.start_at_home:
+            self._place_at_home(settings.set_joint_state_service)
         self.server.start()
         rospy.loginfo(
             "nbv_reconstruction: ready (PhoXi %s, outputs under %s%s)",
@@ -265,7 +286,7 @@ class NBVReconstructionNode:
             else:
                 pose = self._plan_only(result, reconstructor, output_dir, on_progress)
             if pose is not None:
-                result.next_view = nbv_markers.pose_stamped(pose, self._header())
+                result.next_view = pose_stamped(pose, self._header())
                 self.pubs["next_best_view"].publish(result.next_view)
             self._visual(self._publish_map)
             self._visual(lambda: self._publish_mesh(result.mesh_file))
@@ -330,7 +351,7 @@ class NBVReconstructionNode:
             progress=float(progress.progress),
         )
         if progress.next_view_pose is not None:
-            feedback.next_view = nbv_markers.pose_stamped(progress.next_view_pose, self._header())
+            feedback.next_view = pose_stamped(progress.next_view_pose, self._header())
         return feedback
 
     def _fill_result(self, result, outcome) -> None:
@@ -395,7 +416,7 @@ class NBVReconstructionNode:
     # ------------------------------------------------------------------------------------ visuals
     def _on_view(self, view: CapturedView) -> None:
         self.view_poses.append(np.asarray(view.camera_pose, dtype=float))
-        self.pubs["sensor_path"].publish(nbv_markers.sensor_path(self.view_poses, self._header()))
+        self.pubs["sensor_path"].publish(sensor_path(self.view_poses, self._header()))
 
     def _diagnose(self, message: str, level=DiagnosticStatus.OK, **values) -> None:
         status = DiagnosticStatus(level=level, name="nbv_reconstruction", message=message, hardware_id="none")
@@ -415,11 +436,11 @@ class NBVReconstructionNode:
             if progress.phase in ("evaluate", "plan_motion") and self.reconstructor is not None:
                 poses, utilities, reasons = candidate_arrays(self.reconstructor.candidates_last)
                 self.pubs["candidate_views"].publish(
-                    nbv_markers.candidate_markers(poses, utilities, reasons, self._header())
+                    markers.candidate_markers(poses, utilities, reasons, self._header())
                 )
             if progress.next_view_pose is not None:
                 header = self._header()
-                self.pubs["next_best_view"].publish(nbv_markers.pose_stamped(progress.next_view_pose, header))
+                self.pubs["next_best_view"].publish(pose_stamped(progress.next_view_pose, header))
                 self._publish_frustum(progress.next_view_pose, header)
         except Exception as exc:  # a picture must not end a reconstruction (the loop would stop with "error")
             rospy.logwarn_throttle(10.0, "nbv_reconstruction: markers: %s: %s", type(exc).__name__, exc)
@@ -439,7 +460,7 @@ class NBVReconstructionNode:
 
             try:
                 mesh = trimesh.load(mesh_file, force="mesh")
-                marker = nbv_markers.mesh_marker(mesh.vertices, mesh.faces, self._header())
+                marker = markers.mesh_marker(mesh.vertices, mesh.faces, self._header())
             except Exception as exc:  # trimesh raises many kinds for an unreadable file; a picture is not the result
                 rospy.logwarn("nbv_reconstruction: mesh %s not shown: %s", mesh_file, exc)
         self.pubs["mesh"].publish(marker)
@@ -449,7 +470,7 @@ class NBVReconstructionNode:
         if view_model is None:
             return
         self.pubs["view_frustum"].publish(
-            nbv_markers.frustum_marker(
+            markers.frustum_marker(
                 pose,
                 view_model.fov_h_rad,
                 view_model.fov_v_rad,
@@ -468,12 +489,12 @@ class NBVReconstructionNode:
         size = float(grid.resolution_m)
         layers = (
             ("occupied_voxels", np.argwhere(grid.labels() == 1), None),
-            ("frontier_voxels", grid.candidate_voxels(), nbv_markers.FRONTIER_RGBA),
-            ("occlusion_plane", grid.occlusion_plane(), nbv_markers.OCCLUSION_RGBA),
+            ("frontier_voxels", grid.candidate_voxels(), markers.FRONTIER_RGBA),
+            ("occlusion_plane", grid.occlusion_plane(), markers.OCCLUSION_RGBA),
         )
         for name, indices, rgba in layers:
             centres = grid.index_to_world(np.asarray(indices).reshape(-1, 3))
-            self.pubs[name].publish(nbv_markers.voxel_markers(centres, size, header, name, rgba, self.max_cubes))
+            self.pubs[name].publish(markers.voxel_markers(centres, size, header, name, rgba, self.max_cubes))
         points = np.asarray(grid.raw.xyz_m, dtype=float).reshape(-1, 3)
         if len(points):
             keys = np.floor(points / self.cloud_voxel_m).astype(np.int64)
@@ -485,10 +506,8 @@ class NBVReconstructionNode:
         header = self._header()
         self._published = (None, -1)
         for name in ("occupied_voxels", "frontier_voxels", "occlusion_plane", "candidate_views"):
-            clear = Marker(action=Marker.DELETEALL)
-            clear.header = header
-            self.pubs[name].publish(MarkerArray(markers=[clear]))
-        self.pubs["sensor_path"].publish(nbv_markers.sensor_path([], header))
+            self.pubs[name].publish(MarkerArray(markers=[markers.clear(header)]))
+        self.pubs["sensor_path"].publish(sensor_path([], header))
         self.pubs["fused_cloud"].publish(xyz_cloud(np.zeros((0, 3)), header))
 
     # ------------------------------------------------------------------------------------ services
@@ -520,10 +539,4 @@ class NBVReconstructionNode:
 
 
 def main():
-    rospy.init_node("nbv_reconstruction")
-    try:
-        NBVReconstructionNode()
-    except AgiprobotError as exc:
-        rospy.logfatal("nbv_reconstruction: %s", exc)
-        raise SystemExit(1) from exc
-    rospy.spin()
+    run_node("nbv_reconstruction", NBVReconstructionNode)

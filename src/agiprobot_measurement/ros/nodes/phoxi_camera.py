@@ -103,11 +103,12 @@ from std_msgs.msg import Header
 from std_srvs.srv import Empty as StdEmpty
 from std_srvs.srv import EmptyResponse as StdEmptyResponse
 
-from agiprobot_measurement.common.config import ConfigError
+from agiprobot_measurement.common.config import ConfigError, number, whole
 from agiprobot_measurement.errors import AgiprobotError, InternalError
 from agiprobot_measurement.ros import phoxi_messages
 from agiprobot_measurement.ros.conversions import transform_stamped, transform_to_matrix
-from agiprobot_measurement.ros.params import file_param, vector_param
+from agiprobot_measurement.ros.node import run_node
+from agiprobot_measurement.ros.params import file_param, flag, has_param, param, vector_param
 from agiprobot_measurement.sensors.phoxi import reconfigure as phoxi_config
 from agiprobot_measurement.sensors.phoxi.device import (
     API_VERSION,
@@ -161,66 +162,64 @@ def _matrix_from_tf(transform):
 class PhoxiCameraNode:
     def __init__(self):
         self.lock = threading.RLock()
-        static = {
-            name: rospy.get_param(f"~{name}", default) for name, default in phoxi_config.STATIC_PARAMETERS.items()
-        }
+        static = {name: param(f"~{name}", default) for name, default in phoxi_config.STATIC_PARAMETERS.items()}
         for name, value in static.items():
             rospy.set_param(f"~{name}", value)  # so clients and tests find every parameter, given or not
         self.frame_id = str(static["frame_id"])
         self.init_from_config = bool(static["init_from_config"])
         # the simulator's own settings (not the driver's, so not reconfigurable)
-        self.free_run_rate_hz = float(rospy.get_param("~free_run_rate_hz", 1.0))
+        self.free_run_rate_hz = param("~free_run_rate_hz", 1.0, number)
         if not 0.0 < self.free_run_rate_hz <= 30.0:
             raise ConfigError(f"~free_run_rate_hz must be in (0, 30] Hz, got {self.free_run_rate_hz}")
 
         config = load_camera_config(file_param("~camera_config"))
-        model_name = rospy.get_param("~model", "") or config.model
+        model_name = param("~model", "") or config.model
         models_file = file_param("~models")
         # the simulator's speed option: every n-th pixel of the image in both directions (the same field of view)
-        pixel_step = int(rospy.get_param("~pixel_step", 1))
+        pixel_step = param("~pixel_step", 1, whole)
         if pixel_step < 1:
             raise ConfigError(f"~pixel_step must be a positive integer, got {pixel_step}")
         self.model = _subsampled(load_scanner_model(model_name, models_file), pixel_step)
         scanners = [
             dataclasses.replace(scanner, model=_subsampled(scanner.model, pixel_step))
-            for scanner in load_simulated_scanners(model_name, models_file, rospy.get_param("~devices", None))
+            for scanner in load_simulated_scanners(model_name, models_file, param("~devices", None))
         ]
-        self.parent_frame = rospy.get_param("~parent_frame", "") or config.parent_frame
+        self.parent_frame = param("~parent_frame", "") or config.parent_frame
         self.configured_pose = overridden_pose(
             config.pose, vector_param("~camera_xyz_m", 3), vector_param("~camera_rpy_rad", 3)
         )
-        self.publish_tf = bool(rospy.get_param("~publish_tf", True))
+        self.publish_tf = param("~publish_tf", True, flag)
         # simulation of an uncalibrated camera: render at the configured (true) pose but leave tf to a calibration
-        self.render_configured_pose = bool(rospy.get_param("~render_configured_pose", False))
-        self.tf_timeout = rospy.Duration(float(rospy.get_param("~tf_timeout_s", 0.5)))
+        self.render_configured_pose = param("~render_configured_pose", False, flag)
+        self.tf_timeout = rospy.Duration(param("~tf_timeout_s", 0.5, number))
 
         scene = load_scene(file_param("~scene"))
         self.scene_frame = scene.frame_id
         robot = urdf = None
-        description_param = rospy.get_param("~robot_description", "robot_description")
-        if description_param and rospy.has_param(description_param):
-            urdf = UrdfModel(rospy.get_param(description_param))
+        description_param = param("~robot_description", "robot_description")
+        if description_param and has_param(description_param):
+            urdf = UrdfModel(param(description_param))
             robot = RobotGeometry(urdf)
             for entry in robot.skipped:
                 rospy.logwarn("phoxi_camera: robot mesh not found, left out: %s", entry)
         elif description_param:
             rospy.logwarn("phoxi_camera: no robot description in '%s': frames show the scene only", description_param)
-        self.hidden_links = self._hide_links(robot, urdf, rospy.get_param("~hidden_links", "auto"))
+        self.hidden_links = self._hide_links(robot, urdf, param("~hidden_links", "auto"))
         # the driver's paths are relative to the node's working directory (roslaunch: ROS_HOME unless cwd="node")
-        output_dir = os.path.expanduser(rospy.get_param("~output_dir", "") or os.getcwd())
+        output_dir = os.path.expanduser(param("~output_dir", "") or os.getcwd())
         self.device = PhoxiDevice(
             self.model,
             scene_geometry(scene),
             output_dir,
             robot=robot,
-            frame_buffer_size=int(rospy.get_param("~frame_buffer_size", 3)),
-            allowed_dirs=_allowed_save_dirs(rospy.get_param("~allowed_save_dirs", "")),
+            frame_buffer_size=param("~frame_buffer_size", 3, whole),
+            allowed_dirs=_allowed_save_dirs(param("~allowed_save_dirs", "")),
             scanners=scanners,
         )
-        self.noise_seed = int(rospy.get_param("~noise_seed", 0))
+        self.noise_seed = param("~noise_seed", 0, whole)
         # the configuration as the driver starts it: the cfg's defaults overridden by the node's parameters; the
         # simulated scanner's own settings start as these (so init_from_config changes nothing at the first connect)
-        self.config = {name: rospy.get_param(f"~{name}", default) for name, default in phoxi_config.defaults.items()}
+        self.config = {name: param(f"~{name}", default) for name, default in phoxi_config.defaults.items()}
         self.device.update_settings(seed=self.noise_seed, **{name: self.config[name] for name in SETTING_NAMES})
 
         # frame index -> the ROS time its poses refer to (the stamp of its messages)
@@ -665,10 +664,4 @@ class PhoxiCameraNode:
 
 
 def main():
-    rospy.init_node("phoxi_camera")
-    try:
-        PhoxiCameraNode()
-    except AgiprobotError as exc:
-        rospy.logfatal("phoxi_camera: %s", exc)
-        raise SystemExit(1) from exc
-    rospy.spin()
+    run_node("phoxi_camera", PhoxiCameraNode)

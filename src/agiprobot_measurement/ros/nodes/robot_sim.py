@@ -22,6 +22,7 @@ import numpy as np
 import rospy
 from sensor_msgs.msg import JointState
 
+from agiprobot_measurement.common.config import number
 from agiprobot_measurement.errors import AgiprobotError, InputError
 from agiprobot_measurement.motion.controller_sim import (
     ExecutionOutcome,
@@ -35,8 +36,10 @@ from agiprobot_measurement.msg import (
     ExecuteJointTrajectoryFeedback,
     ExecuteJointTrajectoryResult,
 )
+from agiprobot_measurement.ros.node import run_node
+from agiprobot_measurement.ros.params import Param, read_params
 from agiprobot_measurement.srv import SetJointState, SetJointStateResponse
-from agiprobot_measurement.station import ConfigError, load_joint_limits, load_named_states, load_robot_config
+from agiprobot_measurement.station import load_joint_limits, load_named_states, load_robot_config
 
 __all__ = [
     "RobotSimNode",
@@ -88,19 +91,33 @@ class _ActionGoal:
         self.server.publish_feedback(self.feedback)
 
 
+#: the node's parameters (name, default, validator), read once at start
+PARAMETERS = (
+    Param("~robot_config", None),
+    Param("~joint_limits", None),
+    Param("~named_states", None),
+    Param("~start_tolerance_rad", 0.01, number),
+    Param("~velocity_tolerance_fraction", 0.01, number),
+    Param("~acceleration_tolerance_fraction", 0.05, number),
+    Param("~publish_rate_hz", 100.0, number),
+    Param("~initial_state", "home"),
+)
+
+
 class RobotSimNode:
     def __init__(self):
-        robot = load_robot_config(rospy.get_param("~robot_config", None))
+        settings = read_params(PARAMETERS)
+        robot = load_robot_config(settings.robot_config)
         joint_names = list(robot.joint_names)
-        limits = load_joint_limits(rospy.get_param("~joint_limits", None), robot.joint_names)
-        named_states = load_named_states(rospy.get_param("~named_states", None), len(joint_names))
+        limits = load_joint_limits(settings.joint_limits, robot.joint_names)
+        named_states = load_named_states(settings.named_states, len(joint_names))
         tolerances = CheckTolerances(
-            start_rad=float(rospy.get_param("~start_tolerance_rad", 0.01)),
-            velocity_fraction=float(rospy.get_param("~velocity_tolerance_fraction", 0.01)),
-            acceleration_fraction=float(rospy.get_param("~acceleration_tolerance_fraction", 0.05)),
+            start_rad=settings.start_tolerance_rad,
+            velocity_fraction=settings.velocity_tolerance_fraction,
+            acceleration_fraction=settings.acceleration_tolerance_fraction,
         )
-        rate_hz = float(rospy.get_param("~publish_rate_hz", 100.0))
-        initial = resolve_initial_state(rospy.get_param("~initial_state", "home"), named_states, len(joint_names))
+        rate_hz = settings.publish_rate_hz
+        initial = resolve_initial_state(settings.initial_state, named_states, len(joint_names))
         self.controller = SimulatedController(
             joint_names,
             limits,
@@ -180,10 +197,4 @@ class RobotSimNode:
 
 
 def main():
-    rospy.init_node("robot_sim")
-    try:
-        RobotSimNode()
-    except ConfigError as exc:
-        rospy.logfatal("robot_sim: %s", exc)
-        raise SystemExit(1) from exc
-    rospy.spin()
+    run_node("robot_sim", RobotSimNode)

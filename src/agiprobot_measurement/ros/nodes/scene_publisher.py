@@ -10,7 +10,9 @@ import rospy
 from visualization_msgs.msg import MarkerArray
 
 from agiprobot_measurement.ros.markers import scene_marker_array
-from agiprobot_measurement.station import ConfigError, Scene, load_scene
+from agiprobot_measurement.ros.node import run_node
+from agiprobot_measurement.ros.params import flag, param
+from agiprobot_measurement.station import Scene, load_scene
 
 __all__ = [
     "main",
@@ -29,13 +31,10 @@ def publish_scene(scene: Scene, publish_part: bool = True) -> rospy.Publisher:
     return publisher
 
 
+def _start():
+    scene = load_scene(param("~scene", None) or None)
+    return publish_scene(scene, param("~publish_part", True, flag))
+
+
 def main():
-    rospy.init_node("scene_publisher")
-    try:
-        scene = load_scene(rospy.get_param("~scene", None) or None)
-    except ConfigError as exc:
-        rospy.logfatal("scene_publisher: %s", exc)
-        raise SystemExit(1) from exc
-    publisher = publish_scene(scene, bool(rospy.get_param("~publish_part", True)))
-    rospy.spin()
-    publisher.unregister()
+    run_node("scene_publisher", _start).unregister()

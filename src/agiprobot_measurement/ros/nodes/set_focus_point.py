@@ -21,12 +21,15 @@ from asr_robot_model_services.srv import CalculateCameraPose, CalculateCameraPos
 from geometry_msgs.msg import Point, PointStamped, Quaternion, Vector3
 from sensor_msgs.msg import JointState
 
+from agiprobot_measurement.common.config import ConfigError, number
 from agiprobot_measurement.errors import AgiprobotError
 from agiprobot_measurement.mild.config import load_kinematics
 from agiprobot_measurement.mild.focus import focus_on
 from agiprobot_measurement.mild.state import RobotState
 from agiprobot_measurement.ros.conversions import pose_to_matrix
 from agiprobot_measurement.ros.mild_messages import state_to_msg, yaw_of
+from agiprobot_measurement.ros.node import run_node
+from agiprobot_measurement.ros.params import param, text
 
 __all__ = ["RobotModelServiceClient", "SetFocusPoint", "main"]
 
@@ -51,12 +54,12 @@ class RobotModelServiceClient:
 
 class SetFocusPoint:
     def __init__(self):
-        ns = rospy.get_param("~service_namespace", "/asr_robot_model_services").rstrip("/")
+        ns = param("~service_namespace", "/asr_robot_model_services").rstrip("/")
         self.kinematics = load_kinematics()
-        self.tolerance_rad = math.radians(float(rospy.get_param("~facing_tolerance_deg", 0.5)))
+        self.tolerance_rad = math.radians(param("~facing_tolerance_deg", 0.5, number))
         self.services = RobotModelServiceClient(ns)
-        self.view_distance_m = 0.5 * (rospy.get_param(f"{ns}/ncp", 0.4) + rospy.get_param(f"{ns}/fcp", 1.5))
-        self.command = rospy.Publisher(rospy.get_param("~command_topic", "/mild_sim/command"), RobotStateMessage,
+        self.view_distance_m = 0.5 * (param(f"{ns}/ncp", 0.4) + param(f"{ns}/fcp", 1.5))
+        self.command = rospy.Publisher(param("~command_topic", "/mild_sim/command"), RobotStateMessage,
                                        queue_size=1, latch=True)  # fmt: skip
         rospy.Subscriber("/clicked_point", PointStamped, lambda msg: self.look_at(msg.point), queue_size=1)
 
@@ -95,16 +98,18 @@ class SetFocusPoint:
         self.command.publish(state_to_msg(target))
 
 
-def main():
-    rospy.init_node("set_focus_point")
+def _start() -> SetFocusPoint:
     tool = SetFocusPoint()
-    text = str(rospy.get_param("~point", "")).strip()
-    if text:
+    point = param("~point", "", text).strip()
+    if point:
         try:
-            x, y, z = (float(v) for v in text.replace(",", " ").split())
+            x, y, z = (float(v) for v in point.replace(",", " ").split())
         except ValueError:
-            rospy.logfatal("set_focus_point: ~point must be 'x y z' in metres, got %r", text)
-            raise SystemExit(1) from None
+            raise ConfigError(f"~point must be 'x y z' in metres, got {point!r}") from None
         rospy.sleep(0.5)  # let /joint_states arrive
         tool.look_at(Point(x, y, z))
-    rospy.spin()
+    return tool
+
+
+def main():
+    run_node("set_focus_point", _start)

@@ -38,11 +38,11 @@ import actionlib
 import numpy as np
 import rospy
 import yaml
-from geometry_msgs.msg import Point
 from sensor_msgs.msg import PointCloud, PointCloud2
-from std_msgs.msg import ColorRGBA, Header
+from std_msgs.msg import Header
 from visualization_msgs.msg import Marker, MarkerArray
 
+from agiprobot_measurement.common.config import number
 from agiprobot_measurement.errors import AgiprobotError
 from agiprobot_measurement.msg import (
     ExecuteJointTrajectoryAction,
@@ -53,17 +53,18 @@ from agiprobot_measurement.msg import (
     PlanMeasurementFeedback,
     PlanMeasurementResult,
 )
-from agiprobot_measurement.planning.plan.execution import PlanPart
 from agiprobot_measurement.planning.plan.session import GoalError, MeasurementSession
 from agiprobot_measurement.planning.report.coverage import measured_colors, uncertainty_colors
 from agiprobot_measurement.planning.report.progress import overall_progress
 from agiprobot_measurement.planning.request import PlanRequest, PlanRequestError, WorkBudget
 from agiprobot_measurement.planning.trajectory_manager import PlanningCancelled
 from agiprobot_measurement.ros.action_client import ActionClient
-from agiprobot_measurement.ros.conversions import matrix_to_pose, pose_to_matrix, xyz_cloud, xyz_point_cloud
+from agiprobot_measurement.ros.conversions import pose_to_matrix, xyz_cloud, xyz_point_cloud
 from agiprobot_measurement.ros.executor import ControllerWatch, RosSegmentExecutor, ScannerClient
 from agiprobot_measurement.ros.joint_states import JointStateCache
-from agiprobot_measurement.ros.params import file_param
+from agiprobot_measurement.ros.markers import part_markers, path_marker, scan_line_markers
+from agiprobot_measurement.ros.node import run_node
+from agiprobot_measurement.ros.params import Param, file_param, read_params
 from agiprobot_measurement.srv import (
     GetCoverageReport,
     GetCoverageReportResponse,
@@ -72,14 +73,11 @@ from agiprobot_measurement.srv import (
     StorePlan,
     StorePlanResponse,
 )
-from agiprobot_measurement.station import ConfigError, Station
+from agiprobot_measurement.station import Station
 
 __all__ = ["TrajectoryManagerNode", "coverage_summary", "main", "plan_request_from_goal", "yaml_plain"]
 
 #: colours of the scan-line arrows, the planned path and the part
-SCAN_LINE_RGBA = (1.0, 0.55, 0.0, 1.0)
-PATH_RGBA = (0.3, 0.8, 1.0, 0.8)
-PART_RGBA = (0.8, 0.8, 0.2, 1.0)
 
 
 def part_transform_from_pose(pose) -> np.ndarray:
@@ -132,8 +130,22 @@ def yaml_plain(value):
     return value
 
 
+#: the node's parameters (name, default, validator) besides the station files, read once at start
+PARAMETERS = (
+    Param("~allowed_plan_dirs", []),
+    Param("~planning", {}),
+    Param("~plan_directory", "plans"),
+    Param("~measured_radius_mm", 1.0, number),
+    Param("~budget", {}),
+    Param("~scanner_namespace", "/laser_scanner"),
+    Param("~controller_action", "/robot_sim/execute_trajectory"),
+    Param("~controller_heartbeat_timeout_s", 1.0, number),
+)
+
+
 class TrajectoryManagerNode:
     def __init__(self):
+        settings = read_params(PARAMETERS)
         station = Station.load(
             robot=file_param("~robot_config"),
             joint_limits=file_param("~joint_limits"),
@@ -141,16 +153,16 @@ class TrajectoryManagerNode:
             scanner=file_param("~scanner"),
             scene=file_param("~scene"),
         )
-        allowed = rospy.get_param("~allowed_plan_dirs", []) or [os.environ.get("ROS_HOME") or "~/.ros", "/tmp"]
+        allowed = settings.allowed_plan_dirs or [os.environ.get("ROS_HOME") or "~/.ros", "/tmp"]
         if isinstance(allowed, str):
             allowed = allowed.split()
         self.session = MeasurementSession(
             station,
-            dict(rospy.get_param("~planning", {})),
-            plan_directory=rospy.get_param("~plan_directory", "plans"),
-            measured_radius_mm=float(rospy.get_param("~measured_radius_mm", 1.0)),
+            dict(settings.planning),
+            plan_directory=settings.plan_directory,
+            measured_radius_mm=settings.measured_radius_mm,
             allowed_directories=[Path(d).expanduser() for d in allowed],
-            work_budget=WorkBudget.from_mapping(rospy.get_param("~budget", {}), "~budget"),
+            work_budget=WorkBudget.from_mapping(settings.budget, "~budget"),
         )
         rospy.set_param("~sensor_model", dict(station.scanner.sensor_parameters))
         self.joint_states = JointStateCache(self.session.joint_names)
@@ -163,13 +175,9 @@ class TrajectoryManagerNode:
         self.part_pub = rospy.Publisher("~part", MarkerArray, **latched)
         # sensor_msgs/PointCloud, as the original published it: scripts and rviz configs for it subscribe so
         self.current_pub = rospy.Publisher("/currently_measured_points", PointCloud, **latched)
-        self.scanner = ScannerClient(rospy.get_param("~scanner_namespace", "/laser_scanner"))
-        self.robot = ActionClient(
-            rospy.get_param("~controller_action", "/robot_sim/execute_trajectory"), ExecuteJointTrajectoryAction
-        )
-        self.controller = ControllerWatch(
-            self.joint_states, self.robot, float(rospy.get_param("~controller_heartbeat_timeout_s", 1.0))
-        )
+        self.scanner = ScannerClient(settings.scanner_namespace)
+        self.robot = ActionClient(settings.controller_action, ExecuteJointTrajectoryAction)
+        self.controller = ControllerWatch(self.joint_states, self.robot, settings.controller_heartbeat_timeout_s)
         self.plan_server = actionlib.SimpleActionServer(
             "~plan_measurement", PlanMeasurementAction, execute_cb=self.on_plan, auto_start=False
         )
@@ -428,67 +436,5 @@ def coverage_summary(predicted: float, measured: float) -> str:
     return f"coverage predicted {100 * predicted:.1f} %, measured {100 * measured:.1f} %"
 
 
-def scan_line_markers(scan_lines_mm, header) -> MarkerArray:
-    """An arrow and a number per scan line ((start, end) mm), after a DELETEALL of the previous plan's."""
-    markers = MarkerArray()
-    clear = Marker(action=Marker.DELETEALL)
-    clear.header = header
-    markers.markers.append(clear)
-    for i, (start, end) in enumerate(scan_lines_mm):
-        arrow = Marker(header=header, ns="scan_lines", id=i, type=Marker.ARROW, action=Marker.ADD)
-        arrow.points = [Point(*(start / 1000.0)), Point(*(end / 1000.0))]
-        arrow.scale.x, arrow.scale.y, arrow.scale.z = 0.004, 0.01, 0.015
-        arrow.color = ColorRGBA(*SCAN_LINE_RGBA)
-        arrow.pose.orientation.w = 1.0
-        text = Marker(header=header, ns="view_numbers", id=i, type=Marker.TEXT_VIEW_FACING, action=Marker.ADD)
-        text.pose.position = Point(*(start / 1000.0 + [0, 0, 0.02]))
-        text.pose.orientation.w = 1.0
-        text.scale.z = 0.03
-        text.color = ColorRGBA(1.0, 1.0, 1.0, 1.0)
-        text.text = str(i + 1)
-        markers.markers.extend([arrow, text])
-    return markers
-
-
-def path_marker(plan, kinematics, header) -> Marker:
-    """The scanner's path through ``plan`` (every 0.1 s) as a line strip; empty without plan or kinematics."""
-    path = Marker(header=header, ns="planned_path", id=0, type=Marker.LINE_STRIP, action=Marker.ADD)
-    path.scale.x = 0.002
-    path.color = ColorRGBA(*PATH_RGBA)
-    path.pose.orientation.w = 1.0
-    if plan is not None and kinematics is not None:
-        for segment in plan.segments:
-            trajectory = segment.trajectory
-            times = np.linspace(0, trajectory.duration, max(2, int(trajectory.duration / 0.1)))
-            positions, _, _ = trajectory.sample(times)
-            tips = kinematics.fk_batch(positions)[:, :3, 3]
-            path.points.extend(Point(*p) for p in tips)
-    return path
-
-
-def part_markers(part: PlanPart | None, header) -> MarkerArray:
-    """The part's mesh where the plan puts it (empty without a part)."""
-    markers = MarkerArray()
-    if part is not None:
-        placement_mm = part.placement_mm
-        marker = Marker(header=header, ns="part", id=0, type=Marker.MESH_RESOURCE, action=Marker.ADD)
-        marker.mesh_resource = f"file://{part.mesh_file}"
-        scale = np.linalg.norm(placement_mm[:3, 0]) / 1000.0  # the file's unit -> m
-        rigid = placement_mm.copy()
-        rigid[:3, :3] /= np.linalg.norm(placement_mm[:3, :3], axis=0)
-        rigid[:3, 3] /= 1000.0
-        marker.pose = matrix_to_pose(rigid)
-        marker.scale.x = marker.scale.y = marker.scale.z = scale
-        marker.color = ColorRGBA(*PART_RGBA)
-        markers.markers.append(marker)
-    return markers
-
-
 def main():
-    rospy.init_node("trajectory_manager")
-    try:
-        TrajectoryManagerNode()
-    except ConfigError as exc:
-        rospy.logfatal("trajectory_manager: %s", exc)
-        raise SystemExit(1) from exc
-    rospy.spin()
+    run_node("trajectory_manager", TrajectoryManagerNode)

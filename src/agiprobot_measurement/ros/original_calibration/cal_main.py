@@ -1,4 +1,4 @@
-"""The original calibration's ``cal_main.py`` (seed 004, Code API): paths of poses, robot motion, shots, test mode.
+"""The original calibration's ``cal_main.py`` (its documented Code API): paths of poses, robot motion, shots, test mode.
 
 Same names, inputs and outputs as documented, against the running station (``calibration.launch``, or
 ``station.launch tool:=flange_disc`` + ``phoxi_camera.launch``) through the calls the calibration node makes:

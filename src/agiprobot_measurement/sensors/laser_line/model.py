@@ -32,12 +32,14 @@ from concurrent.futures import ThreadPoolExecutor
 from contextlib import nullcontext
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 import scipy.sparse
 import trimesh
 
+from agiprobot_measurement.common.config import positive
 from agiprobot_measurement.errors import InternalError
+from agiprobot_measurement.sensors.errors import SensorInputError, SensorTypeError, ViewIndexError
+from agiprobot_measurement.sensors.laser_line.queries import Cells, RayCaster, build_cells, cull_pairs
 from agiprobot_measurement.station import load_scanner_config
 
 __all__ = [
@@ -70,8 +72,6 @@ DEFAULT_CHUNK_ELEMENTS = 1 << 18
 #: frustum instead of a dense (views x points) test: the same result, with work that grows with the pairs in
 #: reach rather than with every point (a door-sized panel has 30,000 samples; a view reaches a few thousand)
 CELL_CULL_POINTS = 4096
-#: samples per cell of that grid, on average
-CELL_POINTS = 48
 
 
 class ProcessingContextError(InternalError):
@@ -110,10 +110,10 @@ class MeasurabilityResult:
     def concatenate(cls, results: Sequence[MeasurabilityResult]) -> MeasurabilityResult:
         """One result whose viewpoints are those of ``results`` in order (all over the same samples)."""
         if not results:
-            raise ValueError("concatenate needs at least one result")
+            raise SensorInputError("concatenate needs at least one result")
         n_points = results[0].n_points
         if any(r.n_points != n_points for r in results):
-            raise ValueError("results to concatenate must be over the same sample points")
+            raise SensorInputError("results to concatenate must be over the same sample points")
         indptr, offset = [np.zeros(1, dtype=np.int64)], 0
         for result in results:
             indptr.append(result.indptr[1:] + offset)
@@ -215,7 +215,7 @@ class MeasurabilityResult:
     def view(self, j: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(point indices, uncertainties mm, t0 mm) of viewpoint ``j``, as the per-viewpoint API returns."""
         if not -self.n_views <= j < self.n_views:
-            raise IndexError(f"viewpoint {j} out of range for {self.n_views} viewpoints")
+            raise ViewIndexError(f"viewpoint {j} out of range for {self.n_views} viewpoints")
         j %= self.n_views
         lo, hi = self.indptr[j], self.indptr[j + 1]
         return (
@@ -225,153 +225,6 @@ class MeasurabilityResult:
         )
 
 
-class _RayCaster:
-    """Occlusion queries ``segment origin -> origin + distance * direction`` against one mesh.
-
-    Uses Embree (through embreex, as trimesh's intersector does) when available, and trimesh's pure
-    Python intersector otherwise.
-    """
-
-    def __init__(self, mesh: trimesh.Trimesh):
-        self.mesh = mesh
-        # Embree works in float32: shifting the geometry to the origin keeps the rounding of a part placed
-        # a metre away from the robot base at the level of its own size.
-        self.offset = np.asarray(mesh.bounds.mean(axis=0), dtype=float)
-        self.scene = None
-        if trimesh.ray.has_embree:
-            from embreex import rtcore_scene
-            from embreex.mesh_construction import TriangleMesh
-
-            self.scene = rtcore_scene.EmbreeScene()
-            TriangleMesh(
-                scene=self.scene,
-                vertices=(np.asarray(mesh.vertices) - self.offset).astype(np.float32),
-                indices=np.asarray(mesh.faces).astype(np.int32),
-            )
-
-    def occluded(self, origins: np.ndarray, directions: np.ndarray, distances: np.ndarray) -> np.ndarray:
-        """Boolean per ray: does any face intersect the ray between 0 and ``distances`` (mm)?"""
-        count = origins.shape[0]
-        if count == 0:
-            return np.zeros(0, dtype=bool)
-        if self.scene is not None:
-            hit = self.scene.run(
-                (origins - self.offset).astype(np.float32),
-                directions.astype(np.float32),
-                dists=np.maximum(distances, 0.0).astype(np.float32),
-                query="OCCLUDED",
-            )
-            # embreex reports 0 for an occluded ray and -1 for a free one
-            return np.asarray(hit) != -1
-        _, ray, loc = self.mesh.ray.intersects_id(origins, directions, multiple_hits=False, return_locations=True)
-        result = np.zeros(count, dtype=bool)
-        if len(ray):
-            hit_distance = np.einsum("ij,ij->i", loc - origins[ray], directions[ray])
-            result[ray] = hit_distance < distances[ray]
-        return result
-
-
-@numba.njit(cache=True, nogil=True)
-def _cull_pairs(
-    rot,
-    anchor,
-    center,
-    radius,
-    start,
-    order,
-    point_data,
-    min_standoff,
-    max_standoff,
-    tan_half,
-    deflection,
-    tan_psi,
-    margin,
-):  # pragma: no cover - compiled
-    """(view, point) pairs that may pass the exact tests: cells whose bounding sphere (``radius`` with its
-    margin) meets a view's frustum, then per point the psi limit and the frustum with ``margin`` (mm).
-    ``rot`` (V, 3, 3) columns t, l, s; ``anchor`` (V, 3) mm. View-major; within a view by cell."""
-    n_views, n_cells = rot.shape[0], center.shape[0]
-    reach = np.zeros((n_views, n_cells), np.bool_)
-    bound = 0
-    for v in range(n_views):
-        for c in range(n_cells):
-            dx, dy, dz = center[c, 0] - anchor[v, 0], center[c, 1] - anchor[v, 1], center[c, 2] - anchor[v, 2]
-            qx = rot[v, 0, 0] * dx + rot[v, 1, 0] * dy + rot[v, 2, 0] * dz
-            qy = rot[v, 0, 1] * dx + rot[v, 1, 1] * dy + rot[v, 2, 1] * dz
-            qz = rot[v, 0, 2] * dx + rot[v, 1, 2] * dy + rot[v, 2, 2] * dz
-            r = radius[c]
-            if (
-                abs(qx) <= deflection + r
-                and qz > min_standoff - r
-                and qz < max_standoff + r
-                and abs(qy) <= qz * tan_half + r * (1.0 + tan_half)
-            ):
-                reach[v, c] = True
-                bound += start[c + 1] - start[c]
-    views = np.empty(bound, np.int64)
-    points = np.empty(bound, np.int64)
-    n = 0
-    for v in range(n_views):
-        tx, ty, tz = rot[v, 0, 0], rot[v, 1, 0], rot[v, 2, 0]
-        lx, ly, lz = rot[v, 0, 1], rot[v, 1, 1], rot[v, 2, 1]
-        sx, sy, sz = rot[v, 0, 2], rot[v, 1, 2], rot[v, 2, 2]
-        ax, ay, az = anchor[v, 0], anchor[v, 1], anchor[v, 2]
-        for c in range(n_cells):
-            if not reach[v, c]:
-                continue
-            for k in range(start[c], start[c + 1]):
-                p = order[k]
-                nx, ny, nz = point_data[3, p], point_data[4, p], point_data[5, p]
-                ns = nx * sx + ny * sy + nz * sz
-                if not abs(nx * tx + ny * ty + nz * tz) < -ns * tan_psi + 1e-9:
-                    continue
-                dx, dy, dz = point_data[0, p] - ax, point_data[1, p] - ay, point_data[2, p] - az
-                pz = dx * sx + dy * sy + dz * sz
-                if not (pz > min_standoff - margin and pz < max_standoff + margin):
-                    continue
-                if not abs(dx * lx + dy * ly + dz * lz) <= pz * tan_half + margin:
-                    continue
-                if not abs(dx * tx + dy * ty + dz * tz) <= deflection + margin:
-                    continue
-                views[n] = v
-                points[n] = p
-                n += 1
-    return views[:n], points[:n]
-
-
-@dataclass(frozen=True)
-class _Cells:
-    """Samples grouped by grid cell: ``order[start[c]:start[c+1]]`` are cell ``c``'s sample ids (ascending);
-    every one lies within ``radius[c]`` mm of ``center[c]``."""
-
-    order: np.ndarray  # (P,) int64
-    start: np.ndarray  # (C + 1,) int64
-    center: np.ndarray  # (C, 3) mm
-    radius: np.ndarray  # (C,) mm
-
-    @property
-    def sizes(self) -> np.ndarray:
-        return np.diff(self.start)
-
-
-def _build_cells(points: np.ndarray, area_mm2: float) -> _Cells:
-    """A grid of cubic cells holding :data:`CELL_POINTS` samples on average (edge from the surface density)."""
-    edge = math.sqrt(CELL_POINTS * max(float(area_mm2), 1e-9) / max(len(points), 1))
-    keys = np.floor((points - points.min(axis=0)) / edge).astype(np.int64)
-    _, cell = np.unique(keys, axis=0, return_inverse=True)
-    cell = cell.reshape(-1)
-    order = np.argsort(cell, kind="stable")
-    start = np.zeros(int(cell.max()) + 2, dtype=np.int64)
-    np.cumsum(np.bincount(cell, minlength=start.size - 1), out=start[1:])
-    sorted_points = points[order]
-    low = np.minimum.reduceat(sorted_points, start[:-1], axis=0)
-    high = np.maximum.reduceat(sorted_points, start[:-1], axis=0)
-    center = 0.5 * (low + high)
-    distance = np.linalg.norm(sorted_points - np.repeat(center, np.diff(start), axis=0), axis=1)
-    radius = np.maximum.reduceat(distance, start[:-1]) + 1e-6 * edge
-    return _Cells(order.astype(np.int64), start, center, radius)
-
-
 @dataclass(frozen=True)
 class _Context:
     mesh: trimesh.Trimesh
@@ -379,10 +232,10 @@ class _Context:
     face_ids: np.ndarray  # (P,)
     normals: np.ndarray  # (P, 3)
     point_data: np.ndarray  # (6, P): points and normals as rows
-    caster: _RayCaster
+    caster: RayCaster
     unoccludable: np.ndarray  # (P,) bool: the sample's face plane supports the whole mesh
     center: np.ndarray  # (3,)
-    cells: _Cells | None = None  # for CELL_CULL_POINTS samples or more
+    cells: Cells | None = None  # for CELL_CULL_POINTS samples or more
 
 
 def supporting_faces(mesh: trimesh.Trimesh, tolerance: float | None = None) -> np.ndarray:
@@ -426,21 +279,15 @@ class SensorModel:
 
     def __init__(self, parameter_map: Mapping, *, occlusion_tolerance_mm: float = 0.01):
         if not isinstance(parameter_map, Mapping):
-            raise TypeError(f"parameter_map must be a mapping, got {type(parameter_map).__name__}")
+            raise SensorTypeError(f"parameter_map must be a mapping, got {type(parameter_map).__name__}")
         values = {}
         for name, aliases in PARAMETER_NAMES.items():
             given = [key for key in (name, *aliases) if key in parameter_map]
             if not given:
-                raise ValueError(f"sensor parameter_map lacks '{name}' (accepted spellings: {name}, {aliases})")
+                raise SensorInputError(f"sensor parameter_map lacks '{name}' (accepted spellings: {name}, {aliases})")
             if len(given) > 1:
-                raise ValueError(f"sensor parameter_map gives '{name}' more than once: {given}")
-            try:
-                value = float(parameter_map[given[0]])
-            except (TypeError, ValueError) as exc:
-                raise ValueError(f"sensor parameter '{given[0]}' must be a number") from exc
-            if not math.isfinite(value) or value <= 0.0:
-                raise ValueError(f"sensor parameter '{given[0]}' must be positive and finite, got {value}")
-            values[name] = value
+                raise SensorInputError(f"sensor parameter_map gives '{name}' more than once: {given}")
+            values[name] = positive(parameter_map[given[0]], f"sensor parameter '{given[0]}'")
         self.parameters = dict(parameter_map)
         self.optimal_standoff = values["optimal_standoff_mm"]
         self.minimum_standoff = values["minimum_standoff_mm"]
@@ -451,14 +298,14 @@ class SensorModel:
         self.alpha = values["alpha_rad"]
         self.fan_angle = values["fan_angle_rad"]
         if not self.minimum_standoff < self.optimal_standoff < self.maximum_standoff:
-            raise ValueError("sensor parameters need minimum_standoff < optimal_standoff < maximum_standoff")
+            raise SensorInputError("sensor parameters need minimum_standoff < optimal_standoff < maximum_standoff")
         for name in ("theta_max", "psi_max", "alpha"):
             if getattr(self, name) >= math.pi / 2:
-                raise ValueError(f"sensor parameter {name} must be below pi/2 rad")
+                raise SensorInputError(f"sensor parameter {name} must be below pi/2 rad")
         if self.fan_angle >= math.pi:
-            raise ValueError("sensor parameter fan_angle must be below pi rad")
+            raise SensorInputError("sensor parameter fan_angle must be below pi rad")
         if not occlusion_tolerance_mm >= 0.0:
-            raise ValueError("occlusion_tolerance_mm must be >= 0")
+            raise SensorInputError("occlusion_tolerance_mm must be >= 0")
         self.occlusion_tolerance = float(occlusion_tolerance_mm)
         self.xi_0 = math.sin(self.alpha) * self.optimal_standoff
         #: Distance emitter -> detector in mm; the detector sits at ``e - distance * x``.
@@ -525,7 +372,7 @@ class SensorModel:
         """
         half_length = float(half_length)
         if not math.isfinite(half_length) or half_length <= 0.0:
-            raise ValueError(f"half_length must be a positive number of mm, got {half_length}")
+            raise SensorInputError(f"half_length must be a positive number of mm, got {half_length}")
         corners = []
         for x in (-half_length, half_length):
             for z in (self.minimum_standoff, self.maximum_standoff):
@@ -552,17 +399,19 @@ class SensorModel:
         them, so the result is the same. ``False`` casts rays for every pair (for comparisons).
         """
         if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-            raise ValueError("set_processing_context needs a trimesh.Trimesh with faces")
+            raise SensorInputError("set_processing_context needs a trimesh.Trimesh with faces")
         points = np.asarray(sampled_surface_points, dtype=float).reshape(-1, 3)
         face_ids = np.asarray(sampled_face_indices).reshape(-1)
         if face_ids.shape[0] != points.shape[0]:
-            raise ValueError(f"{points.shape[0]} sample points but {face_ids.shape[0]} face indices: they must match")
+            raise SensorInputError(
+                f"{points.shape[0]} sample points but {face_ids.shape[0]} face indices: they must match"
+            )
         if not np.all(np.isfinite(points)):
-            raise ValueError("sample points must be finite")
+            raise SensorInputError("sample points must be finite")
         if face_ids.size and (
             not np.issubdtype(face_ids.dtype, np.integer) or face_ids.min() < 0 or face_ids.max() >= len(mesh.faces)
         ):
-            raise ValueError(f"face indices must be integers in [0, {len(mesh.faces)})")
+            raise SensorInputError(f"face indices must be integers in [0, {len(mesh.faces)})")
         face_ids = face_ids.astype(np.int64)
         normals = np.asarray(mesh.face_normals, dtype=float)[face_ids]
         if cull_supporting_faces:
@@ -575,10 +424,10 @@ class SensorModel:
             face_ids=face_ids,
             normals=normals,
             point_data=np.ascontiguousarray(np.concatenate([points, normals], axis=1).T),
-            caster=_RayCaster(mesh),
+            caster=RayCaster(mesh),
             unoccludable=unoccludable,
             center=points.mean(axis=0) if len(points) else np.zeros(3),
-            cells=_build_cells(points, mesh.area) if len(points) >= CELL_CULL_POINTS else None,
+            cells=build_cells(points, mesh.area) if len(points) >= CELL_CULL_POINTS else None,
         )
 
     def __getstate__(self):
@@ -591,7 +440,7 @@ class SensorModel:
     def __setstate__(self, state):
         self.__dict__.update(state)
         if self._context is not None and self._context.caster is None:
-            self._context = dataclasses.replace(self._context, caster=_RayCaster(self._context.mesh))
+            self._context = dataclasses.replace(self._context, caster=RayCaster(self._context.mesh))
 
     @property
     def sampled_surface_points(self) -> np.ndarray:
@@ -651,19 +500,19 @@ class SensorModel:
         ctx = self._require_context()
         poses = np.asarray(anchor_poses, dtype=float)
         if poses.ndim != 3 or poses.shape[1:] != (4, 4):
-            raise ValueError(f"anchor_poses must have shape (V, 4, 4), got {poses.shape}")
+            raise SensorInputError(f"anchor_poses must have shape (V, 4, 4), got {poses.shape}")
         if not np.all(np.isfinite(poses)):
-            raise ValueError("anchor_poses must be finite")
+            raise SensorInputError("anchor_poses must be finite")
         rotations = poses[:, :3, :3]
         gram = np.einsum("vji,vjk->vik", rotations, rotations)
         if poses.shape[0] and (np.abs(gram - np.eye(3)).max() > 1e-6 or np.linalg.det(rotations).min() < 0.0):
-            raise ValueError("anchor_poses must be rigid: rotation blocks orthonormal with det +1")
+            raise SensorInputError("anchor_poses must be rigid: rotation blocks orthonormal with det +1")
         threshold = float(uncertainty_threshold)
         deflection = float(maximum_deflection)
         if not threshold > 0.0:
-            raise ValueError(f"uncertainty_threshold must be a positive number of mm, got {threshold}")
+            raise SensorInputError(f"uncertainty_threshold must be a positive number of mm, got {threshold}")
         if not deflection >= 0.0:
-            raise ValueError(f"maximum_deflection must be >= 0 mm, got {deflection}")
+            raise SensorInputError(f"maximum_deflection must be >= 0 mm, got {deflection}")
         n_views, n_points = poses.shape[0], ctx.points.shape[0]
         if n_views == 0 or n_points == 0:
             return MeasurabilityResult(
@@ -690,7 +539,7 @@ class SensorModel:
 
         cells = ctx.cells if spatial_cull is not False else None
         if spatial_cull and cells is None:
-            cells = _build_cells(ctx.points, ctx.mesh.area)
+            cells = build_cells(ctx.points, ctx.mesh.area)
         per_chunk = max(1, int(chunk_elements) // (n_points if cells is None else len(cells.radius)))
 
         def process(start: int):
@@ -771,11 +620,11 @@ class SensorModel:
         at most ``max_pairs``: a superset of the exact tests (conservative for a cell's bounding sphere, then the
         frustum and psi limits per pair with small margins). Yields (view indices, point indices).
 
-        One compiled pass (:func:`_cull_pairs`): the dense (view x cell) and (view x pair) temporaries of an
+        One compiled pass (:func:`cull_pairs`): the dense (view x cell) and (view x pair) temporaries of an
         array formulation made the evaluation memory-bound, so two workers on one machine slowed each other."""
         del view_data  # the kernel reads the poses directly
         margin = 1e-6 * (self.maximum_standoff + deflection) + 1e-6
-        vi, pi = _cull_pairs(
+        vi, pi = cull_pairs(
             np.ascontiguousarray(poses[:, :3, :3]), np.ascontiguousarray(poses[:, :3, 3]), cells.center,
             cells.radius + (1e-6 * (self.maximum_standoff + deflection) + 1e-3), cells.start, cells.order,
             ctx.point_data, float(self.minimum_standoff), float(self.maximum_standoff), float(self._tan_half_fan),

@@ -19,6 +19,7 @@ import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
 
+from agiprobot_measurement.sensors.errors import SensorInputError, SensorStateError
 from agiprobot_measurement.sensors.laser_line.model import SensorModel
 
 __all__ = [
@@ -54,9 +55,9 @@ class LaserLineScannerSimulator:
         occlusion_tolerance_mm: float = 0.05,
     ):
         if int(points_per_profile) < 2:
-            raise ValueError(f"points_per_profile must be >= 2, got {points_per_profile}")
+            raise SensorInputError(f"points_per_profile must be >= 2, got {points_per_profile}")
         if not (np.isfinite(noise_scale) and noise_scale >= 0):
-            raise ValueError(f"noise_scale must be >= 0, got {noise_scale}")
+            raise SensorInputError(f"noise_scale must be >= 0, got {noise_scale}")
         self.sensor = sensor_model
         self.points_per_profile = int(points_per_profile)
         self.noise_scale = float(noise_scale)
@@ -72,7 +73,7 @@ class LaserLineScannerSimulator:
     def set_target(self, mesh_mm: trimesh.Trimesh) -> None:
         """The surface to scan (mm, world). Normals must point outwards (as loaded parts' do)."""
         if not isinstance(mesh_mm, trimesh.Trimesh) or len(mesh_mm.faces) == 0:
-            raise ValueError("the scan target must be a non-empty trimesh.Trimesh")
+            raise SensorInputError("the scan target must be a non-empty trimesh.Trimesh")
         self.mesh = mesh_mm
         # the Embree intersector works in float32: shift the part near the origin for its precision
         self._offset = np.asarray(mesh_mm.bounds.mean(axis=0))
@@ -93,10 +94,10 @@ class LaserLineScannerSimulator:
     def profiles(self, emitter_poses_mm: np.ndarray) -> list[Profile]:
         """Profiles for many emitter poses (K, 4, 4) at once: all rays of all profiles in one batch."""
         if self.mesh is None:
-            raise RuntimeError("no scan target: call set_target(mesh) first")
+            raise SensorStateError("no scan target: call set_target(mesh) first")
         poses = np.asarray(emitter_poses_mm, dtype=float).reshape(-1, 4, 4)
         if not np.all(np.isfinite(poses)):
-            raise ValueError("emitter poses must be finite 4x4 matrices")
+            raise SensorInputError("emitter poses must be finite 4x4 matrices")
         k, n = poses.shape[0], self.points_per_profile
         rotations, emitters = poses[:, :3, :3], poses[:, :3, 3]
         directions = np.einsum("kij,nj->kni", rotations, self._fan).reshape(-1, 3)

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from agiprobot_measurement.common.files import PathPolicyError, atomic_write
+from agiprobot_measurement.sensors.errors import PointCloudFormatError, PointCloudWriteError
 
 __all__ = [
     "OutputPathError",
@@ -73,7 +74,7 @@ def write_ply(
         fields.append((name, np.asarray(values, dtype=np.float32).reshape(-1)))
     for name, values in fields:
         if len(values) != len(points):
-            raise ValueError(f"PLY property {name}: {len(values)} values for {len(points)} points")
+            raise PointCloudFormatError(f"PLY property {name}: {len(values)} values for {len(points)} points")
     table = np.empty(len(points), dtype=[(name, "<f4") for name, _ in fields])
     for name, values in fields:
         table[name] = values
@@ -96,7 +97,7 @@ def read_ply(path: str | Path) -> dict:
     data = Path(path).read_bytes()
     end = data.find(b"end_header")
     if not data.startswith(b"ply") or end < 0:
-        raise ValueError(f"{path}: not a PLY file")
+        raise PointCloudFormatError(f"{path}: not a PLY file")
     body_start = data.index(b"\n", end) + 1
     lines = data[:end].decode("ascii").splitlines()
     fmt, comments, elements = None, [], []
@@ -112,10 +113,10 @@ def read_ply(path: str | Path) -> dict:
             elements.append((words[1], int(words[2]), []))
         elif words[0] == "property":
             if words[1] == "list":
-                raise ValueError(f"{path}: list properties are not supported")
+                raise PointCloudFormatError(f"{path}: list properties are not supported")
             elements[-1][2].append((words[2], _PLY_DTYPES[words[1]]))
     if not elements or elements[0][0] != "vertex":
-        raise ValueError(f"{path}: the first element must be 'vertex'")
+        raise PointCloudFormatError(f"{path}: the first element must be 'vertex'")
     _, count, props = elements[0]
     if fmt == "ascii":
         values = np.loadtxt(data[body_start:].decode("ascii").splitlines()[:count], ndmin=2)
@@ -147,7 +148,7 @@ def format_fixed_rows(table: np.ndarray, decimals: Sequence[int]) -> bytes:
     """
     table = np.asarray(table, dtype=np.float64)
     if table.ndim != 2 or table.shape[1] != len(decimals):
-        raise ValueError(f"expected a table with {len(decimals)} columns, got shape {table.shape}")
+        raise PointCloudFormatError(f"expected a table with {len(decimals)} columns, got shape {table.shape}")
     if len(table) == 0:
         return b""
     if not np.all(np.isfinite(table)) or np.abs(table).max() >= _FIXED_POINT_LIMIT:
@@ -192,12 +193,12 @@ def write_ptx(path: str | Path, points: np.ndarray, intensity: np.ndarray, scann
     """
     points = np.asarray(points)
     if points.ndim != 3 or points.shape[2] != 3:
-        raise ValueError("PTX needs an organised cloud (H, W, 3)")
+        raise PointCloudFormatError("PTX needs an organised cloud (H, W, 3)")
     height, width = points.shape[:2]
     pose = np.eye(4) if scanner_pose is None else np.asarray(scanner_pose, dtype=float)
     intensity = np.asarray(intensity)
     if intensity.shape != (height, width):
-        raise ValueError(f"PTX intensity must be ({height}, {width}), got {intensity.shape}")
+        raise PointCloudFormatError(f"PTX intensity must be ({height}, {width}), got {intensity.shape}")
     header = [str(width), str(height), " ".join(f"{v:.6f}" for v in pose[:3, 3])]
     header += [" ".join(f"{v:.6f}" for v in pose[:3, i]) for i in range(3)]
     header += [" ".join(f"{v:.6f}" for v in row) for row in pose.T]
@@ -224,14 +225,14 @@ def write_point_tiff(path: str | Path, points: np.ndarray) -> Path:
 
     points = np.asarray(points, dtype=np.float32)
     if points.ndim != 3 or points.shape[2] != 3:
-        raise ValueError("TIFF needs an organised cloud (H, W, 3)")
+        raise PointCloudFormatError("TIFF needs an organised cloud (H, W, 3)")
 
     def write(tmp: Path) -> None:
         # OpenCV stores 3-channel images as RGB from its BGR order: reverse so the file holds x, y, z. LZW is
         # named explicitly: OpenCV 4's default for 3-channel float is the lossy SGI LogLuv coding.
         lossless = [cv2.IMWRITE_TIFF_COMPRESSION, 5]
         if not cv2.imwrite(str(tmp), np.ascontiguousarray(points[:, :, ::-1]), lossless):
-            raise OSError(f"OpenCV could not write {tmp}")
+            raise PointCloudWriteError(f"OpenCV could not write {tmp}")
 
     return atomic_write(path, write, suffix=Path(path).suffix, make_parents=True)
 
@@ -242,5 +243,5 @@ def read_point_tiff(path: str | Path) -> np.ndarray:
 
     image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if image is None:
-        raise ValueError(f"{path}: not a readable TIFF")
+        raise PointCloudFormatError(f"{path}: not a readable TIFF")
     return image[:, :, ::-1]
