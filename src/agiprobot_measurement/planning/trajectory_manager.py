@@ -25,6 +25,7 @@ from agiprobot_measurement.motion.placement_check import check_placement
 from agiprobot_measurement.motion.trajectory import check_trajectory
 from agiprobot_measurement.planning import pipeline
 from agiprobot_measurement.planning.candidates import generation
+from agiprobot_measurement.planning.candidates.distributed import DaskEvaluator  # Dask itself loads on first use
 from agiprobot_measurement.planning.candidates.streaming import EvaluationSettings
 from agiprobot_measurement.planning.candidates.viewpoint import ViewPoint
 from agiprobot_measurement.planning.connection import ConnectionPlanner, add_plan_part, station_robot
@@ -134,8 +135,6 @@ class TrajectoryManager:
     def evaluator(self):
         """The Dask evaluator of this manager's settings (made on first use), or None to evaluate here."""
         if self._evaluator is None and self.evaluation.distributed:
-            from agiprobot_measurement.planning.candidates.distributed import DaskEvaluator  # Dask: on demand
-
             self._evaluator = DaskEvaluator(self.evaluation.workers, self.evaluation.scheduler)
         return self._evaluator
 

@@ -22,7 +22,6 @@ README_MAX_LINES = 150
 
 #: modules (and their classes) being split on other branches; emptied once those are merged
 BEING_SPLIT = {
-    "planning/trajectory_manager.py",
     "nbv/reconstruction.py",
     "nbv/loop.py",
     "nbv/voxel_map.py",
@@ -30,7 +29,7 @@ BEING_SPLIT = {
 }
 
 #: subpackages whose inner imports are reshaped on other branches; emptied once those are merged
-RESHAPED_ELSEWHERE = ("planning", "nbv")
+RESHAPED_ELSEWHERE = ("nbv",)
 
 #: "path under src/agiprobot_measurement:function" -> why that function imports a package module inside it
 INNER_IMPORTS = {

@@ -20,6 +20,7 @@ import time
 from collections.abc import Callable
 
 from agiprobot_measurement.errors import InputError, InternalError
+from agiprobot_measurement.planning.candidates.streaming import block_summary, chunk_block
 from agiprobot_measurement.planning.errors import PlanningInputError
 
 __all__ = ["MAX_ATTEMPTS", "ClusterError", "DaskEvaluator", "peak_rss_bytes"]
@@ -81,8 +82,6 @@ def _tune_worker_heap() -> None:
 
 
 def _evaluate_task(sensor_model, poses, threshold_mm, deflection_mm, compact, drop_dominated, redundancy):
-    from agiprobot_measurement.planning.candidates.streaming import chunk_block
-
     _tune_worker_heap()
 
     # one thread per task: a worker process is one core's share of the cluster
@@ -93,8 +92,6 @@ def _evaluate_task(sensor_model, poses, threshold_mm, deflection_mm, compact, dr
 
 
 def _summary_task(sensor_model, poses, threshold_mm, deflection_mm, compact, drop_dominated):
-    from agiprobot_measurement.planning.candidates.streaming import block_summary
-
     _tune_worker_heap()
     return block_summary(sensor_model, poses, threshold_mm, deflection_mm, 1, compact, drop_dominated)
 
