@@ -20,7 +20,7 @@ import math
 import sys
 from pathlib import Path
 
-from agiprobot_measurement.nbv.errors import NbvInputError
+from agiprobot_measurement.nbv.planar.errors import NbvInputError
 
 
 def _parse(argv):
@@ -47,12 +47,18 @@ def _parse(argv):
 def main(argv=None) -> int:
     args = _parse(argv)
     try:
-        from agiprobot_measurement.nbv.evaluation import coverage, measurable_boundary, plannable_boundary, summarize
-        from agiprobot_measurement.nbv.loop import RunConfig, run
-        from agiprobot_measurement.nbv.objects import OBJECT_NAMES, load_object_file, make_object
-        from agiprobot_measurement.nbv.painting import paint_rf
-        from agiprobot_measurement.nbv.range_finder import RangeFinder2D
-        from agiprobot_measurement.nbv.scoring import ScoreConfig
+        from agiprobot_measurement.nbv.planar.evaluation import (
+            coverage,
+            measurable_boundary,
+            plannable_boundary,
+            summarize,
+        )
+        from agiprobot_measurement.nbv.planar.loop import run
+        from agiprobot_measurement.nbv.planar.objects import OBJECT_NAMES, load_object_file, make_object
+        from agiprobot_measurement.nbv.planar.painting import paint_rf
+        from agiprobot_measurement.nbv.planar.range_finder import RangeFinder2D
+        from agiprobot_measurement.nbv.planar.run_config import RunConfig
+        from agiprobot_measurement.nbv.planar.scoring import ScoreConfig
 
         for name, value in (("--noise", args.noise), ("--rf-length", args.rf_length), ("--max-time", args.max_time)):
             if value is not None and not math.isfinite(value):

@@ -1,0 +1,1 @@
+"""The lab: benchmarks of the package's methods, outside the installed product."""
