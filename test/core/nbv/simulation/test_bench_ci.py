@@ -1,4 +1,4 @@
-"""CI-sized 3D NBV benchmark (issue 17): two objects, ours vs random vs a fixed 12-view hemisphere, 8 views, low
+"""CI-sized 3D NBV benchmark: two objects, ours vs random vs a fixed 12-view hemisphere, 8 views, low
 resolution (8 x 8 pixel subsampling), noise on. Asserts that ours is at least as good as random (AUC over the
 views, mean over objects and seeds), reaches 90 % of the observable surface, and never collides with the part."""
 
