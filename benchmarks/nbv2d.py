@@ -24,12 +24,13 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from agiprobot_measurement.common.files import atomic_write_text
-from agiprobot_measurement.nbv.errors import NbvInputError
-from agiprobot_measurement.nbv.evaluation import coverage, measurable_boundary, plannable_boundary, summarize
-from agiprobot_measurement.nbv.loop import RunConfig, run
-from agiprobot_measurement.nbv.objects import OBJECT_NAMES, make_object
-from agiprobot_measurement.nbv.range_finder import RangeFinder2D
-from agiprobot_measurement.nbv.strategies import SCRIPTS
+from agiprobot_measurement.nbv.planar.errors import NbvInputError
+from agiprobot_measurement.nbv.planar.evaluation import coverage, measurable_boundary, plannable_boundary, summarize
+from agiprobot_measurement.nbv.planar.loop import run
+from agiprobot_measurement.nbv.planar.objects import OBJECT_NAMES, make_object
+from agiprobot_measurement.nbv.planar.range_finder import RangeFinder2D
+from agiprobot_measurement.nbv.planar.run_config import RunConfig
+from agiprobot_measurement.nbv.planar.strategies import SCRIPTS
 from benchmarks.harness import (
     OptionError,
     Target,

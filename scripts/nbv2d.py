@@ -25,7 +25,7 @@ from pathlib import Path
 
 from agiprobot_measurement.common.cli import run_main
 from agiprobot_measurement.common.files import output_path, write_output
-from agiprobot_measurement.nbv.errors import NbvInputError
+from agiprobot_measurement.nbv.planar.errors import NbvInputError
 
 
 def _parse(argv):
@@ -69,12 +69,18 @@ def _main(argv=None) -> int:
         output_path(args.summary, args.overwrite, what="--summary", make_parents=True) if args.summary else None
     )
     try:
-        from agiprobot_measurement.nbv.evaluation import coverage, measurable_boundary, plannable_boundary, summarize
-        from agiprobot_measurement.nbv.loop import RunConfig, run
-        from agiprobot_measurement.nbv.objects import OBJECT_NAMES, load_object_file, make_object
-        from agiprobot_measurement.nbv.painting import paint_rf
-        from agiprobot_measurement.nbv.range_finder import RangeFinder2D
-        from agiprobot_measurement.nbv.scoring import ScoreConfig
+        from agiprobot_measurement.nbv.planar.evaluation import (
+            coverage,
+            measurable_boundary,
+            plannable_boundary,
+            summarize,
+        )
+        from agiprobot_measurement.nbv.planar.loop import run
+        from agiprobot_measurement.nbv.planar.objects import OBJECT_NAMES, load_object_file, make_object
+        from agiprobot_measurement.nbv.planar.painting import paint_rf
+        from agiprobot_measurement.nbv.planar.range_finder import RangeFinder2D
+        from agiprobot_measurement.nbv.planar.run_config import RunConfig
+        from agiprobot_measurement.nbv.planar.scoring import ScoreConfig
 
         for name, value in (("--noise", args.noise), ("--rf-length", args.rf_length), ("--max-time", args.max_time)):
             if value is not None and not math.isfinite(value):

@@ -40,7 +40,7 @@ from agiprobot_measurement.errors import InputError  # noqa: E402
 
 
 def parse_args(argv=None) -> argparse.Namespace:
-    from agiprobot_measurement.nbv.reconstruction import METHODS
+    from agiprobot_measurement.nbv.volumetric.request import METHODS
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], epilog=__doc__.split("\n\n", 2)[2],
                                      formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
@@ -84,7 +84,7 @@ def run(args) -> int:
     if out.is_dir() and any(out.iterdir()) and not args.overwrite:
         raise InputError(f"--out {out} is not empty (use --overwrite to write into it)")
     summary_path = output_path(args.summary, args.overwrite, what="--summary") if args.summary else None
-    from agiprobot_measurement.nbv.reconstruction import ReconstructionRequest
+    from agiprobot_measurement.nbv.volumetric.request import ReconstructionRequest
 
     overrides = {
         "gain": args.method,
@@ -100,8 +100,8 @@ def run(args) -> int:
     if args.cost_weight is not None:
         overrides["cost_weight"] = args.cost_weight
     request = ReconstructionRequest.with_config_defaults(**overrides)  # validates before the heavy imports
-    from agiprobot_measurement.nbv.ground_truth import GroundTruth, simulate
-    from agiprobot_measurement.nbv.station3d import SimulatedNBVStation
+    from agiprobot_measurement.nbv.simulation.ground_truth import GroundTruth, simulate
+    from agiprobot_measurement.nbv.simulation.station3d import SimulatedNBVStation
 
     t0 = time.perf_counter()
     station = SimulatedNBVStation(

@@ -37,18 +37,13 @@ from pathlib import Path
 import numpy as np
 
 from agiprobot_measurement.errors import InputError
-from agiprobot_measurement.nbv.gain_names import GAIN_NAMES
-from agiprobot_measurement.nbv.ground_truth import (
-    GainQuality,
-    GroundTruth,
-    auc,
-    oracle_views,
-    simulate,
-    views_to,
-)
-from agiprobot_measurement.nbv.reconstruction import METHODS, ReconstructionRequest
-from agiprobot_measurement.nbv.station3d import SimulatedNBVStation, load_nbv_config
+from agiprobot_measurement.nbv.simulation.ground_truth import GroundTruth, auc, simulate, views_to
+from agiprobot_measurement.nbv.simulation.station3d import SimulatedNBVStation
+from agiprobot_measurement.nbv.volumetric.gain_names import GAIN_NAMES
+from agiprobot_measurement.nbv.volumetric.request import METHODS, ReconstructionRequest
+from agiprobot_measurement.nbv.volumetric.station3d import load_nbv_config
 from benchmarks.harness import ROOT, load_conditions, number_value, parse_key_values, write_json
+from benchmarks.nbv_oracles import GainQuality, oracle_views
 
 CONDITIONS = load_conditions("nbv3d_loop")
 SHARED = (ROOT / CONDITIONS["parts_dir"]).resolve()

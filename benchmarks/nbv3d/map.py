@@ -30,9 +30,9 @@ import numpy as np
 import trimesh
 
 from agiprobot_measurement.common.geometry import look_at
-from agiprobot_measurement.nbv.gains import ViewModel, evaluate_views
-from agiprobot_measurement.nbv.meshing import TSDFVolume
-from agiprobot_measurement.nbv.voxel_map import MapConfig, VoxelMap
+from agiprobot_measurement.nbv.volumetric.gains import ViewModel, evaluate_views
+from agiprobot_measurement.nbv.volumetric.meshing import TSDFVolume
+from agiprobot_measurement.nbv.volumetric.voxel_map import MapConfig, VoxelMap
 from agiprobot_measurement.sensors.phoxi.models import RESOLUTION_LOW, load_scanner_model
 from agiprobot_measurement.sensors.phoxi.renderer import ScanSettings, StructuredLightScanner
 from agiprobot_measurement.sensors.phoxi.scene_geometry import SceneGeometry
@@ -41,8 +41,8 @@ from benchmarks.harness import ChildFailed, load_conditions, run_process, timed,
 #: the cold-JIT child: imports, a first fusion, pooling and gains with an empty numba cache (seconds of each)
 COLD_JIT_CODE = (
     "import time, numpy as np; t=time.perf_counter();"
-    "from agiprobot_measurement.nbv.voxel_map import VoxelMap, MapConfig;"
-    "from agiprobot_measurement.nbv.gains import ViewModel, evaluate_views;"
+    "from agiprobot_measurement.nbv.volumetric.voxel_map import VoxelMap, MapConfig;"
+    "from agiprobot_measurement.nbv.volumetric.gains import ViewModel, evaluate_views;"
     "from agiprobot_measurement.common.geometry import look_at;"
     "g=VoxelMap([0,0,0],[0.05]*3, MapConfig(resolution_m=0.005)); t1=time.perf_counter();"
     "g.integrate([0.025,0.025,0.5], np.array([[0.025,0.025,0.025]])); t2=time.perf_counter();"

@@ -29,7 +29,7 @@ from station_test_utils import JOINTS, LIMITS, action_client, current_positions,
 
 from agiprobot_measurement.motion.point_to_point import point_to_point
 from agiprobot_measurement.msg import ReconstructObjectAction, ReconstructObjectGoal
-from agiprobot_measurement.nbv.station3d import SimulatedNBVStation
+from agiprobot_measurement.nbv.simulation.station3d import SimulatedNBVStation
 from agiprobot_measurement.ros.action_client import ActionClient
 from agiprobot_measurement.ros.conversions import pose_to_matrix
 from agiprobot_measurement.ros.nbv_interfaces import RosNBVCamera

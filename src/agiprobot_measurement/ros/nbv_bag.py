@@ -19,6 +19,9 @@ import tf2_ros
 from geometry_msgs.msg import Quaternion, TransformStamped, Vector3
 
 from agiprobot_measurement.errors import InputError
+from agiprobot_measurement.nbv.volumetric.reconstruction import Reconstructor
+from agiprobot_measurement.nbv.volumetric.request import ReconstructionRequest
+from agiprobot_measurement.nbv.volumetric.station3d import NBVStation, load_nbv_config
 from agiprobot_measurement.ros.conversions import transform_to_matrix
 from agiprobot_measurement.ros.nbv_messages import captured_view, request_mapping_from_goal
 
@@ -111,9 +114,6 @@ def reconstruction_from_bag(
     """Map and coverage of one recorded run (default: the last) of ``bag_path``; ``config`` (config/nbv.yaml),
     ``station`` (the NBVStation the node used) and ``ground_truth`` (for the coverage) as the node had them.
     Raises InputError for a bag without a run or frames."""
-    from agiprobot_measurement.nbv.reconstruction import ReconstructionRequest, Reconstructor
-    from agiprobot_measurement.nbv.station3d import NBVStation, load_nbv_config
-
     config = config if config is not None else load_nbv_config()
     with rosbag.Bag(str(bag_path)) as bag:
         runs = recorded_runs(bag)

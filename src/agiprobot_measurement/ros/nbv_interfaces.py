@@ -8,7 +8,7 @@ messages are matched by their header's seq (the frame id, as the driver numbers 
 tf transform world <- the cloud's frame at the cloud's stamp: with the scanner on the arm the phoxi_camera node
 stamps a frame with the tf time it was rendered at, so this is exactly the pose the frame was taken from.
 
-:func:`~agiprobot_measurement.ros.nbv_messages.captured_view` turns those messages into the loop's :class:`~agiprobot_measurement.nbv.interfaces.CapturedView`
+:func:`~agiprobot_measurement.ros.nbv_messages.captured_view` turns those messages into the loop's :class:`~agiprobot_measurement.nbv.volumetric.interfaces.CapturedView`
 (world frame, valid pixels only, unit normals, sigma = the confidence map in mm, the organised depth for the TSDF).
 """
 
@@ -26,7 +26,7 @@ from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
 from agiprobot_measurement.motion.trajectory import JointTrajectory
 from agiprobot_measurement.msg import ExecuteJointTrajectoryAction, ExecuteJointTrajectoryGoal
-from agiprobot_measurement.nbv.interfaces import CapturedView, CaptureError, MotionError
+from agiprobot_measurement.nbv.volumetric.interfaces import CapturedView, CaptureError, MotionError
 from agiprobot_measurement.ros.action_client import ActionClient
 from agiprobot_measurement.ros.conversions import joint_trajectory_to_msg, transform_to_matrix
 from agiprobot_measurement.ros.executor import ControllerWatch

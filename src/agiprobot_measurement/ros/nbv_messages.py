@@ -1,9 +1,9 @@
 """Messages of the 3D next-best-view loop <-> its core types (needs the message packages, not a master).
 
 :func:`request_mapping_from_goal` maps a ReconstructObject goal to the fields of
-:class:`~agiprobot_measurement.nbv.reconstruction.ReconstructionRequest` (zero / empty = the configured default);
+:class:`~agiprobot_measurement.nbv.volumetric.request.ReconstructionRequest` (zero / empty = the configured default);
 :func:`captured_view` turns one PhoXi frame (organised cloud, confidence map, camera info) and the sensor's pose into
-a :class:`~agiprobot_measurement.nbv.interfaces.CapturedView`; :func:`candidate_arrays` reads the loop's last
+a :class:`~agiprobot_measurement.nbv.volumetric.interfaces.CapturedView`; :func:`candidate_arrays` reads the loop's last
 candidate set for the markers. World frame, metres.
 """
 
@@ -15,7 +15,7 @@ import numpy as np
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
 from agiprobot_measurement.errors import InputError
-from agiprobot_measurement.nbv.interfaces import CapturedView, CaptureError
+from agiprobot_measurement.nbv.volumetric.interfaces import CapturedView, CaptureError
 from agiprobot_measurement.ros.conversions import xyz_array
 from agiprobot_measurement.ros.phoxi_messages import CLOUD_NORMAL_SCALE, image_array, pointcloud2_arrays
 from agiprobot_measurement.sensors.phoxi.models import CameraIntrinsics

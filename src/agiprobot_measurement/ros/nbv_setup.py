@@ -8,6 +8,9 @@ from pathlib import Path
 import numpy as np
 
 from agiprobot_measurement.common.config import ConfigError
+from agiprobot_measurement.nbv.simulation.ground_truth import GroundTruth
+from agiprobot_measurement.nbv.simulation.station3d import SimulatedNBVStation
+from agiprobot_measurement.nbv.volumetric.station3d import NBVStation, load_nbv_config
 
 __all__ = ["nbv_station"]
 
@@ -20,15 +23,11 @@ def nbv_station(config_path: str | Path | None = None, scene_path: str | Path | 
     """(config, station, truth): config/nbv.yaml (or ``config_path``), the :class:`~.station3d.NBVStation` of
     ``scene_path`` (what the loop may know: no part) and, when ``ground_truth`` and the scene file has a part, that
     part's observable surface (:class:`~.ground_truth.GroundTruth`, for the coverage in simulation; else None)."""
-    from agiprobot_measurement.nbv.station3d import NBVStation, SimulatedNBVStation, load_nbv_config
-
     config = load_nbv_config(config_path)
     station = NBVStation(model=model or None, scene_path=scene_path, config=config)
     truth = None
     # a scene without a part (a real station) has no truth to compare with: no coverage then
     if ground_truth and station.station.scene.part is not None:
-        from agiprobot_measurement.nbv.ground_truth import GroundTruth
-
         simulated = SimulatedNBVStation(model=model or None, scene_path=scene_path, config=config)
         _check_part_placement(simulated)
         truth = GroundTruth(simulated)

@@ -4,8 +4,6 @@ and neither the documentation nor the files around the nodes cite issue or brief
 import re
 from pathlib import Path
 
-import pytest
-
 from agiprobot_measurement._paths import PACKAGE_ROOT
 
 README = PACKAGE_ROOT / "README.md"
@@ -127,9 +125,5 @@ def test_the_ros_interface_reference_covers_every_node():
     assert sorted(keys - checked) == [], "sections no rostest checks"
 
 
-@pytest.mark.xfail(
-    strict=False,
-    reason="the numbers in src/, scripts/ and config/nbv.yaml are being removed area by area; enable once merged",
-)
 def test_no_issue_or_brief_numbers_in_the_code():
     assert _numbers_in(_text_files("src", "scripts", "config/nbv.yaml")) == []

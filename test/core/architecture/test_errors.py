@@ -15,7 +15,7 @@ from agiprobot_measurement._paths import PACKAGE_ROOT
 SOURCE = PACKAGE_ROOT / "src" / "agiprobot_measurement"
 
 #: subpackages whose raises another branch converts; emptied once those branches are merged
-CONVERTED_ELSEWHERE = ("nbv",)
+CONVERTED_ELSEWHERE: tuple[str, ...] = ()
 
 #: builtin exceptions that may be raised anywhere, each with its reason
 ALLOWED_ANYWHERE = {

@@ -21,23 +21,13 @@ CLASS_MAX_LINES = 600
 README_MAX_LINES = 150
 
 #: modules (and their classes) being split on other branches; emptied once those are merged
-BEING_SPLIT = {
-    "nbv/reconstruction.py",
-    "nbv/loop.py",
-    "nbv/voxel_map.py",
-    "nbv/raycast3d.py",
-}
+BEING_SPLIT: set[str] = set()
 
 #: subpackages whose inner imports are reshaped on other branches; emptied once those are merged
-RESHAPED_ELSEWHERE = ("nbv",)
+RESHAPED_ELSEWHERE: tuple[str, ...] = ()
 
 #: "path under src/agiprobot_measurement:function" -> why that function imports a package module inside it
-INNER_IMPORTS = {
-    "ros/nbv_bag.py:reconstruction_from_bag": "the nbv 3D modules are being split; their import paths settle then",
-    "ros/nbv_setup.py:nbv_station": "the nbv 3D modules are being split; their import paths settle then",
-    "ros/nodes/nbv_reconstruction.py:_make_reconstructor": "the nbv 3D modules are being split; as above",
-    "ros/nodes/nbv_reconstruction.py:_plan_only": "the nbv 3D modules are being split; as above",
-}
+INNER_IMPORTS: dict[str, str] = {}
 
 
 def source_files() -> list[Path]:

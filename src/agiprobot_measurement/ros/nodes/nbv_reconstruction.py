@@ -1,5 +1,5 @@
 """The ``nbv_reconstruction`` node (nodes/nbv_reconstruction): next-best-view reconstruction of an unknown part on the
-station, the ROS layer over :class:`agiprobot_measurement.nbv.reconstruction.Reconstructor`.
+station, the ROS layer over :class:`agiprobot_measurement.nbv.volumetric.reconstruction.Reconstructor`.
 
 The loop is ROS-free; this node gives it the station's robot (:class:`~agiprobot_measurement.ros.nbv_interfaces.
 RosNBVRobot`: robot_sim's ExecuteJointTrajectory action and /joint_states) and the PhoXi on the flange
@@ -67,7 +67,10 @@ from agiprobot_measurement.msg import (
     ReconstructObjectFeedback,
     ReconstructObjectResult,
 )
-from agiprobot_measurement.nbv.interfaces import CapturedView
+from agiprobot_measurement.nbv.volumetric.interfaces import CapturedView
+from agiprobot_measurement.nbv.volumetric.reconstruction import Reconstructor
+from agiprobot_measurement.nbv.volumetric.request import ReconstructionRequest
+from agiprobot_measurement.nbv.volumetric.results import Progress
 from agiprobot_measurement.ros import markers
 from agiprobot_measurement.ros.conversions import pose_stamped, sensor_path, xyz_cloud
 from agiprobot_measurement.ros.nbv_interfaces import RosNBVCamera, RosNBVRobot
@@ -233,8 +236,6 @@ class NBVReconstructionNode:
         """The loop for ``goal`` and its output folder; a plan-only goal over the same map as the last plan-only
         goal (ROI, resolutions, gain, candidates) goes on with that map, so a user who moves the robot between
         plan-only goals builds one map (``~reset`` starts a new one)."""
-        from agiprobot_measurement.nbv.reconstruction import ReconstructionRequest, Reconstructor
-
         values = request_mapping_from_goal(goal, self.defaults, self.max_voxels)
         output_dir = self._output_dir(goal.output_dir)
         values["output_dir"] = str(output_dir)
@@ -371,7 +372,6 @@ class NBVReconstructionNode:
     def _plan_only(self, result, reconstructor, output_dir, on_progress):
         """execute false: one frame from where the robot stands, fused into the map, and the next best view from
         there; nothing moves. Returns the view's pose (None when there is none; the reason is the result's)."""
-        from agiprobot_measurement.nbv.reconstruction import Progress
 
         def report(phase, **values):
             grid = reconstructor.map

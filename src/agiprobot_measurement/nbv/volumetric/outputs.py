@@ -1,0 +1,67 @@
+"""The files of a 3D reconstruction, each written atomically into one folder: ``cloud.ply`` (fused raw points),
+``map.npz`` (+ ``map.bt`` with an OctoMap binding), ``mesh.ply`` (TSDF + marching cubes) and ``views.yaml``
+(method, request, ROI, per-view poses, joints, gains and timings, the result)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from agiprobot_measurement.common.files import atomic_write, atomic_write_text
+
+__all__ = ["attach_outputs", "save_outputs"]
+
+
+def save_outputs(output_dir, voxel_map, tsdf, request, roi_min_m, roi_max_m, views, termination_reason: str = "",
+                 result=None) -> dict[str, str]:  # fmt: skip
+    """Write the files into ``output_dir`` (created); returns {kind: path}. ``tsdf``: the TSDF volume or None;
+    ``views``: the view records; ``result``: the ReconstructionResult when there is one."""
+    out = Path(output_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    files = {}
+    cloud = out / "cloud.ply"
+    if voxel_map.export_cloud_ply(cloud) > 0:
+        files["cloud"] = str(cloud)
+    files["map"] = str(voxel_map.save_npz(out / "map.npz"))
+    if voxel_map.save_bt(out / "map.bt"):
+        files["octomap"] = str(out / "map.bt")
+    if tsdf is not None:
+        mesh = tsdf.mesh()
+        if mesh is not None and len(mesh.faces):
+            atomic_write(out / "mesh.ply", lambda tmp: mesh.export(str(tmp), file_type="ply"), suffix=".ply")
+            files["mesh"] = str(out / "mesh.ply")
+    log = {
+        "method": request.method,
+        "termination_reason": termination_reason or (result.termination_reason if result else ""),
+        "request": {
+            k: (v.tolist() if isinstance(v, np.ndarray) else v)
+            for k, v in request.__dict__.items()
+            if k != "output_dir"
+        },
+        "roi_min_m": np.asarray(roi_min_m).tolist(),
+        "roi_max_m": np.asarray(roi_max_m).tolist(),
+        "views": [v.as_dict() for v in views],
+    }
+    if result is not None:
+        log["result"] = {k: v for k, v in result.summary().items() if not k.endswith("_file")}
+    log_path = out / "views.yaml"
+    atomic_write_text(log_path, yaml.safe_dump(log, sort_keys=False, default_flow_style=None))
+    files["log"] = str(log_path)
+    return files
+
+
+def attach_outputs(result, write: Callable[[], dict]) -> None:
+    """Write the outputs with ``write()`` and name the files in ``result``; a failed write is added to the result's
+    error instead of raising (the run's measurements stay in the result)."""
+    try:
+        files = write()
+    except OSError as exc:
+        result.error = (result.error + "; " if result.error else "") + f"writing the outputs failed: {exc}"
+        files = {}
+    result.cloud_file = files.get("cloud", "")
+    result.mesh_file = files.get("mesh", "")
+    result.map_file = files.get("map", "")
+    result.log_file = files.get("log", "")

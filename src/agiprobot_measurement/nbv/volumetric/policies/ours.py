@@ -1,0 +1,87 @@
+"""Ours: the report's method in 3D, scored by a weighted sum of PhoXi-aware gains and discounted by the motion."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from agiprobot_measurement.errors import InputError
+from agiprobot_measurement.nbv.volumetric.gain_names import GAIN_NAMES
+from agiprobot_measurement.nbv.volumetric.gains import ExpectedSurfaceModel, expected_surface
+from agiprobot_measurement.nbv.volumetric.policies.base import Policy, PolicyContext, weighted_score
+from agiprobot_measurement.nbv.volumetric.settings import PlanningSettings
+
+__all__ = ["OursPolicy"]
+
+
+class OursPolicy(Policy):
+    """The report's method in 3D: frontier targets (growth / candidate voxels with the PCA predicted surface),
+    candidate views perpendicular to it filtered by the sphere of visibility, scored by the weighted terms of
+    config/nbv.yaml ``planning.ours_weights`` (each normalised by its best candidate; the default mixes rpg's
+    proximity count, average entropy and rear side voxel, the mix whose best candidate came closest to the truly
+    best view in the benchmark's gain-quality check), times the motion factor Pohyb ``exp(-lambda C)`` (lambda
+    scaled by :meth:`cost_factor`, config ``planning.cost_schedule``). The expected newly seen surface of the
+    predicted-surface model (:func:`~agiprobot_measurement.nbv.volumetric.gains.expected_surface`: camera and
+    projector rays clear and in range, perpendicularity) ranks the fallbacks and drives the stopping rule; it is a
+    score term only when the weights name it."""
+
+    name = "ours"
+    #: the score when the configuration names none: the name ``expected_surface`` is the predicted-surface gain,
+    #: the others are :data:`~agiprobot_measurement.nbv.volumetric.gain_names.GAIN_NAMES`
+    default_weights = (("expected_surface", 1.0),)
+
+    def __init__(self, context: PolicyContext, planning: PlanningSettings):
+        super().__init__(context)
+        weights = planning.ours_weights
+        self.weights = dict(weights if weights is not None else dict(self.default_weights))
+        unknown = sorted(set(self.weights) - {*GAIN_NAMES, "expected_surface"})
+        if unknown:
+            raise InputError(
+                f"planning.ours_weights: unknown gain(s) {unknown}; known: expected_surface, {', '.join(GAIN_NAMES)}"
+            )
+        self.model = ExpectedSurfaceModel.from_config(planning.expected_surface)
+        self.cost_schedule = planning.cost_schedule
+        self.cost_schedule_power = planning.cost_schedule_power
+        self.cost_s_per_rad = planning.cost_joint_path_s_per_rad
+        self.first_expected_area_m2 = None
+
+    def cost_factor(self, expected_area_m2: float) -> float:
+        """The share of lambda applied now. ``constant``: 1. ``remaining_surface``: 1 - A / A1, with A the most
+        new surface any candidate is expected to see and A1 that at the first planned view (clipped to [0, 1]):
+        while most of the part is still unseen, the view that sees most is worth its motion; the motion counts
+        fully once little is left to gain."""
+        if self.cost_schedule == "constant":
+            return 1.0
+        if self.first_expected_area_m2 is None:
+            self.first_expected_area_m2 = expected_area_m2
+        if self.first_expected_area_m2 <= 0:
+            return 1.0
+        share_seen = float(np.clip(1.0 - expected_area_m2 / self.first_expected_area_m2, 0.0, 1.0))
+        return share_seen**self.cost_schedule_power
+
+    def choose(self, q):
+        c = self.context
+        cands, stats = self.feasible_pool(q)
+        if cands is None:
+            return None, "frontier_exhausted", stats
+        idx = np.nonzero(cands.feasible)[0]
+        exp_gain, exp_area = expected_surface(c.planning_map, cands.poses[idx], c.view_model, self.model)
+        terms = {"expected_surface": exp_gain}
+        if set(self.weights) - {"expected_surface"}:
+            g, _ = c.evaluate(cands, "report")
+            terms.update(g.all_gains)
+        score = weighted_score(terms, self.weights, len(idx))
+        cost = c.motion_cost(q, cands.joints[idx])
+        if self.cost_s_per_rad > 0:
+            cost = cost + self.cost_s_per_rad * np.abs(cands.joints[idx] - q).sum(axis=1)
+        factor = self.cost_factor(float(exp_area.max()))
+        utilities = score * np.exp(-c.cost_weight * factor * cost)
+        self.remember(cands, utilities)
+        if not np.any(exp_area > 0):
+            return None, "frontier_exhausted", stats
+        choice, fallbacks = self.ranked(cands, idx, exp_gain, utilities, exp_area)
+        # the stopping rule looks at the predicted surface left for any candidate, not at the chosen view only
+        for option in (choice, *fallbacks):
+            option.remaining_area_m2 = float(exp_area.max())
+            option.remaining_gain = float(exp_gain.max())
+        stats["fallbacks"] = fallbacks
+        return choice, "", stats
