@@ -83,8 +83,11 @@ class Router:
             self._planner = self.planner_factory()
         return self._planner
 
-    def connect(self, q_from: np.ndarray, q_to: np.ndarray):
-        """A collision-free trajectory: the straight joint move when it is free, else OMPL; None when neither."""
+    def connect(
+        self, q_from: np.ndarray, q_to: np.ndarray, planning_time_s: float | None = None, attempts: int | None = None
+    ):
+        """A collision-free trajectory: the straight joint move when it is free, else OMPL; None when neither.
+        ``planning_time_s`` (OMPL's first budget, s) and ``attempts`` override the settings for this move."""
         return collision_free_trajectory(
             q_from,
             q_to,
@@ -92,8 +95,8 @@ class Router:
             self.checker,
             planner=self.planner,
             velocity_scaling=self.settings.velocity_scaling,
-            planning_time_s=self.settings.planning_time_s,
-            attempts=self.settings.connect_attempts,
+            planning_time_s=self.settings.planning_time_s if planning_time_s is None else planning_time_s,
+            attempts=self.settings.connect_attempts if attempts is None else attempts,
         )
 
     def route(self, q_from: np.ndarray, q_to: np.ndarray, vias=(), centre: np.ndarray | None = None):

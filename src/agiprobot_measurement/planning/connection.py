@@ -1,8 +1,9 @@
 """Connection moves: collision-free, time-parameterised joint motions between two states of the station's robot.
 
 :class:`ConnectionPlanner` is the motion layer put together for one job (a collision checker, the joint limits,
-an OMPL planner set up only when a straight move is blocked): the planning run connects its views with it and a
-session adapts a stored plan's start with it, without building a whole planning run. Joint values are rad, times s.
+an OMPL planner set up only when a straight move is blocked) over :class:`~agiprobot_measurement.motion.routing.Router`,
+the router NBV moves with too: the planning run connects its views with it and a session adapts a stored plan's start
+with it, without building a whole planning run. Joint values are rad, times s.
 """
 
 from __future__ import annotations
@@ -12,7 +13,8 @@ import numpy as np
 from agiprobot_measurement.motion.collision import CollisionChecker
 from agiprobot_measurement.motion.ik import make_ik_solver
 from agiprobot_measurement.motion.kinematics import KinematicModel
-from agiprobot_measurement.motion.motion_planning import MotionPlanner, collision_free_trajectory
+from agiprobot_measurement.motion.motion_planning import MotionPlanner
+from agiprobot_measurement.motion.routing import Router, RouteSettings
 from agiprobot_measurement.motion.trajectory import JointTrajectory
 from agiprobot_measurement.planning.part_loading import load_part
 from agiprobot_measurement.planning.plan.execution import PlanPart
@@ -62,7 +64,8 @@ class ConnectionPlanner:
         self.seed = int(seed)
         self.planning_time_s = float(planning_time_s)
         self.attempts = int(attempts)
-        self._planner: MotionPlanner | None = None
+        settings = RouteSettings(planning_time_s=self.planning_time_s, connect_attempts=self.attempts)
+        self.router = Router(collision, limits, self._make_planner, settings)
 
     @classmethod
     def for_station(cls, station: Station, part: PlanPart | None = None, **settings) -> ConnectionPlanner:
@@ -73,25 +76,18 @@ class ConnectionPlanner:
             add_plan_part(collision, part)
         return cls(collision, station.limits, **settings)
 
+    def _make_planner(self) -> MotionPlanner:
+        # OMPL refuses the seed 0 (and says so on every call): seeds count from 1 there
+        return MotionPlanner(self.collision, planner=self.planner_name, seed=self.seed + 1)
+
     @property
     def planner(self) -> MotionPlanner:
         """The OMPL planner (set up on first use)."""
-        if self._planner is None:
-            # OMPL refuses the seed 0 (and says so on every call): seeds count from 1 there
-            self._planner = MotionPlanner(self.collision, planner=self.planner_name, seed=self.seed + 1)
-        return self._planner
+        return self.router.planner()
 
     def connect(
         self, q_from: np.ndarray, q_to: np.ndarray, planning_time_s: float | None = None, attempts: int | None = None
     ) -> JointTrajectory | None:
         """The collision-free, time-parameterised move from ``q_from`` to ``q_to`` (rad), or None: the straight
         joint move when it is free, else OMPL with a bounded number of attempts."""
-        return collision_free_trajectory(
-            q_from,
-            q_to,
-            self.limits,
-            self.collision,
-            lambda: self.planner,  # OMPL is set up only when a straight move is blocked
-            planning_time_s=self.planning_time_s if planning_time_s is None else planning_time_s,
-            attempts=self.attempts if attempts is None else attempts,
-        )
+        return self.router.connect(q_from, q_to, planning_time_s, attempts)
