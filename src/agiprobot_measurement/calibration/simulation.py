@@ -4,7 +4,7 @@
 tool orientation from the config) and renders one scanner frame with
 :mod:`agiprobot_measurement.sensors.phoxi.renderer` from a camera pose kept from the calibration (the hidden
 truth). :class:`SimulatedJointDriver` and :class:`SimulatedCamera` are the ROS node's robot and camera over it, so
-that :mod:`~agiprobot_measurement.calibration.procedure` runs in pytest; ``scripts/bench_calibration.py`` uses the
+that :mod:`~agiprobot_measurement.calibration.procedure` runs in pytest; ``python -m benchmarks.calibration`` uses the
 station directly. Metres and rad throughout.
 
 Two options of the station (both off by default): ``true_kinematics`` (a
