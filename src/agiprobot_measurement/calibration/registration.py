@@ -27,6 +27,7 @@ import yaml
 from agiprobot_measurement.common.config import ConfigError, load_yaml_text
 from agiprobot_measurement.common.files import FileReadError, atomic_write_text, read_text_file
 from agiprobot_measurement.common.geometry import matrix_to_quaternion, matrix_to_rpy, transform_points
+from agiprobot_measurement.common.limits import LIMITS, check_count, excerpt
 from agiprobot_measurement.errors import InputError
 
 __all__ = [
@@ -54,6 +55,7 @@ __all__ = [
     "original_matrix_rows",
     "original_pair_block",
     "original_transform_blocks",
+    "parse_data_text",
     "parse_vector",
     "plane_basis",
     "pose_error",
@@ -84,23 +86,24 @@ COPLANAR_TOLERANCE_M = 0.01
 _VECTOR_RE = re.compile(r"^\s*\[([^\]]*)\]\s*$")
 
 
-def parse_vector(text: str, length: int | None, where: str) -> np.ndarray:
+def parse_vector(text: str, length: int | None, where: str, quote: bool = True) -> np.ndarray:
     """``[a, b, c]`` (or the original writer's ``[a, b, c, ]``) -> array of ``length`` values (None: any number);
-    CalibrationError naming ``where`` otherwise."""
+    CalibrationError naming ``where`` otherwise, quoting an excerpt of ``text`` (nothing of it when not ``quote``)."""
+    got = f", got {excerpt(text.strip())}" if quote else ""
     match = _VECTOR_RE.match(text)
     if not match:
-        raise CalibrationError(f"{where}: expected '[x, y, z]', got {text.strip()!r}")
+        raise CalibrationError(f"{where}: expected '[x, y, z]'{got}")
     items = match.group(1).split(",")
     if len(items) > 1 and not items[-1].strip():  # the original writes a separator after every value
         items = items[:-1]
     try:
         values = [float(v) for v in items]
     except ValueError as exc:
-        raise CalibrationError(f"{where}: not a list of numbers: {text.strip()!r}") from exc
+        raise CalibrationError(f"{where}: not a list of numbers{got}") from exc
     if length is None:
         length = len(values)
     if len(values) != length or not all(math.isfinite(v) for v in values):
-        raise CalibrationError(f"{where}: expected {length} finite numbers, got {text.strip()!r}")
+        raise CalibrationError(f"{where}: expected {length} finite numbers{got}")
     return np.array(values)
 
 
@@ -127,16 +130,19 @@ def read_flag_points(path: str | Path) -> np.ndarray:
     """Flag points (N, 3) in metres, robot base frame, from a text file: one ``[x, y, z]`` per line.
 
     Blank lines and lines starting with ``#`` are skipped. Raises CalibrationError for a missing file, a bad line,
-    fewer than 4 points or coplanar points.
+    fewer than 4 points or coplanar points. A bad line is named by its number, never quoted: the file may be one
+    a client named, and its content is not the client's to see.
     """
     path = Path(path)
     if not path.is_file() and not path.is_dir():
         raise CalibrationError(f"{path}: flag point file not found (one '[x, y, z]' per line, metres, robot base)")
+    lines = _read_text(path, "flag point file").splitlines()
+    check_count(len(lines), LIMITS.data_file_lines, f"{path}: lines of the flag point file")
     points = []
-    for number, line in enumerate(_read_text(path, "flag point file").splitlines(), start=1):
+    for number, line in enumerate(lines, start=1):
         if not line.strip() or line.lstrip().startswith("#"):
             continue
-        points.append(parse_vector(line, 3, f"{path}:{number}"))
+        points.append(parse_vector(line, 3, f"{path}:{number} (one '[x, y, z]' per line, metres)", quote=False))
     return check_flag_points(np.array(points).reshape(-1, 3), where=str(path))
 
 
@@ -498,7 +504,7 @@ def _vector_text(values) -> str:
 
 def _check_format(format: str) -> str:
     if format not in DATA_FORMATS:
-        raise CalibrationError(f"data file format must be one of {', '.join(DATA_FORMATS)}, got {format!r}")
+        raise CalibrationError(f"data file format must be one of {', '.join(DATA_FORMATS)}, got {excerpt(format)}")
     return format
 
 
@@ -631,7 +637,9 @@ def _pair_vector(text: str, dof: str, where: str) -> np.ndarray:
         return parse_vector(text, 3, where)
     values = parse_vector(text, None, where)
     if len(values) not in (6, 7):
-        raise CalibrationError(f"{where}: a 6-DoF pose needs 7 values [x, y, z, qx, qy, qz, qw], got {text.strip()!r}")
+        raise CalibrationError(
+            f"{where}: a 6-DoF pose needs 7 values [x, y, z, qx, qy, qz, qw], got {excerpt(text.strip())}"
+        )
     return values[:3]
 
 
@@ -646,11 +654,20 @@ def read_data_file(path: str | Path) -> CalibrationData:
     original's flag points) are the flag samples.
     """
     path = Path(path)
-    lines = _read_text(path, "data file").splitlines()
+    return parse_data_text(_read_text(path, "data file"), path)
+
+
+def parse_data_text(text: str, path: str | Path = "<data>", max_lines: int | None = None) -> CalibrationData:
+    """:func:`read_data_file` of the text ``text`` (``path`` names it in messages); refused unparsed when it has more
+    than ``max_lines`` lines (default :attr:`InputLimits.data_file_lines`). Linear in the number of lines."""
+    limit = LIMITS.data_file_lines if max_lines is None else max_lines
+    check_count(text.count("\n") + 1, limit + 1, f"{path}: lines of the data file")
+    lines = text.splitlines()
+    check_count(len(lines), limit, f"{path}: lines of the data file")
     data = CalibrationData()
     robot: dict[str, np.ndarray] = {}
     camera: dict[str, np.ndarray] = {}
-    order: list[str] = []
+    order: dict[str, None] = {}  # the indices in file order (a dict: membership in constant time)
     flags: set[str] | None = None
     criteria: dict[str, list[int]] = {"plane": [], "line": []}
     i = 0
@@ -669,8 +686,7 @@ def read_data_file(path: str | Path) -> CalibrationData:
             kind, dof, index = header.groups()
             vector = _pair_vector(next_line(line), dof, where)
             (robot if kind == "robot" else camera)[index] = vector
-            if index not in order:
-                order.append(index)
+            order.setdefault(index)
             i += 2
         elif line in _MATRIX_TITLES:
             rows = []
@@ -706,11 +722,11 @@ def read_data_file(path: str | Path) -> CalibrationData:
         elif not line or line.startswith("#"):
             i += 1
         else:
-            raise CalibrationError(f"{path}:{i + 1}: unexpected line {line!r}")
+            raise CalibrationError(f"{path}:{i + 1}: unexpected line {excerpt(line)}")
     for index in order:
         if index not in robot or index not in camera:
             missing = "p_camera" if index not in camera else "p_robot"
-            raise CalibrationError(f"{path}: sample {index} has no {missing}")
+            raise CalibrationError(f"{path}: sample {excerpt(index)} has no {missing}")
         flag = index.startswith("flag") if flags is None else index in flags
         data.samples.append(Sample(index, robot[index], camera[index], flag))
     data.criteria_plane = min(criteria["plane"]) if criteria["plane"] else None
@@ -721,7 +737,7 @@ def read_data_file(path: str | Path) -> CalibrationData:
 def calibrate_data(data: CalibrationData, mode: str = "cal_fine", **options) -> CalibrationResult:
     """Coarse (flag samples only; all samples when none is marked) or fine (all samples) calibration."""
     if mode not in ("cal_fine", "cal_coarse"):
-        raise CalibrationError(f"mode must be cal_fine or cal_coarse, got {mode!r}")
+        raise CalibrationError(f"mode must be cal_fine or cal_coarse, got {excerpt(mode)}")
     flag_only = mode == "cal_coarse" and any(s.flag for s in data.samples)
     pc, pr, ids = data.arrays(flag_only=flag_only)
     if mode == "cal_coarse" or len(pc) == MIN_FLAG_POINTS:

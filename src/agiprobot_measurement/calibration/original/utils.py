@@ -25,11 +25,13 @@ from agiprobot_measurement.calibration.registration import (
     original_block,
     original_matrix_rows,
     original_pair_block,
+    parse_data_text,
     read_data_file,
     read_flag_points,
 )
 from agiprobot_measurement.common.files import atomic_write_text, read_text_file
 from agiprobot_measurement.common.geometry import matrix_to_rpy
+from agiprobot_measurement.common.limits import excerpt
 
 __all__ = [
     "DATA_TYPES",
@@ -99,6 +101,10 @@ def write_data(data_path, data, title=None, type="mat"):
       - ``"H"`` / ``"mat"``: a matrix, one ``[a, b, c, d, ]`` line per row, under ``title`` (default ``H``).
       - ``"criteria"`` / ``"vec"``: ``title`` (``criteria:plane`` / ``criteria:line``, or the seed's
         ``circle:plane`` / ``circle:line``) and ``data`` on the next line (criteria: an integer point count).
+
+    A block the reader would refuse (a NaN or infinite value, an index or title with spaces or line breaks, a title
+    the reader does not know) is refused with a :class:`CalibrationError` before anything is written, so the file
+    stays readable: one bad sample cannot make the earlier ones unreadable.
     """
     path = Path(data_path)
     type = _TYPE_ALIASES.get(type, type)
@@ -118,11 +124,11 @@ def write_data(data_path, data, title=None, type="mat"):
     elif type in ("H", "mat"):
         matrix = np.asarray(data, dtype=float)
         if matrix.ndim != 2:
-            raise CalibrationError(f"write_data(type={type!r}) needs a matrix, got shape {matrix.shape}")
+            raise CalibrationError(f"write_data(type={excerpt(type)}) needs a matrix, got shape {matrix.shape}")
         block = original_block(title or "H", original_matrix_rows(matrix))
     elif type in ("criteria", "vec"):
         if not title:
-            raise CalibrationError(f"write_data(type={type!r}) needs a title, e.g. 'criteria:plane'")
+            raise CalibrationError(f"write_data(type={excerpt(type)}) needs a title, e.g. 'criteria:plane'")
         if type == "criteria":
             value = str(int(data))
         elif np.ndim(data):
@@ -131,7 +137,11 @@ def write_data(data_path, data, title=None, type="mat"):
             value = repr(data)
         block = original_block(str(title), [value])
     else:
-        raise CalibrationError(f"write_data: type must be one of {', '.join(DATA_TYPES[:-1])}, got {type!r}")
+        raise CalibrationError(f"write_data: type must be one of {', '.join(DATA_TYPES[:-1])}, got {excerpt(type)}")
+    try:
+        parse_data_text(block, f"write_data({excerpt(type)}, title {excerpt(title)})")
+    except CalibrationError as exc:
+        raise CalibrationError(f"{exc}; nothing written to {path}") from exc
     existing = read_text_file(path, "data file") if path.is_file() else ""
     return atomic_write_text(path, existing + block, make_parents=True)
 
@@ -162,7 +172,7 @@ def read_data(data_path, type):
         if data.criteria_plane is None or data.criteria_line is None:
             return None
         return [data.criteria_plane, data.criteria_line]
-    raise CalibrationError(f"read_data: type must be point_pair, H, target or criteria, got {type!r}")
+    raise CalibrationError(f"read_data: type must be point_pair, H, target or criteria, got {excerpt(type)}")
 
 
 def get_point_pair_list(data_path) -> list[PointPair]:
