@@ -36,7 +36,7 @@ from agiprobot_measurement.calibration.registration import (
     read_flag_points,
     read_result_yaml,
 )
-from agiprobot_measurement.calibration.session import CalibrationSession, detector_config, zigzag_for
+from agiprobot_measurement.calibration.session import CalibrationSession, check_zigzag, detector_config, zigzag_for
 
 __all__ = [
     "CollectionOutcome",
@@ -146,6 +146,8 @@ def run_collection(
         raise CalibrationError("run_collection: mode test is run_test_mode's")
     detector = detector_config(config)
     flags = read_flag_points(config["flag_points_file"])
+    if mode == "cal_fine":  # before the robot moves: a bad value must not cost the flag points' motions
+        check_zigzag(config.get("zigzag"))
     session.clear()
     clouds = []
     for i, p in enumerate(flags):

@@ -89,22 +89,25 @@ _VECTOR_RE = re.compile(r"^\s*\[([^\]]*)\]\s*$")
 def parse_vector(text: str, length: int | None, where: str, quote: bool = True) -> np.ndarray:
     """``[a, b, c]`` (or the original writer's ``[a, b, c, ]``) -> array of ``length`` values (None: any number);
     CalibrationError naming ``where`` otherwise, quoting an excerpt of ``text`` (nothing of it when not ``quote``)."""
-    got = f", got {excerpt(text.strip())}" if quote else ""
     match = _VECTOR_RE.match(text)
     if not match:
-        raise CalibrationError(f"{where}: expected '[x, y, z]'{got}")
+        raise CalibrationError(f"{where}: expected '[x, y, z]'{_got(text, quote)}")
     items = match.group(1).split(",")
     if len(items) > 1 and not items[-1].strip():  # the original writes a separator after every value
         items = items[:-1]
     try:
         values = [float(v) for v in items]
     except ValueError as exc:
-        raise CalibrationError(f"{where}: not a list of numbers{got}") from exc
+        raise CalibrationError(f"{where}: not a list of numbers{_got(text, quote)}") from exc
     if length is None:
         length = len(values)
-    if len(values) != length or not all(math.isfinite(v) for v in values):
-        raise CalibrationError(f"{where}: expected {length} finite numbers{got}")
+    if len(values) != length or not all(map(math.isfinite, values)):
+        raise CalibrationError(f"{where}: expected {length} finite numbers{_got(text, quote)}")
     return np.array(values)
+
+
+def _got(text: str, quote: bool) -> str:
+    return f", got {excerpt(text.strip())}" if quote else ""
 
 
 def check_flag_points(points_m: np.ndarray, where: str = "flag points", tolerance_m: float = COPLANAR_TOLERANCE_M):
@@ -661,9 +664,11 @@ def parse_data_text(text: str, path: str | Path = "<data>", max_lines: int | Non
     """:func:`read_data_file` of the text ``text`` (``path`` names it in messages); refused unparsed when it has more
     than ``max_lines`` lines (default :attr:`InputLimits.data_file_lines`). Linear in the number of lines."""
     limit = LIMITS.data_file_lines if max_lines is None else max_lines
-    check_count(text.count("\n") + 1, limit + 1, f"{path}: lines of the data file")
+    newlines = text.count("\n")  # before splitting: a file of line breaks must not become a list of millions
+    check_count(newlines + (not text.endswith("\n")), limit, f"{path}: lines of the data file")
     lines = text.splitlines()
     check_count(len(lines), limit, f"{path}: lines of the data file")
+    path = str(path)  # formatted into a location per line: once
     data = CalibrationData()
     robot: dict[str, np.ndarray] = {}
     camera: dict[str, np.ndarray] = {}
@@ -681,7 +686,7 @@ def parse_data_text(text: str, path: str | Path = "<data>", max_lines: int | Non
         line = lines[i].strip()
         where = f"{path}:{i + 2}"
         header = _PAIR_HEADER_RE.match(line)
-        criterion = _CRITERIA_RE.match(line)
+        criterion = None if header else _CRITERIA_RE.match(line)
         if header:
             kind, dof, index = header.groups()
             vector = _pair_vector(next_line(line), dof, where)

@@ -7,7 +7,9 @@ after every change (atomic rewrite, so an interrupted session keeps every sample
 
 from __future__ import annotations
 
+import math
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -27,10 +29,12 @@ from agiprobot_measurement.calibration.registration import (
     zigzag_path,
 )
 from agiprobot_measurement.common.geometry import transform_points
+from agiprobot_measurement.common.limits import excerpt
 
 __all__ = [
     "MODES",
     "CalibrationSession",
+    "check_zigzag",
     "detector_config",
     "sample_index",
     "zigzag_for",
@@ -126,30 +130,41 @@ class CalibrationSession:
             )
         return ""
 
+    def _save_samples(self, samples: list[Sample]) -> None:
+        """Make ``samples`` the session's samples only when the data file took them: when writing fails the
+        samples are left as they were and the error is raised (either changed and saved, or neither)."""
+        previous = self.data.samples
+        self.data.samples = samples
+        try:
+            self.save()
+        except BaseException:
+            self.data.samples = previous
+            raise
+
     def add_sample(self, p_robot_m: np.ndarray, detection: FlangeDetection, what: str = "sample") -> tuple[bool, str]:
-        """Judge a detection; accepted ones become a sample (data file rewritten), rejected ones are recorded."""
+        """Judge a detection; accepted ones become a sample (data file rewritten; not added when that fails),
+        rejected ones are recorded."""
         reason = self.judge(detection)
         if reason:
             self.rejections.append((what, reason))
             return False, reason
         sample = Sample(self._index(), np.asarray(p_robot_m, dtype=float), detection.centre_m)
-        self.data.samples.append(sample)
-        self.save()
+        self._save_samples([*self.data.samples, sample])
         return True, sample.index
 
     def remove(self, index: str) -> Sample:
-        """Remove a sample by index ("" or "last": the last one)."""
+        """Remove a sample by index ("" or "last": the last one). The data file is rewritten first: when that
+        fails, the error is raised and the sample stays."""
         if not self.data.samples:
             raise CalibrationError("no samples")
         if index in ("", "last"):
-            removed = self.data.samples.pop()
+            removed = self.data.samples[-1]
         else:
             matches = [s for s in self.data.samples if s.index == index]
             if not matches:
-                raise CalibrationError(f"no sample with index {index!r}")
+                raise CalibrationError(f"no sample with index {excerpt(index)}")
             removed = matches[0]
-            self.data.samples.remove(removed)
-        self.save()
+        self._save_samples([s for s in self.data.samples if s is not removed])
         return removed
 
     def listing(self) -> str:
@@ -178,14 +193,51 @@ class CalibrationSession:
         return transform_points(np.linalg.inv(self.data.h_coarse), np.asarray(p_robot_m, dtype=float)[None])[0]
 
 
+#: most fractions per flag point pair of the zig-zag path, most jitter (metres)
+MAX_ZIGZAG_FRACTIONS = 100
+MAX_ZIGZAG_JITTER_M = 1.0
+_ZIGZAG_KEYS = ("fractions", "jitter_m", "seed")
+
+
+def _finite(value, where: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise CalibrationError(f"{where} must be a finite number, got {excerpt(value)}")
+    return float(value)
+
+
+def check_zigzag(zigzag, where: str = "zigzag") -> dict:
+    """The zig-zag settings (``fractions``, ``jitter_m``, ``seed``; missing ones take their defaults) checked, so
+    that a bad value is refused before the robot moves: a :class:`CalibrationError` naming the key otherwise.
+    ``fractions``: 1 to 100 numbers in [0, 1]; ``jitter_m``: 0 to 1 m; ``seed``: a non-negative integer or null."""
+    if zigzag is None:
+        zigzag = {}
+    if not isinstance(zigzag, Mapping):
+        raise CalibrationError(f"{where} must be a mapping of {', '.join(_ZIGZAG_KEYS)}, got {excerpt(zigzag)}")
+    unknown = [str(k) for k in zigzag if k not in _ZIGZAG_KEYS]
+    if unknown:
+        raise CalibrationError(f"{where}: unknown key {excerpt(unknown[0])}; the keys are {', '.join(_ZIGZAG_KEYS)}")
+    fractions = zigzag.get("fractions", (0.25, 0.5, 0.75))
+    if isinstance(fractions, str | bytes) or not isinstance(fractions, list | tuple):
+        raise CalibrationError(f"{where}.fractions must be a list of numbers in [0, 1], got {excerpt(fractions)}")
+    if not 1 <= len(fractions) <= MAX_ZIGZAG_FRACTIONS:
+        raise CalibrationError(f"{where}.fractions needs 1 to {MAX_ZIGZAG_FRACTIONS} values, got {len(fractions)}")
+    checked = tuple(_finite(f, f"{where}.fractions[{k}]") for k, f in enumerate(fractions))
+    for k, f in enumerate(checked):
+        if not 0.0 <= f <= 1.0:
+            raise CalibrationError(f"{where}.fractions[{k}] must be in [0, 1] (of a flag point pair), got {f}")
+    jitter_m = _finite(zigzag.get("jitter_m", 0.03), f"{where}.jitter_m")
+    if not 0.0 <= jitter_m <= MAX_ZIGZAG_JITTER_M:
+        raise CalibrationError(f"{where}.jitter_m must be in [0, {MAX_ZIGZAG_JITTER_M}] m, got {jitter_m}")
+    seed = zigzag.get("seed", 0)
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
+        raise CalibrationError(f"{where}.seed must be a non-negative integer or null, got {excerpt(seed)}")
+    return {"fractions": checked, "jitter_m": jitter_m, "seed": seed}
+
+
 def zigzag_for(flag_points_m: np.ndarray, config: dict) -> np.ndarray:
-    zz = config.get("zigzag", {}) or {}
-    return zigzag_path(
-        flag_points_m,
-        seed=zz.get("seed", 0),
-        jitter_m=float(zz.get("jitter_m", 0.03)),
-        fractions=tuple(zz.get("fractions", (0.25, 0.5, 0.75))),
-    )
+    """The zig-zag path of ``config['zigzag']`` (checked by :func:`check_zigzag`) between the flag points."""
+    zz = check_zigzag(config.get("zigzag"))
+    return zigzag_path(flag_points_m, seed=zz["seed"], jitter_m=zz["jitter_m"], fractions=zz["fractions"])
 
 
 def detector_config(config: dict) -> FlangeDetectorConfig:

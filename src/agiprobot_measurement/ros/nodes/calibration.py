@@ -27,7 +27,8 @@ Services (std_srvs; every handler answers, errors are ``success: false`` with th
 Parameters: ~config (config/calibration.yaml; its keys can be overridden as private parameters: ~mode
 (cal_fine | cal_coarse | test), ~use_mp, ~use_auto_judge, ~flag_points_file, ~zigzag, ~output_dir,
 ~result_file, ~data_file, ~base_frame, ~camera_frame; ~mode, ~flag_points_file and ~zigzag are read again at
-every run), ~camera_ns (/phoxi_camera), ~controller_action
+every run and checked before the robot moves; a flag point file named at run time must lie in the output folder
+or the folder of the flag point file the node started with, and its lines are never quoted), ~camera_ns (/phoxi_camera), ~controller_action
 (/robot_sim/execute_trajectory), ~velocity_scaling (0.3), ~check_collisions (true: every motion is checked along
 its whole path and planned around obstacles with OMPL when the straight joint move is blocked), ~scene (the
 station's scene file, config/scene.yaml; its obstacles for the collision checks, its chessboard for test mode),
@@ -63,8 +64,9 @@ from agiprobot_measurement.calibration.procedure import (
     run_test_mode,
 )
 from agiprobot_measurement.calibration.registration import CalibrationError, write_result_yaml
-from agiprobot_measurement.calibration.session import CalibrationSession, detector_config
+from agiprobot_measurement.calibration.session import CalibrationSession, check_zigzag, detector_config
 from agiprobot_measurement.common.config import number
+from agiprobot_measurement.common.files import FileRoot
 from agiprobot_measurement.errors import AgiprobotError, InputError
 from agiprobot_measurement.motion.ik import make_ik_solver
 from agiprobot_measurement.motion.kinematics import KinematicModel
@@ -203,6 +205,10 @@ class CalibrationNode:
         output_dir = str(self.config.get("output_dir", "") or "")
         self.output_dir = Path(output_dir or Path(os.environ.get("ROS_HOME", "~/.ros")) / "calibration").expanduser()
         self.result_file = self._in_output(self.config.get("result_file", "calibration_result.yaml"))
+        # the flag point files a client may name at run time: in the output folder or beside the start-up one
+        self.flag_files = FileRoot(
+            self.output_dir, (Path(str(self.config["flag_points_file"])).expanduser().parent,), "~flag_points_file"
+        )
         self.detector = detector_config(self.config)
         self.session = CalibrationSession.from_config(
             self.config, self._in_output(self.config.get("data_file", "calibration_data.txt"))
@@ -388,8 +394,12 @@ class CalibrationNode:
             )
             return TriggerResponse(success=outcome.success, message=outcome.message)
         self.use_auto_judge = param("~use_auto_judge", self.use_auto_judge, flag)
-        self.config["flag_points_file"] = param("~flag_points_file", self.config["flag_points_file"], text)
-        self.config["zigzag"] = param("~zigzag", self.config.get("zigzag", {}))
+        flag_file = param("~flag_points_file", self.config["flag_points_file"], text)
+        self.config["flag_points_file"] = str(self.flag_files.for_reading(flag_file))
+        zigzag = param("~zigzag", self.config.get("zigzag", {}))
+        if self.mode == "cal_fine":
+            check_zigzag(zigzag, "~zigzag")
+        self.config["zigzag"] = zigzag
         self.flag_points, self.flag_candidates = [], []
         outcome = run_collection(
             self.robot,
