@@ -7,6 +7,8 @@ no flange in view is rejected with its reason and the session goes on; test mode
 calibration scene, moves the flange to each of its 88 corners and reports the positioning error per corner; the
 manual services (flag points at the robot's pose, samples, remove, save, load) keep the data file
 current sample by sample; with use_auto_judge false a run waits for the operator's answer at every detection.
+Refused before the robot moves, with a short reply that quotes no file: a flag point file outside the node's
+folders, an empty name, a bad ~zigzag; a 63 MB data file of NUL bytes gives a short load_samples reply.
 """
 
 import threading
@@ -47,17 +49,56 @@ class CalibrationNodeTest(unittest.TestCase):
         cls.tf_buffer = tf2_ros.Buffer()
         cls.tf_listener = tf2_ros.TransformListener(cls.tf_buffer)
 
-    def test_1_missing_flag_file_is_a_clear_error(self):
-        original = rospy.get_param("/calibration/flag_points_file")
-        rospy.set_param("/calibration/flag_points_file", "/nonexistent/flags.txt")
+    def _run_with(self, **params):
+        """``~run`` with the node's parameters set to ``params`` for this call only: (response, seconds)."""
+        originals = {key: rospy.get_param(f"/calibration/{key}") for key in params}
+        for key, value in params.items():
+            rospy.set_param(f"/calibration/{key}", value)
         try:
+            start = time.monotonic()
             response = self.run_collection()
+            return response, time.monotonic() - start
         finally:
-            rospy.set_param("/calibration/flag_points_file", original)
+            for key, value in originals.items():
+                rospy.set_param(f"/calibration/{key}", value)
+
+    def test_1_missing_flag_file_is_a_clear_error(self):
+        response, _ = self._run_with(flag_points_file=str(self.output_dir / "missing_flags.txt"))
         self.assertFalse(response.success)
-        self.assertIn("/nonexistent/flags.txt", response.message)
+        self.assertIn("missing_flags.txt", response.message)
         self.assertIn("not found", response.message)
         self.assertTrue(self.list_samples().success, "the node keeps serving")
+
+    def test_1b_flag_file_outside_the_node_folders_is_refused_unread(self):
+        for name in ("/etc/os-release", "/nonexistent/flags.txt", str(self.output_dir / ".." / "x.txt")):
+            response, seconds = self._run_with(flag_points_file=name)
+            self.assertFalse(response.success)
+            self.assertLess(seconds, 5.0)
+            self.assertNotIn("PRETTY_NAME", response.message)
+            self.assertIn("~flag_points_file", response.message)
+        response, _ = self._run_with(flag_points_file="")
+        self.assertFalse(response.success)
+        self.assertIn("empty", response.message)
+        self.output_dir.mkdir(parents=True, exist_ok=True)
+        secret = self.output_dir / "secret.txt"
+        secret.write_text("TOKEN=abcdef0123456789\n")
+        response, _ = self._run_with(flag_points_file=str(secret))
+        self.assertFalse(response.success)
+        self.assertIn("secret.txt:1", response.message)
+        self.assertNotIn("TOKEN", response.message)
+
+    def test_1c_bad_zigzag_is_refused_before_the_robot_moves(self):
+        for zigzag, key in (
+            ("lots", "~zigzag must be a mapping"),
+            ({"fractions": [1e9, -5], "jitter_m": 0.03, "seed": 0}, "~zigzag.fractions[0]"),
+            ({"fractions": [0.5], "jitter_m": 1e308}, "~zigzag.jitter_m"),
+            ({"fractions": [0.5], "seed": -1}, "~zigzag.seed"),
+        ):
+            response, seconds = self._run_with(zigzag=zigzag)
+            self.assertFalse(response.success)
+            self.assertIn(key, response.message)
+            self.assertNotIn("internal error", response.message)
+            self.assertLess(seconds, 5.0, "refused before any motion")
 
     def test_2_automatic_collection_is_accurate(self):
         response = self.run_collection()
@@ -230,6 +271,22 @@ class CalibrationNodeTest(unittest.TestCase):
             ok, failed = sum(c[0] for c in counts), sum(c[1] for c in counts)
             print(f"/calibration/list_samples {clients} client(s): {ok / seconds:.1f} calls/s, {failed} failed")
             self.assertEqual((ok, failed), (200 * clients, 0))
+
+    def test_8_load_of_a_huge_bad_data_file_gives_a_short_reply(self):
+        data_file = self.output_dir / "calibration_data.txt"
+        with open(data_file, "wb") as f:  # 63 MB of NUL bytes: under the size cap, one line
+            f.truncate(63 * 1024 * 1024)
+        try:
+            start = time.monotonic()
+            response = _service("/calibration/load_samples")()
+            seconds = time.monotonic() - start
+        finally:
+            data_file.unlink()
+        print(f"load_samples of 63 MB of NUL bytes: {seconds:.1f} s, reply of {len(response.message)} chars")
+        self.assertFalse(response.success)
+        self.assertLess(len(response.message), 500)
+        self.assertIn("unexpected line", response.message)
+        self.assertTrue(self.list_samples().success, "the node keeps serving")
 
 
 if __name__ == "__main__":

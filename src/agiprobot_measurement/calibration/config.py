@@ -15,6 +15,7 @@ import numpy as np
 from agiprobot_measurement._paths import CONFIG_DIR, URDF_DIR
 from agiprobot_measurement.calibration.registration import CalibrationError
 from agiprobot_measurement.common.config import read_yaml
+from agiprobot_measurement.common.limits import excerpt
 from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.station import Station
 
@@ -38,7 +39,7 @@ def check_mode(mode: str, where: str = "~mode") -> str:
     """``mode`` if it is one of :data:`MODES`, else a :class:`CalibrationError` naming ``where``."""
     mode = str(mode)
     if mode not in MODES:
-        raise CalibrationError(f"{where} must be one of {', '.join(MODES)}, got {mode!r}")
+        raise CalibrationError(f"{where} must be one of {', '.join(MODES)}, got {excerpt(mode)}")
     return mode
 
 

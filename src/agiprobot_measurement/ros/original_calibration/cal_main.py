@@ -45,6 +45,7 @@ from agiprobot_measurement.calibration.original.calibration import calibrate, ci
 from agiprobot_measurement.calibration.original.utils import H2trans_rot, read_data, write_data
 from agiprobot_measurement.calibration.registration import CalibrationError, zigzag_path
 from agiprobot_measurement.common.geometry import fit_plane, transform_points
+from agiprobot_measurement.common.limits import excerpt
 from agiprobot_measurement.motion.ik import make_ik_solver
 from agiprobot_measurement.motion.kinematics import KinematicModel
 from agiprobot_measurement.ros.conversions import matrix_to_pose, pose_to_matrix
@@ -175,7 +176,7 @@ def station() -> StationHandles:
 
 def _check_mode(value) -> str:
     if value not in RUN_MODES:
-        raise CalibrationError(f"mode must be one of {', '.join(RUN_MODES)}, got {value!r}")
+        raise CalibrationError(f"mode must be one of {', '.join(RUN_MODES)}, got {excerpt(value)}")
     return value
 
 
