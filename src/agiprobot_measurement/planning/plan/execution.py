@@ -17,13 +17,14 @@ from typing import Protocol
 
 import numpy as np
 
-from agiprobot_measurement.errors import InputError, InternalError
+from agiprobot_measurement.errors import AgiprobotError, InputError, InternalError
 from agiprobot_measurement.motion.trajectory import JointTrajectory, check_trajectory
 from agiprobot_measurement.planning.candidates.viewpoint import ViewPoint
 from agiprobot_measurement.planning.plan import executors, plan_io
 from agiprobot_measurement.planning.plan.plan_io import START_TOLERANCE_RAD, ExecutionPlan
 
 __all__ = [
+    "JUMP_TOLERANCE_RAD",
     "ControllerLost",
     "ExecutionCancelled",
     "ExecutionError",
@@ -139,6 +140,32 @@ class ExecutionOutcome:
         return ""
 
 
+#: a robot this far (rad, any joint) from where its last segment ended has moved without a command: its controller
+#: was restarted or lost between moves (a controller's tracking error is far smaller)
+JUMP_TOLERANCE_RAD = 0.05
+
+
+def _jump_since(executor: SegmentExecutor, previous_end: np.ndarray | None, index: int) -> str:
+    """Why the robot's state is not where segment ``index`` (0-based) - 1 ended, or '' (no earlier segment, the
+    state unknown, or within :data:`JUMP_TOLERANCE_RAD`)."""
+    if previous_end is None:
+        return ""
+    try:
+        state = np.asarray(executor.current_state(), dtype=float)
+    except (AgiprobotError, ValueError, RuntimeError):
+        return ""
+    if state.shape != previous_end.shape:
+        return ""
+    offsets = np.abs(state - previous_end)
+    joint = int(np.argmax(offsets))
+    if not offsets[joint] > JUMP_TOLERANCE_RAD:
+        return ""
+    return (
+        f"the robot's joint {joint + 1} is {offsets[joint]:.3f} rad from where segment {index} ended without a "
+        "command: the controller was restarted or lost between moves"
+    )
+
+
 def execute_segments(
     segments: Sequence[tuple[str, JointTrajectory, object]],
     executor: SegmentExecutor,
@@ -148,6 +175,7 @@ def execute_segments(
     stop at the first failure or cancel. ``on_segment`` hears of each segment before it starts."""
     total_time = sum(trajectory.duration for _, trajectory, _ in segments if trajectory is not None) or 1.0
     done_time = 0.0
+    previous_end = None
     for index, (kind, trajectory, view) in enumerate(segments):
         if on_segment is not None:
             on_segment(SegmentFeedback(index + 1, len(segments), kind, done_time / total_time))
@@ -160,7 +188,11 @@ def execute_segments(
         except ControllerLost as exc:
             return ExecutionOutcome("controller_lost", index, len(segments), str(exc))
         except ExecutionError as exc:
+            jump = _jump_since(executor, previous_end, index)
+            if jump:  # a controller restarted between moves refuses the next one as not starting at its state
+                return ExecutionOutcome("controller_lost", index, len(segments), f"{jump}; the segment failed: {exc}")
             return ExecutionOutcome("failed", index, len(segments), str(exc))
+        previous_end = trajectory.end
         done_time += trajectory.duration
     return ExecutionOutcome("ok", len(segments), len(segments))
 

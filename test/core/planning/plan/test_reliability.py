@@ -211,8 +211,10 @@ def test_a_planning_request_for_an_existing_plan_file_is_refused_before_planning
     assert (directory / "taken.yaml").read_text() == "keep me" and session.plan is plan
 
 
-def test_figures_stay_in_their_root_and_never_replace_a_file(planned):
-    session, directory = planned
+def test_figures_stay_in_their_root_and_never_replace_a_file(station, tmp_path):
+    directory = tmp_path  # a session of its own: the shared one may hold a loaded plan, which has no figure
+    session = MeasurementSession(station, load_planning_defaults(), plan_directory=directory)
+    session.plan_measurement(session.request(**QUICK), station.named_states["home"])
     for name in ("/etc/fig.png", "../fig.png", "~/fig.png"):
         with pytest.raises(PathPolicyError):
             session.write_figure(name)
@@ -262,6 +264,39 @@ class LosingExecutor(SimulatedExecutor):
         super().execute_segment(trajectory, kind, viewpoint)
 
 
+class RestartedExecutor(SimulatedExecutor):
+    """A controller killed and respawned after segment ``at`` - 1: it starts at all-zero joints and refuses the
+    next segment as not starting at its state."""
+
+    def __init__(self, start_state, limits, at):
+        super().__init__(start_state, limits)
+        self.at, self.count = at, 0
+
+    def execute_segment(self, trajectory, kind, viewpoint=None):
+        self.count += 1
+        if self.count == self.at:
+            self.state = np.zeros_like(self.state)
+        super().execute_segment(trajectory, kind, viewpoint)
+
+
+def test_a_controller_restarted_between_moves_is_reported_as_lost(planned, station):
+    session = planned[0]
+    home = station.named_states["home"]
+    plan = session.prepared_plan(home)
+    outcome = session.execute(plan, RestartedExecutor(home, station.limits, at=3))
+    total = len(plan.segments)
+    assert outcome.status == "controller_lost" and outcome.segments_executed == 2, outcome
+    message = outcome.describe()
+    assert message.startswith(f"controller lost during segment 3 of {total}: the robot's joint "), message
+    assert "from where segment 2 ended without a command: the controller was restarted or lost" in message
+    assert "the segment failed: measure segment rejected" in message or "connect segment rejected" in message
+    # a segment that fails while the robot stays where it was is still a failure, not a lost controller
+    bad = [(s.kind, s.trajectory, None) for s in plan.segments]
+    bad[2] = (bad[2][0], bad[4][1], None)
+    outcome = execute_segments(bad, SimulatedExecutor(home, station.limits))
+    assert outcome.status == "failed" and outcome.segments_executed == 2
+
+
 def test_a_lost_controller_ends_the_loop_naming_its_segment(planned, station):
     session = planned[0]
     home = station.named_states["home"]
@@ -275,3 +310,31 @@ def test_a_lost_controller_ends_the_loop_naming_its_segment(planned, station):
     )
     assert outcome.ok
     np.testing.assert_allclose(plan.segments[0].trajectory.start, home, atol=1e-3)
+
+
+# ------------------------------------------------------------------------------------ the report names its plan
+def test_the_report_counts_the_views_of_the_plan_it_names(station, tmp_path):
+    """After another plan file was adopted, the report named that file with the planning run's view count."""
+    session = MeasurementSession(station, load_planning_defaults(), plan_directory=tmp_path)
+    session.plan_measurement(session.request(**QUICK), station.named_states["home"])
+    planned = session.summary()
+    assert planned.source == "(planned, not stored)" and planned.report is not None
+    assert planned.number_of_views == planned.report.n_views >= 2
+    assert planned.message == "plan: (planned, not stored)"
+    fewer = ExecutionPlan(session.plan.metadata, session.plan.segments[:2])  # the first view only
+    store_execution_plan(tmp_path / "one_view.yaml", fewer)
+    session.load("one_view")
+    summary = session.summary()
+    assert summary.source == str(tmp_path / "one_view.yaml") and summary.report is None
+    assert summary.number_of_views == 1 and summary.estimated_execution_time_s == pytest.approx(fewer.duration)
+    assert summary.message.startswith(f"plan: {tmp_path / 'one_view.yaml'} (loaded: no coverage prediction")
+    assert summary.as_dict()["number_of_views"] == 1 and summary.as_dict()["predicted_coverage"] is None
+    with pytest.raises(GoalError, match="loaded from a file"):
+        session.write_figure("coverage.png")
+    assert not (tmp_path / "coverage.png").exists()
+
+
+def test_the_report_needs_a_plan(station, tmp_path):
+    session = MeasurementSession(station, load_planning_defaults(), plan_directory=tmp_path)
+    with pytest.raises(GoalError, match="nothing planned or loaded yet"):
+        session.summary()
