@@ -25,6 +25,8 @@ from agiprobot_measurement.planning.plan.plan_io import START_TOLERANCE_RAD, Exe
 
 __all__ = [
     "JUMP_TOLERANCE_RAD",
+    "MAX_PART_LINEAR_ENTRY",
+    "MAX_PART_OFFSET_MM",
     "ControllerLost",
     "ExecutionCancelled",
     "ExecutionError",
@@ -207,6 +209,13 @@ def plan_segments(plan_or_segments, views: Sequence | None = None) -> list[tuple
     return [(s.kind, s.trajectory, by_measure.get(i)) for i, s in enumerate(segments)]
 
 
+#: a stored plan's part lies at most this far (mm, any axis) from the world origin: a station is metres across, and a
+#: part beyond it executed "successfully" with nothing to measure
+MAX_PART_OFFSET_MM = 1e5
+#: largest entry of a part placement's linear part: a rotation times the file unit's scale (1000 for metres)
+MAX_PART_LINEAR_ENTRY = 1e4
+
+
 @dataclass(frozen=True)
 class PlanPart:
     """The part a plan measures: its mesh file, the file's unit, and ``placement_mm``, the 4x4 map from file
@@ -244,6 +253,20 @@ def plan_part(plan: ExecutionPlan) -> PlanPart | None:
         raise plan_io.PlanError(f"{where}{key} must be 16 numbers (a 4x4 matrix, mm), got shape {placement.shape}")
     if not np.all(np.isfinite(placement)):
         raise plan_io.PlanError(f"{where}{key} holds NaN or infinite values")
+    placement = placement.reshape(4, 4)
+    offset_mm = float(np.abs(placement[:3, 3]).max())
+    if offset_mm > MAX_PART_OFFSET_MM:
+        raise plan_io.PlanError(
+            f"{where}{key} places the part {offset_mm:.3g} mm from the world origin: beyond the "
+            f"{MAX_PART_OFFSET_MM:,.0f} mm a station spans"
+        )
+    if float(np.abs(placement[:3, :3]).max()) > MAX_PART_LINEAR_ENTRY or not np.allclose(
+        placement[3], [0.0, 0.0, 0.0, 1.0]
+    ):
+        raise plan_io.PlanError(
+            f"{where}{key} must be a rotation and a unit scale (entries of at most {MAX_PART_LINEAR_ENTRY:g}) "
+            "and end in the row 0 0 0 1"
+        )
     part_file = params["part_file"]
     if not isinstance(part_file, str) or not part_file:
         raise plan_io.PlanError(f"{where}parameters.part_file must be a file name, got {part_file!r}")

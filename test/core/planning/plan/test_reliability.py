@@ -84,7 +84,15 @@ def test_shared_metadata_is_written_as_loaded_not_expanded(tmp_path):
 # ------------------------------------------------------------------------------------ row 10: bad transform
 @pytest.mark.parametrize(
     ("value", "expected"),
-    [([1.0, 2.0, 3.0], "shape"), ([[1.0, "a"]] * 8, "16 numbers"), ([float("nan")] * 16, "NaN")],
+    [
+        ([1.0, 2.0, 3.0], "shape"),
+        ([[1.0, "a"]] * 8, "16 numbers"),
+        ([float("nan")] * 16, "NaN"),
+        # finite but absurd: executed "successfully" 1e300 mm away with nothing measured
+        ([[1.0, 0.0, 0.0, 1e300], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]], "1e\\+300 mm"),
+        ([[1e9, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]], "unit scale"),
+        ([[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 5.0, 1.0]], "0 0 0 1"),
+    ],
 )
 def test_a_bad_part_transform_names_file_and_key(value, expected):
     plan = ExecutionPlan(
@@ -93,6 +101,13 @@ def test_a_bad_part_transform_names_file_and_key(value, expected):
     with pytest.raises(PlanError, match=expected) as info:
         plan_part(plan)
     assert "/plans/bad.yaml" in str(info.value) and "parameters.part_transform_mm" in str(info.value)
+
+
+def test_a_part_in_metres_near_the_robot_is_accepted():
+    placement = np.diag([1000.0, 1000.0, 1000.0, 1.0])
+    placement[:3, 3] = [800.0, -300.0, 50.0]
+    plan = ExecutionPlan({"parameters": {"part_file": str(CUBE), "part_transform_mm": placement.tolist()}}, [])
+    assert plan_part(plan).scale_to_mm == 1000.0
 
 
 # ------------------------------------------------------------------------------------ row 11: directory part
