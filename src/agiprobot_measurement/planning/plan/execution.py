@@ -47,6 +47,7 @@ __all__ = [
     "plan_segments",
     "segment_triples",
     "starts_at",
+    "state_jump",
     "view_segments",
 ]
 
@@ -147,25 +148,33 @@ class ExecutionOutcome:
 JUMP_TOLERANCE_RAD = 0.05
 
 
-def _jump_since(executor: SegmentExecutor, previous_end: np.ndarray | None, index: int) -> str:
-    """Why the robot's state is not where segment ``index`` (0-based) - 1 ended, or '' (no earlier segment, the
-    state unknown, or within :data:`JUMP_TOLERANCE_RAD`)."""
-    if previous_end is None:
+def state_jump(state, expected: np.ndarray | None, where: str) -> str:
+    """Why the robot's joint ``state`` (rad) is not at ``expected``, where ``where`` (e.g. 'segment 2') ended, or ''
+    (nothing expected, the state unknown or of another shape, or within :data:`JUMP_TOLERANCE_RAD`)."""
+    if expected is None or state is None:
         return ""
-    try:
-        state = np.asarray(executor.current_state(), dtype=float)
-    except (AgiprobotError, ValueError, RuntimeError):
+    state = np.asarray(state, dtype=float)
+    if state.shape != np.shape(expected):
         return ""
-    if state.shape != previous_end.shape:
-        return ""
-    offsets = np.abs(state - previous_end)
+    offsets = np.abs(state - expected)
     joint = int(np.argmax(offsets))
     if not offsets[joint] > JUMP_TOLERANCE_RAD:
         return ""
     return (
-        f"the robot's joint {joint + 1} is {offsets[joint]:.3f} rad from where segment {index} ended without a "
-        "command: the controller was restarted or lost between moves"
+        f"the robot's joint {joint + 1} is {offsets[joint]:.3f} rad from where {where} ended without a command: "
+        "the controller was restarted or lost between moves"
     )
+
+
+def _jump_since(executor: SegmentExecutor, previous_end: np.ndarray | None, index: int) -> str:
+    """:func:`state_jump` of ``executor``'s state since segment ``index`` (0-based) - 1 ended."""
+    if previous_end is None:
+        return ""
+    try:
+        state = executor.current_state()
+    except (AgiprobotError, ValueError, RuntimeError):
+        return ""
+    return state_jump(state, previous_end, f"segment {index}")
 
 
 def execute_segments(

@@ -15,6 +15,7 @@ from agiprobot_measurement.planning.plan.execution import (
     SimulatedExecutor,
     execute_segments,
     plan_part,
+    state_jump,
 )
 from agiprobot_measurement.planning.plan.plan_io import (
     ExecutionPlan,
@@ -310,6 +311,16 @@ def test_a_controller_restarted_between_moves_is_reported_as_lost(planned, stati
     bad[2] = (bad[2][0], bad[4][1], None)
     outcome = execute_segments(bad, SimulatedExecutor(home, station.limits))
     assert outcome.status == "failed" and outcome.segments_executed == 2
+
+
+def test_a_state_jump_names_the_joint_and_ignores_what_it_cannot_compare():
+    end = np.array([2.886, -1.0, 0.5])
+    assert state_jump(np.zeros(3), end, "the last motion") == (
+        "the robot's joint 1 is 2.886 rad from where the last motion ended without a command: the controller was "
+        "restarted or lost between moves"
+    )
+    assert state_jump(end + 0.01, end, "segment 2") == ""  # tracking error
+    assert state_jump(None, end, "x") == state_jump(np.zeros(3), None, "x") == state_jump(np.zeros(2), end, "x") == ""
 
 
 def test_a_lost_controller_ends_the_loop_naming_its_segment(planned, station):
