@@ -212,12 +212,37 @@ class MeasurementFaultTest(unittest.TestCase):
         self.assertIn("bad_transform.yaml", reply.message)
         self.assertIn("part_transform_mm", reply.message)
         self.assertNotIn("reshape", reply.message)
+        # a finite but absurd one too (it executed "successfully" 1e300 mm away)
+        data[0]["parameters"]["part_transform_mm"] = [[1, 0, 0, 1.0e300], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]
+        (self.root / "far_transform.yaml").write_text(yaml.safe_dump(data))
+        reply = self.load("far_transform")
+        self.assertFalse(reply.success)
+        self.assertIn("far_transform.yaml: parameters.part_transform_mm places the part 1e+300 mm", reply.message)
         # a directory as part file says so
         state, result = self._plan(quick_goal(part_file=str(self.root)), timeout_s=60)
         self.assertEqual(state, GoalStatus.ABORTED)
         self.assertIn("is a directory", result.error)
         self.assertEqual(self._plan_source(), source)
         self._serves_a_good_request()
+
+    def test_6b_the_report_counts_the_views_of_the_plan_it_names(self):
+        planned = self.report("")
+        self.assertTrue(planned.success, planned.message)
+        self.assertGreater(planned.predicted_coverage, 0.0)
+        data = yaml.safe_load((self.root / "baseline.yaml").read_text())
+        (self.root / "one_view.yaml").write_text(yaml.safe_dump(data[:3]))  # the metadata and the first view
+        try:
+            self.assertTrue(self.load("one_view").success)
+            reply = self.report("")
+            self.assertTrue(reply.success, reply.message)
+            self.assertIn(f"plan: {self.root / 'one_view.yaml'} (loaded: no coverage prediction", reply.message)
+            self.assertEqual(reply.number_of_views, 1)
+            self.assertEqual(reply.predicted_coverage, -1.0)
+            self.assertEqual(yaml.safe_load(reply.report_yaml)["number_of_views"], 1)
+            self.assertFalse(self.report(str(self.root / "one_view.png")).success, "no figure of another plan")
+        finally:  # the later tests execute the planned plan again
+            state, result = self._plan(quick_goal())
+            self.assertEqual(state, GoalStatus.SUCCEEDED, result.error)
 
     # ------------------------------------------------------------------------------------- row 8
     def test_7_a_killed_controller_aborts_the_execution_and_a_restart_works(self):

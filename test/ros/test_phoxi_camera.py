@@ -26,6 +26,8 @@ import rosservice
 import rostest
 import rostopic
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from dynamic_reconfigure.msg import Config, DoubleParameter, StrParameter
+from dynamic_reconfigure.srv import Reconfigure
 from geometry_msgs.msg import Transform
 from std_srvs.srv import Empty as StdEmpty
 
@@ -476,6 +478,24 @@ class PhoxiCameraTest(unittest.TestCase):
         self.assertEqual(result["confidence"], before)
         self.assertEqual(rospy.get_param(f"{NODE}/confidence"), before)
         self.assertGreaterEqual(self._trigger(), 0, "the node keeps serving")
+
+    def test_a_reconfigured_value_of_the_wrong_type_is_refused(self):
+        """A double for the int resolution broke every later frame; a string for a bool raised a raw TypeError.
+        Sent as raw requests: the Python client would cast the values first."""
+        before = rospy.get_param(f"{NODE}/resolution")
+        set_parameters = service("set_parameters", Reconfigure)
+        for request, expected in (
+            (Config(doubles=[DoubleParameter("resolution", 0.5)]), "parameter resolution is int: got float '0.5'"),
+            (Config(strs=[StrParameter("organized_cloud", "no")]), "parameter organized_cloud is bool: got str 'no'"),
+        ):
+            with self.assertRaises(rospy.ServiceException) as refused:
+                set_parameters(request)
+            self.assertIn(expected, str(refused.exception))
+        self.assertEqual(rospy.get_param(f"{NODE}/resolution"), before)
+        self.assertIs(rospy.get_param(f"{NODE}/organized_cloud"), True)
+        self.assertGreaterEqual(self._trigger(), 0, "the node keeps serving")
+        reply = service("get_frame", GetFrame)(-1)
+        self.assertTrue(reply.success, reply.message)
 
     def test_get_frame_from_the_command_line(self):
         result = subprocess.run(

@@ -27,6 +27,7 @@ from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from agiprobot_measurement.motion.trajectory import JointTrajectory
 from agiprobot_measurement.msg import ExecuteJointTrajectoryAction, ExecuteJointTrajectoryGoal
 from agiprobot_measurement.nbv.volumetric.interfaces import CapturedView, CaptureError, MotionError
+from agiprobot_measurement.planning.plan.execution import state_jump
 from agiprobot_measurement.ros.action_client import ActionClient
 from agiprobot_measurement.ros.conversions import joint_trajectory_to_msg, transform_to_matrix
 from agiprobot_measurement.ros.executor import ControllerWatch
@@ -73,6 +74,7 @@ class RosNBVRobot:
         self.poll_s = float(poll_s)
         self.client = ActionClient(controller_action, ExecuteJointTrajectoryAction)
         self.watch = ControllerWatch(self.joints, self.client, heartbeat_timeout_s)
+        self.last_end: np.ndarray | None = None  # where the last motion ended (rad)
 
     def current_joints(self) -> np.ndarray:
         joints = self.joints.wait(self.state_timeout_s)
@@ -85,6 +87,7 @@ class RosNBVRobot:
     def execute(self, trajectory: JointTrajectory) -> None:
         if not self.client.wait_for_server(rospy.Duration(10.0)):
             raise MotionError(f"the robot controller's action {self.controller_action} is not available")
+        expected, self.last_end = self.last_end, None  # known again only once this motion succeeded
         self.client.send_goal(ExecuteJointTrajectoryGoal(trajectory=joint_trajectory_to_msg(trajectory)))
         while not self.client.wait_for_result(rospy.Duration(self.poll_s)):
             if self.cancel_requested() or rospy.is_shutdown():
@@ -98,7 +101,12 @@ class RosNBVRobot:
         state, result = self.client.get_state(), self.client.get_result()
         if state != GoalStatus.SUCCEEDED or result is None or not result.success:
             reason = result.error if result is not None and result.error else GoalStatus.to_string(state)
+            # a controller restarted between moves refuses the next one as not starting at its state
+            jump = state_jump(self.joints.latest(), expected, "the last motion")
+            if jump:
+                raise MotionError(f"robot controller lost: {jump}; the motion failed: {reason}")
             raise MotionError(f"robot motion failed: {reason}")
+        self.last_end = np.asarray(trajectory.end, dtype=float)
         self._settle()
 
     def _settle(self) -> None:

@@ -17,13 +17,16 @@ from typing import Protocol
 
 import numpy as np
 
-from agiprobot_measurement.errors import InputError, InternalError
+from agiprobot_measurement.errors import AgiprobotError, InputError, InternalError
 from agiprobot_measurement.motion.trajectory import JointTrajectory, check_trajectory
 from agiprobot_measurement.planning.candidates.viewpoint import ViewPoint
 from agiprobot_measurement.planning.plan import executors, plan_io
 from agiprobot_measurement.planning.plan.plan_io import START_TOLERANCE_RAD, ExecutionPlan
 
 __all__ = [
+    "JUMP_TOLERANCE_RAD",
+    "MAX_PART_LINEAR_ENTRY",
+    "MAX_PART_OFFSET_MM",
     "ControllerLost",
     "ExecutionCancelled",
     "ExecutionError",
@@ -44,6 +47,7 @@ __all__ = [
     "plan_segments",
     "segment_triples",
     "starts_at",
+    "state_jump",
     "view_segments",
 ]
 
@@ -139,6 +143,40 @@ class ExecutionOutcome:
         return ""
 
 
+#: a robot this far (rad, any joint) from where its last segment ended has moved without a command: its controller
+#: was restarted or lost between moves (a controller's tracking error is far smaller)
+JUMP_TOLERANCE_RAD = 0.05
+
+
+def state_jump(state, expected: np.ndarray | None, where: str) -> str:
+    """Why the robot's joint ``state`` (rad) is not at ``expected``, where ``where`` (e.g. 'segment 2') ended, or ''
+    (nothing expected, the state unknown or of another shape, or within :data:`JUMP_TOLERANCE_RAD`)."""
+    if expected is None or state is None:
+        return ""
+    state = np.asarray(state, dtype=float)
+    if state.shape != np.shape(expected):
+        return ""
+    offsets = np.abs(state - expected)
+    joint = int(np.argmax(offsets))
+    if not offsets[joint] > JUMP_TOLERANCE_RAD:
+        return ""
+    return (
+        f"the robot's joint {joint + 1} is {offsets[joint]:.3f} rad from where {where} ended without a command: "
+        "the controller was restarted or lost between moves"
+    )
+
+
+def _jump_since(executor: SegmentExecutor, previous_end: np.ndarray | None, index: int) -> str:
+    """:func:`state_jump` of ``executor``'s state since segment ``index`` (0-based) - 1 ended."""
+    if previous_end is None:
+        return ""
+    try:
+        state = executor.current_state()
+    except (AgiprobotError, ValueError, RuntimeError):
+        return ""
+    return state_jump(state, previous_end, f"segment {index}")
+
+
 def execute_segments(
     segments: Sequence[tuple[str, JointTrajectory, object]],
     executor: SegmentExecutor,
@@ -148,6 +186,7 @@ def execute_segments(
     stop at the first failure or cancel. ``on_segment`` hears of each segment before it starts."""
     total_time = sum(trajectory.duration for _, trajectory, _ in segments if trajectory is not None) or 1.0
     done_time = 0.0
+    previous_end = None
     for index, (kind, trajectory, view) in enumerate(segments):
         if on_segment is not None:
             on_segment(SegmentFeedback(index + 1, len(segments), kind, done_time / total_time))
@@ -160,7 +199,11 @@ def execute_segments(
         except ControllerLost as exc:
             return ExecutionOutcome("controller_lost", index, len(segments), str(exc))
         except ExecutionError as exc:
+            jump = _jump_since(executor, previous_end, index)
+            if jump:  # a controller restarted between moves refuses the next one as not starting at its state
+                return ExecutionOutcome("controller_lost", index, len(segments), f"{jump}; the segment failed: {exc}")
             return ExecutionOutcome("failed", index, len(segments), str(exc))
+        previous_end = trajectory.end
         done_time += trajectory.duration
     return ExecutionOutcome("ok", len(segments), len(segments))
 
@@ -173,6 +216,13 @@ def plan_segments(plan_or_segments, views: Sequence | None = None) -> list[tuple
     if views and len(views) * 2 == len(segments):
         by_measure = {2 * i + 1: view for i, view in enumerate(views)}
     return [(s.kind, s.trajectory, by_measure.get(i)) for i, s in enumerate(segments)]
+
+
+#: a stored plan's part lies at most this far (mm, any axis) from the world origin: a station is metres across, and a
+#: part beyond it executed "successfully" with nothing to measure
+MAX_PART_OFFSET_MM = 1e5
+#: largest entry of a part placement's linear part: a rotation times the file unit's scale (1000 for metres)
+MAX_PART_LINEAR_ENTRY = 1e4
 
 
 @dataclass(frozen=True)
@@ -212,6 +262,20 @@ def plan_part(plan: ExecutionPlan) -> PlanPart | None:
         raise plan_io.PlanError(f"{where}{key} must be 16 numbers (a 4x4 matrix, mm), got shape {placement.shape}")
     if not np.all(np.isfinite(placement)):
         raise plan_io.PlanError(f"{where}{key} holds NaN or infinite values")
+    placement = placement.reshape(4, 4)
+    offset_mm = float(np.abs(placement[:3, 3]).max())
+    if offset_mm > MAX_PART_OFFSET_MM:
+        raise plan_io.PlanError(
+            f"{where}{key} places the part {offset_mm:.3g} mm from the world origin: beyond the "
+            f"{MAX_PART_OFFSET_MM:,.0f} mm a station spans"
+        )
+    if float(np.abs(placement[:3, :3]).max()) > MAX_PART_LINEAR_ENTRY or not np.allclose(
+        placement[3], [0.0, 0.0, 0.0, 1.0]
+    ):
+        raise plan_io.PlanError(
+            f"{where}{key} must be a rotation and a unit scale (entries of at most {MAX_PART_LINEAR_ENTRY:g}) "
+            "and end in the row 0 0 0 1"
+        )
     part_file = params["part_file"]
     if not isinstance(part_file, str) or not part_file:
         raise plan_io.PlanError(f"{where}parameters.part_file must be a file name, got {part_file!r}")

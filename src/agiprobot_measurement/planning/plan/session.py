@@ -45,7 +45,7 @@ from agiprobot_measurement.planning.report.report import CoverageReport
 from agiprobot_measurement.planning.request import PlanRequest, WorkBudget
 from agiprobot_measurement.planning.trajectory_manager import ProgressCallback, TrajectoryManager
 
-__all__ = ["GoalError", "MeasurementSession", "PlanningOutcome"]
+__all__ = ["GoalError", "MeasurementSession", "PlanSummary", "PlanningOutcome"]
 
 
 class GoalError(InputError):
@@ -59,6 +59,37 @@ class PlanningOutcome:
     report: CoverageReport
     plan_file: str
     tilt_choice: str = ""
+
+
+@dataclass(frozen=True)
+class PlanSummary:
+    """What a coverage report says about the session's plan: its ``source`` (file or '(planned, not stored)'),
+    its own view count and duration, and ``report``, the planning run's coverage report only when the plan is that
+    run's (None for a plan loaded from a file: no prediction belongs to it)."""
+
+    source: str
+    number_of_views: int
+    estimated_execution_time_s: float
+    measured_coverage: float
+    report: CoverageReport | None
+
+    @property
+    def message(self) -> str:
+        if self.report is not None:
+            return f"plan: {self.source}"
+        return f"plan: {self.source} (loaded: no coverage prediction belongs to it; plan it to get one)"
+
+    def as_dict(self) -> dict:
+        if self.report is not None:
+            data = self.report.as_dict()
+        else:
+            data = {"number_of_views": self.number_of_views, "predicted_coverage": None}
+        data.update(
+            plan=self.source,
+            estimated_execution_time_s=self.estimated_execution_time_s,
+            measured_coverage=self.measured_coverage,
+        )
+        return data
 
 
 class MeasurementSession:
@@ -101,6 +132,7 @@ class MeasurementSession:
         self.coverable_mask: np.ndarray | None = None
         self.predicted_mask: np.ndarray | None = None
         self.last_measured_coverage = -1.0
+        self.planned_plan: plan_io.ExecutionPlan | None = None  # the plan of the planning run (self.manager)
 
     # ------------------------------------------------------------------------------------ paths
     def resolve(self, path_text: str | Path) -> Path:
@@ -164,7 +196,7 @@ class MeasurementSession:
             written = str(manager.last_plan_path)
         report = manager.coverage_report()
         with self.lock:
-            self.manager, self.views, self.plan = manager, ordered, plan
+            self.manager, self.views, self.plan, self.planned_plan = manager, ordered, plan, plan
             self.plan_source = written or "(planned, not stored)"
             self.part = PlanPart(
                 request.part_file,
@@ -244,6 +276,21 @@ class MeasurementSession:
         return result
 
     # ------------------------------------------------------------------------------------ reports
+    def summary(self) -> PlanSummary:
+        """The report of the session's plan: the planning run's coverage report while the plan is that run's,
+        else the loaded plan's own view count and duration (the last planning run's numbers describe another
+        plan). :class:`GoalError` without a plan."""
+        with self.lock:
+            plan, source, manager, measured = self.plan, self.plan_source, self.manager, self.last_measured_coverage
+            own = manager is not None and plan is not None and plan is self.planned_plan
+        if plan is None:
+            raise GoalError("nothing planned or loaded yet")
+        views = sum(1 for segment in plan.segments if segment.kind == plan_io.MEASURE)
+        report = manager.coverage_report() if own else None
+        if report is not None:
+            return PlanSummary(source, report.n_views, report.estimated_execution_time_s, measured, report)
+        return PlanSummary(source, views, float(plan.duration), measured, None)
+
     def figure_path(self, name: str, overwrite: bool = False) -> Path:
         """Where the figure ``name`` (.png) goes under the file policy; an existing file is kept and the figure
         gets the next free version name (``name_2.png``, ...) unless ``overwrite``."""
@@ -269,6 +316,11 @@ class MeasurementSession:
         manager = self.manager
         if manager is None:
             raise GoalError("nothing planned yet")
+        if self.plan is not self.planned_plan:
+            raise GoalError(
+                f"the plan {self.plan_source} was loaded from a file: the figure shows a planning run's prediction, "
+                "plan it to get one"
+            )
         path = self.figure_path(name, overwrite)
         measured = self.last_measured_coverage
         report = manager.coverage_report()

@@ -117,6 +117,7 @@ from agiprobot_measurement.sensors.phoxi.device import (
     SETTING_NAMES,
     PhoxiDevice,
     PhoxiError,
+    check_reconfigure_changes,
     default_allowed_save_dirs,
     frame_output,
     load_camera_config,
@@ -132,6 +133,16 @@ from agiprobot_measurement.station.urdf_model import UrdfModel
 #: full, permissions)
 REQUEST_ERRORS = (AgiprobotError, OSError)
 DIAGNOSTIC_LEVELS = {"OK": DiagnosticStatus.OK, "WARN": DiagnosticStatus.WARN, "ERROR": DiagnosticStatus.ERROR}
+
+
+class CheckedReconfigureServer(ReconfigureServer):
+    """dynamic_reconfigure's server with every value checked against its parameter's type before anything else:
+    its own range clamp compares a string with a bool (a TypeError) and keeps a double for an int parameter, which
+    broke every later frame. A wrong type refuses the request with a clear service error and keeps the previous
+    values (:func:`check_reconfigure_changes`)."""
+
+    def update_configuration(self, changes):
+        return super().update_configuration(check_reconfigure_changes(changes))
 
 
 def _allowed_save_dirs(value) -> list[str]:
@@ -264,7 +275,7 @@ class PhoxiCameraNode:
             ):
                 self.config[name] = value
                 rospy.set_param(f"~{name}", value)
-        self.reconfigure = ReconfigureServer(phoxi_config, self._reconfigure)
+        self.reconfigure = CheckedReconfigureServer(phoxi_config, self._reconfigure)
 
         services = [
             ("get_device_list", GetDeviceList, self.get_device_list),

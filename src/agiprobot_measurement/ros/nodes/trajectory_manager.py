@@ -304,34 +304,37 @@ class TrajectoryManagerNode:
         return StorePlanResponse(True, f"stored {written}", str(written))
 
     def on_get_report(self, request):
-        manager = self.session.manager
-        if manager is None:
-            return GetCoverageReportResponse(success=False, message="nothing planned yet", measured_coverage=-1.0)
-        report = manager.coverage_report()
-        measured = self.session.last_measured_coverage
-        data = report.as_dict()
-        data["measured_coverage"] = measured
+        try:  # the numbers belong to the plan the message names (a loaded plan has no prediction)
+            summary = self.session.summary()
+        except AgiprobotError as exc:
+            return GetCoverageReportResponse(success=False, message=str(exc), measured_coverage=-1.0)
         figure = ""
         if request.figure_file:
             try:
                 figure = str(self.session.write_figure(request.figure_file))
             except (AgiprobotError, ValueError, OSError) as exc:
                 return GetCoverageReportResponse(success=False, message=f"figure: {exc}", measured_coverage=-1.0)
-        return GetCoverageReportResponse(
+        report = summary.report
+        response = GetCoverageReportResponse(
             figure_file=figure,
             success=True,
-            message=f"plan: {self.session.plan_source}",
-            number_of_samples=report.n_samples,
-            number_of_coverable=report.n_coverable,
-            number_of_covered=report.n_covered,
-            number_of_views=report.n_views,
-            predicted_coverage=report.coverage_of_coverable,
-            measured_coverage=measured,
-            estimated_execution_time_s=report.estimated_execution_time_s,
-            mean_uncertainty_mm=report.mean_uncertainty_mm,
-            max_uncertainty_mm=report.max_uncertainty_mm,
-            report_yaml=yaml.safe_dump(yaml_plain(data), sort_keys=False),
+            message=summary.message,
+            number_of_views=summary.number_of_views,
+            predicted_coverage=-1.0,
+            measured_coverage=summary.measured_coverage,
+            estimated_execution_time_s=summary.estimated_execution_time_s,
+            mean_uncertainty_mm=-1.0,
+            max_uncertainty_mm=-1.0,
+            report_yaml=yaml.safe_dump(yaml_plain(summary.as_dict()), sort_keys=False),
         )
+        if report is not None:
+            response.number_of_samples = report.n_samples
+            response.number_of_coverable = report.n_coverable
+            response.number_of_covered = report.n_covered
+            response.predicted_coverage = report.coverage_of_coverable
+            response.mean_uncertainty_mm = report.mean_uncertainty_mm
+            response.max_uncertainty_mm = report.max_uncertainty_mm
+        return response
 
     # ------------------------------------------------------------------------------------ execution
     def on_execute(self, goal):

@@ -38,6 +38,7 @@ import numpy as np
 from agiprobot_measurement.common.config import require, vector
 from agiprobot_measurement.common.files import FileRoot, PathPolicyError
 from agiprobot_measurement.common.geometry import look_at, matrix_to_rpy
+from agiprobot_measurement.common.limits import excerpt
 from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.sensors.phoxi import reconfigure as phoxi_config
 from agiprobot_measurement.sensors.phoxi.models import SIMULATED_SCANNER_ID, ScannerModel, SimulatedScanner
@@ -80,6 +81,7 @@ __all__ = [
     "PhoxiDevice",
     "PhoxiError",
     "ScenePoses",
+    "check_reconfigure_changes",
     "check_transformation",
     "default_allowed_save_dirs",
     "default_output_dir",
@@ -128,6 +130,50 @@ _DOUBLE_PARAMETERS = tuple(entry[0] for entry in phoxi_config.PARAMETERS if entr
 class PhoxiError(InputError):
     """A request the device refuses (a bad argument, or one the device's state does not allow: the client must
     change it); the message is what the service answers."""
+
+
+def _typed_value(name: str, kind: str, value):
+    """``value`` as parameter ``name`` of type ``kind`` holds it, or PhoxiError. dynamic_reconfigure's message has a
+    list per type and takes a name from any of them: an int parameter accepts an integral number (not a bool), a
+    double any real number, a bool a bool or the int 0 / 1; a string is no value of any of them."""
+    if kind == "bool":
+        if isinstance(value, bool):
+            return value
+        if isinstance(value, int) and value in (0, 1):
+            return bool(value)
+        expected = "a bool (true / false)"
+    elif kind == "int":
+        if isinstance(value, int) and not isinstance(value, bool):
+            return value
+        if isinstance(value, float) and math.isfinite(value) and value == int(value):
+            return int(value)
+        expected = "an integer"
+    elif kind == "double":
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            return float(value)
+        expected = "a number"
+    else:
+        return value
+    raise PhoxiError(f"parameter {name} is {kind}: got {type(value).__name__} {excerpt(value)}, expected {expected}")
+
+
+def check_reconfigure_changes(changes: Mapping) -> dict:
+    """The changes of a set_parameters request with every known parameter converted to its type, or PhoxiError
+    naming each value of the wrong type (the request is refused whole and changes nothing). Names the driver does
+    not know pass through unchanged, as dynamic_reconfigure ignores them."""
+    checked = dict(changes)
+    refusals = []
+    for name, value in changes.items():
+        kind = phoxi_config.type.get(name) if isinstance(name, str) else None
+        if kind is None:
+            continue
+        try:
+            checked[name] = _typed_value(name, kind, value)
+        except PhoxiError as exc:
+            refusals.append(str(exc))
+    if refusals:
+        raise PhoxiError("set_parameters refused, nothing changed: " + "; ".join(refusals))
+    return checked
 
 
 # --------------------------------------------------------------------------------------------- config
@@ -488,7 +534,8 @@ class PhoxiDevice:
         """The driver's dynamic_reconfigure callback: apply what ``level``'s bits name (-1: everything) and change
         ``config`` in place to what holds afterwards. Not connected: ``config`` becomes ``previous`` (the driver
         refuses to reconfigure without a scanner). A number that is not finite is put back to its ``previous`` value
-        (dynamic_reconfigure clamps to the ranges, but NaN passes its comparisons); a refused trigger mode or space
+        (dynamic_reconfigure clamps to the ranges, but NaN passes its comparisons), and so is a value of the wrong type
+        (:func:`check_reconfigure_changes`: a double for an int parameter); a refused trigger mode or space
         is put back to the device's. Returns why something was refused, or ''."""
         previous = dict(phoxi_config.defaults if previous is None else previous)
         if not self.connected:
@@ -496,6 +543,12 @@ class PhoxiDevice:
             config.update(previous)
             return "Node is not connected to scanner"
         refusals = []
+        for name, kind in phoxi_config.type.items():  # a value of the wrong type (a double for an int) is refused
+            try:
+                config[name] = _typed_value(name, kind, config[name])
+            except PhoxiError as exc:
+                refusals.append(f"{exc} (kept {previous[name]})")
+                config[name] = previous[name]
         for name in _DOUBLE_PARAMETERS:
             if not math.isfinite(float(config[name])):
                 refusals.append(f"{name} {config[name]} refused: not a finite number (kept {previous[name]})")

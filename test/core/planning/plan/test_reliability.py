@@ -15,6 +15,7 @@ from agiprobot_measurement.planning.plan.execution import (
     SimulatedExecutor,
     execute_segments,
     plan_part,
+    state_jump,
 )
 from agiprobot_measurement.planning.plan.plan_io import (
     ExecutionPlan,
@@ -84,7 +85,15 @@ def test_shared_metadata_is_written_as_loaded_not_expanded(tmp_path):
 # ------------------------------------------------------------------------------------ row 10: bad transform
 @pytest.mark.parametrize(
     ("value", "expected"),
-    [([1.0, 2.0, 3.0], "shape"), ([[1.0, "a"]] * 8, "16 numbers"), ([float("nan")] * 16, "NaN")],
+    [
+        ([1.0, 2.0, 3.0], "shape"),
+        ([[1.0, "a"]] * 8, "16 numbers"),
+        ([float("nan")] * 16, "NaN"),
+        # finite but absurd: executed "successfully" 1e300 mm away with nothing measured
+        ([[1.0, 0.0, 0.0, 1e300], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]], "1e\\+300 mm"),
+        ([[1e9, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]], "unit scale"),
+        ([[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 5.0, 1.0]], "0 0 0 1"),
+    ],
 )
 def test_a_bad_part_transform_names_file_and_key(value, expected):
     plan = ExecutionPlan(
@@ -93,6 +102,13 @@ def test_a_bad_part_transform_names_file_and_key(value, expected):
     with pytest.raises(PlanError, match=expected) as info:
         plan_part(plan)
     assert "/plans/bad.yaml" in str(info.value) and "parameters.part_transform_mm" in str(info.value)
+
+
+def test_a_part_in_metres_near_the_robot_is_accepted():
+    placement = np.diag([1000.0, 1000.0, 1000.0, 1.0])
+    placement[:3, 3] = [800.0, -300.0, 50.0]
+    plan = ExecutionPlan({"parameters": {"part_file": str(CUBE), "part_transform_mm": placement.tolist()}}, [])
+    assert plan_part(plan).scale_to_mm == 1000.0
 
 
 # ------------------------------------------------------------------------------------ row 11: directory part
@@ -211,8 +227,10 @@ def test_a_planning_request_for_an_existing_plan_file_is_refused_before_planning
     assert (directory / "taken.yaml").read_text() == "keep me" and session.plan is plan
 
 
-def test_figures_stay_in_their_root_and_never_replace_a_file(planned):
-    session, directory = planned
+def test_figures_stay_in_their_root_and_never_replace_a_file(station, tmp_path):
+    directory = tmp_path  # a session of its own: the shared one may hold a loaded plan, which has no figure
+    session = MeasurementSession(station, load_planning_defaults(), plan_directory=directory)
+    session.plan_measurement(session.request(**QUICK), station.named_states["home"])
     for name in ("/etc/fig.png", "../fig.png", "~/fig.png"):
         with pytest.raises(PathPolicyError):
             session.write_figure(name)
@@ -262,6 +280,49 @@ class LosingExecutor(SimulatedExecutor):
         super().execute_segment(trajectory, kind, viewpoint)
 
 
+class RestartedExecutor(SimulatedExecutor):
+    """A controller killed and respawned after segment ``at`` - 1: it starts at all-zero joints and refuses the
+    next segment as not starting at its state."""
+
+    def __init__(self, start_state, limits, at):
+        super().__init__(start_state, limits)
+        self.at, self.count = at, 0
+
+    def execute_segment(self, trajectory, kind, viewpoint=None):
+        self.count += 1
+        if self.count == self.at:
+            self.state = np.zeros_like(self.state)
+        super().execute_segment(trajectory, kind, viewpoint)
+
+
+def test_a_controller_restarted_between_moves_is_reported_as_lost(planned, station):
+    session = planned[0]
+    home = station.named_states["home"]
+    plan = session.prepared_plan(home)
+    outcome = session.execute(plan, RestartedExecutor(home, station.limits, at=3))
+    total = len(plan.segments)
+    assert outcome.status == "controller_lost" and outcome.segments_executed == 2, outcome
+    message = outcome.describe()
+    assert message.startswith(f"controller lost during segment 3 of {total}: the robot's joint "), message
+    assert "from where segment 2 ended without a command: the controller was restarted or lost" in message
+    assert "the segment failed: measure segment rejected" in message or "connect segment rejected" in message
+    # a segment that fails while the robot stays where it was is still a failure, not a lost controller
+    bad = [(s.kind, s.trajectory, None) for s in plan.segments]
+    bad[2] = (bad[2][0], bad[4][1], None)
+    outcome = execute_segments(bad, SimulatedExecutor(home, station.limits))
+    assert outcome.status == "failed" and outcome.segments_executed == 2
+
+
+def test_a_state_jump_names_the_joint_and_ignores_what_it_cannot_compare():
+    end = np.array([2.886, -1.0, 0.5])
+    assert state_jump(np.zeros(3), end, "the last motion") == (
+        "the robot's joint 1 is 2.886 rad from where the last motion ended without a command: the controller was "
+        "restarted or lost between moves"
+    )
+    assert state_jump(end + 0.01, end, "segment 2") == ""  # tracking error
+    assert state_jump(None, end, "x") == state_jump(np.zeros(3), None, "x") == state_jump(np.zeros(2), end, "x") == ""
+
+
 def test_a_lost_controller_ends_the_loop_naming_its_segment(planned, station):
     session = planned[0]
     home = station.named_states["home"]
@@ -275,3 +336,31 @@ def test_a_lost_controller_ends_the_loop_naming_its_segment(planned, station):
     )
     assert outcome.ok
     np.testing.assert_allclose(plan.segments[0].trajectory.start, home, atol=1e-3)
+
+
+# ------------------------------------------------------------------------------------ the report names its plan
+def test_the_report_counts_the_views_of_the_plan_it_names(station, tmp_path):
+    """After another plan file was adopted, the report named that file with the planning run's view count."""
+    session = MeasurementSession(station, load_planning_defaults(), plan_directory=tmp_path)
+    session.plan_measurement(session.request(**QUICK), station.named_states["home"])
+    planned = session.summary()
+    assert planned.source == "(planned, not stored)" and planned.report is not None
+    assert planned.number_of_views == planned.report.n_views >= 2
+    assert planned.message == "plan: (planned, not stored)"
+    fewer = ExecutionPlan(session.plan.metadata, session.plan.segments[:2])  # the first view only
+    store_execution_plan(tmp_path / "one_view.yaml", fewer)
+    session.load("one_view")
+    summary = session.summary()
+    assert summary.source == str(tmp_path / "one_view.yaml") and summary.report is None
+    assert summary.number_of_views == 1 and summary.estimated_execution_time_s == pytest.approx(fewer.duration)
+    assert summary.message.startswith(f"plan: {tmp_path / 'one_view.yaml'} (loaded: no coverage prediction")
+    assert summary.as_dict()["number_of_views"] == 1 and summary.as_dict()["predicted_coverage"] is None
+    with pytest.raises(GoalError, match="loaded from a file"):
+        session.write_figure("coverage.png")
+    assert not (tmp_path / "coverage.png").exists()
+
+
+def test_the_report_needs_a_plan(station, tmp_path):
+    session = MeasurementSession(station, load_planning_defaults(), plan_directory=tmp_path)
+    with pytest.raises(GoalError, match="nothing planned or loaded yet"):
+        session.summary()

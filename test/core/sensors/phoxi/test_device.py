@@ -19,6 +19,7 @@ from agiprobot_measurement.sensors.phoxi.device import (
     TRIGGER_SOFTWARE,
     PhoxiDevice,
     PhoxiError,
+    check_reconfigure_changes,
     check_transformation,
     default_allowed_save_dirs,
     default_output_dir,
@@ -624,6 +625,47 @@ def test_reconfigure_puts_back_numbers_that_are_not_finite(device):
     assert device.settings.confidence == 2.0 and device.settings.resolution == RESOLUTION_LOW
     frame = device.trigger(CAMERA)
     assert frame.valid.any()
+
+
+def test_reconfigure_puts_back_values_of_the_wrong_type(device):
+    """A double for the int resolution was stored and broke every later frame ("unknown resolution 0.5")."""
+    previous = dict(phoxi_config.defaults, resolution=RESOLUTION_LOW)
+    config = dict(previous, resolution=0.5, organized_cloud="no")
+    refusal = device.reconfigure(config, -1, previous=previous)
+    assert (
+        "parameter resolution is int: got float '0.5', expected an integer (kept 0)" in refusal
+        and "organized_cloud" in refusal
+    )
+    assert config["resolution"] == RESOLUTION_LOW and config["organized_cloud"] is True
+    assert device.settings.resolution == RESOLUTION_LOW
+    assert device.trigger(CAMERA).valid.any(), "the camera keeps working"
+
+
+@pytest.mark.parametrize("name", sorted(phoxi_config.type))
+def test_set_parameters_refuses_a_wrong_type_for_every_parameter(name):
+    kind = phoxi_config.type[name]
+    wrong = ["no", "1", None] + {"int": [0.5, float("nan"), True], "bool": [2, 0.0], "double": [False]}[kind]
+    for value in wrong:
+        with pytest.raises(PhoxiError, match=f"set_parameters refused, nothing changed: parameter {name} is {kind}"):
+            check_reconfigure_changes({"groups": {}, name: value})
+    default = phoxi_config.defaults[name]
+    assert check_reconfigure_changes({name: default}) == {name: default}
+
+
+def test_set_parameters_converts_values_of_a_compatible_type():
+    changes = {"resolution": 0.0, "confidence": 2, "send_texture": 0, "organized_cloud": 1, "unknown": "x"}
+    checked = check_reconfigure_changes(changes)
+    assert checked == {
+        "resolution": 0,
+        "confidence": 2.0,
+        "send_texture": False,
+        "organized_cloud": True,
+        "unknown": "x",
+    }
+    assert type(checked["resolution"]) is int and type(checked["confidence"]) is float
+    with pytest.raises(PhoxiError, match="got str") as refused:
+        check_reconfigure_changes({"resolution": "x" * 100_000})
+    assert len(str(refused.value)) < 1000, "the input is quoted as an excerpt"
 
 
 def test_capturing_modes_and_free_run_need_a_connection(device):
