@@ -39,7 +39,7 @@ import trimesh
 from agiprobot_measurement.common.config import positive
 from agiprobot_measurement.errors import InternalError
 from agiprobot_measurement.sensors.errors import SensorInputError, SensorTypeError, ViewIndexError
-from agiprobot_measurement.sensors.laser_line.queries import Cells, RayCaster, build_cells, cull_pairs
+from agiprobot_measurement.sensors.laser_line.queries import Cells, RayCaster, build_cells, cull_pairs, support_test
 from agiprobot_measurement.station import load_scanner_config
 
 __all__ = [
@@ -247,18 +247,12 @@ def supporting_faces(mesh: trimesh.Trimesh, tolerance: float | None = None) -> n
     if tolerance is None:
         tolerance = 1e-6 * float(mesh.scale)
     try:
-        hull = np.asarray(mesh.convex_hull.vertices)
+        hull = mesh.convex_hull
     except Exception:  # qhull fails on flat or degenerate meshes: then nothing is culled
         return np.zeros(len(mesh.faces), dtype=bool)
-    normals = np.asarray(mesh.face_normals)
-    origins = np.asarray(mesh.triangles[:, 0])
-    # the largest height of any hull vertex above each face plane, in blocks to bound the memory
-    result = np.zeros(len(normals), dtype=bool)
-    block = max(1, (1 << 22) // max(1, len(hull)))
-    for start in range(0, len(normals), block):
-        n = normals[start : start + block]
-        height = n @ hull.T - np.einsum("ij,ij->i", n, origins[start : start + block])[:, None]
-        result[start : start + block] = height.max(axis=1) <= tolerance
+    normals = np.asarray(mesh.face_normals, dtype=float)
+    thresholds = np.einsum("ij,ij->i", normals, mesh.triangles[:, 0]) + tolerance
+    result = support_test(hull, normals, thresholds, mesh.triangles[:, 0])
     # degenerate faces have no normal and so no front side
     result &= np.linalg.norm(normals, axis=1) > 0.5
     return result
