@@ -23,12 +23,15 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from agiprobot_measurement.common import config
+from agiprobot_measurement.common.limits import LIMITS, check_count, check_file_size, excerpt
 from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.planning.errors import validated
 from agiprobot_measurement.station import UNIT_SCALES_TO_M
 from agiprobot_measurement.station.placement import fixture_placement
 
 __all__ = [
+    "MAX_COORDINATE",
+    "MAX_PLACEMENT_MM",
     "MESH_SUFFIXES",
     "PLAUSIBLE_SIZE_MM",
     "STEP_SUFFIXES",
@@ -50,6 +53,10 @@ UNIT_SCALES_TO_MM = {unit: scale * 1000.0 for unit, scale in UNIT_SCALES_TO_M.it
 
 #: Largest extent (mm) of a part the UR10e station can plausibly measure; outside it a warning suggests units.
 PLAUSIBLE_SIZE_MM = (10.0, 2000.0)
+#: vertex coordinates beyond this (file units) are refused: no part is that large, and squares of them overflow
+MAX_COORDINATE = 1e12
+#: a part placed farther than this from the world origin (mm) is refused: the station is a few metres across
+MAX_PLACEMENT_MM = 1e5
 
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".glb", ".gltf")
 STEP_SUFFIXES = (".step", ".stp")
@@ -125,6 +132,12 @@ def validate_rigid_transform(transform, tolerance: float = 1e-6) -> np.ndarray:
         raise PartLoadError(f"part transform must be a 4x4 matrix, got shape {matrix.shape}")
     if not np.all(np.isfinite(matrix)):
         raise PartLoadError("part transform contains NaN or infinite values")
+    distance = float(np.max(np.abs(matrix[:3, 3])))
+    if distance > MAX_PLACEMENT_MM:
+        raise PartLoadError(
+            f"part transform shifts the part by {distance:.3g} mm along an axis, more than "
+            f"{MAX_PLACEMENT_MM:g} mm: the translation is in mm and the station is a few metres across"
+        )
     if not np.allclose(matrix[3], (0.0, 0.0, 0.0, 1.0), atol=tolerance):
         raise PartLoadError(f"part transform's last row must be [0, 0, 0, 1], got {matrix[3].tolist()}")
     rotation = matrix[:3, :3]
@@ -175,6 +188,7 @@ def _read_mesh(path: Path, tessellation_tolerance_mm: float = 0.0) -> trimesh.Tr
             head = handle.read(64)
         if b"ISO-10303" not in head:
             raise PartLoadError(f"{path}: not a STEP file (no ISO-10303 header)")
+        check_file_size(path, LIMITS.step_file_bytes, "STEP file")
     elif suffix in UNREAD_CAD_SUFFIXES:
         raise PartLoadError(
             f"{path}: IGES is not read here (trimesh's loader tessellates STEP through cascadio, not IGES); "
@@ -185,15 +199,35 @@ def _read_mesh(path: Path, tessellation_tolerance_mm: float = 0.0) -> trimesh.Tr
             f"{path}: unsupported part format {suffix or '(no suffix)'!r}; "
             f"supported: {', '.join(MESH_SUFFIXES + STEP_SUFFIXES)}"
         )
+    else:
+        check_file_size(path, LIMITS.mesh_file_bytes, "mesh file")
     try:
         loaded = trimesh.load(str(path), force="mesh", process=False, **options)
     except Exception as exc:  # trimesh raises anything from ValueError to ModuleNotFoundError on bad files
-        raise PartLoadError(f"{path}: cannot read the part: {type(exc).__name__}: {exc}") from exc
+        raise PartLoadError(f"{path}: {_read_failure(suffix, exc)}") from exc
     if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
         raise PartLoadError(f"{path}: the file holds no triangles")
-    if not np.all(np.isfinite(loaded.vertices)):
-        raise PartLoadError(f"{path}: the mesh has NaN or infinite vertex coordinates")
+    check_count(len(loaded.faces), LIMITS.mesh_faces, f"{path}: triangles of the part's mesh")
+    with np.errstate(all="ignore"):
+        finite = np.all(np.isfinite(loaded.vertices)) and np.all(np.abs(loaded.vertices) < MAX_COORDINATE)
+    if not finite:
+        raise PartLoadError(
+            f"{path}: the mesh has NaN, infinite or absurd vertex coordinates (beyond {MAX_COORDINATE:g} file units)"
+        )
     return loaded
+
+
+def _read_failure(suffix: str, error: Exception) -> str:
+    """What went wrong reading a part file, in words: the readers' own errors on a corrupt file name a missing
+    text-decoding module (a binary STL or OBJ that is not one) or a converter's missing output (a STEP file
+    OpenCASCADE could not parse)."""
+    if suffix in STEP_SUFFIXES and isinstance(error, FileNotFoundError | OSError):
+        return "cannot read the STEP file: OpenCASCADE could not parse it (corrupt, truncated or not AP203/AP214)"
+    if isinstance(error, ImportError):
+        return (
+            f"cannot read the part: the file is not a valid {suffix.lstrip('.').upper()} file (corrupt or truncated?)"
+        )
+    return f"cannot read the part: {type(error).__name__}: {excerpt(str(error), 200)}"
 
 
 def _check_geometry(mesh: trimesh.Trimesh, path: Path, messages: list[str], merged: bool) -> None:
