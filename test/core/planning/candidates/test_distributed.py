@@ -212,7 +212,7 @@ def test_a_scheduler_address_that_accepts_but_never_answers_is_refused_in_bounde
     try:
         address = f"tcp://127.0.0.1:{listener.getsockname()[1]}"
         start = time.monotonic()
-        with pytest.raises(ClusterError, match="does not speak Dask|cannot reach"):
+        with pytest.raises(ClusterError, match=r"does not speak Dask|cannot reach"):
             DaskEvaluator(scheduler=address).client  # noqa: B018
         assert time.monotonic() - start < 5.0
     finally:
