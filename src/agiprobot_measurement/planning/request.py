@@ -26,7 +26,7 @@ import numpy as np
 from agiprobot_measurement._paths import CONFIG_DIR
 from agiprobot_measurement.common import config
 from agiprobot_measurement.common.config import ConfigError, read_yaml
-from agiprobot_measurement.common.limits import LIMITS, local_worker_limit
+from agiprobot_measurement.common.limits import LIMITS, check_file_size, local_worker_limit
 from agiprobot_measurement.common.units import UNIT_SCALES_TO_M
 from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.planning.candidates.viewpoint import TILT_MODES, TILT_STEPS
@@ -357,6 +357,11 @@ class PlanRequest:
             raise PlanRequestError("part_file", f"part file not found: {part}")
         if not part.is_file():
             raise PlanRequestError("part_file", f"part is not a regular file: {part}")
+        # refused before the readers are even imported (the part loader checks it again)
+        step = part.suffix.lower() in (".step", ".stp")
+        check_file_size(
+            part, LIMITS.step_file_bytes if step else LIMITS.mesh_file_bytes, "STEP file" if step else "mesh file"
+        )
         units = check_choice(self.units, tuple(UNIT_SCALES_TO_M), "units", label("units"))
         tilt = check_choice(
             self.viewpoint_tilt_mode, REQUEST_TILT_MODES, "viewpoint_tilt_mode", label("viewpoint_tilt_mode")
