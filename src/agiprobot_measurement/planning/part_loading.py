@@ -15,6 +15,7 @@ from __future__ import annotations
 import importlib.util
 import math
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -275,6 +276,7 @@ def load_part(
     remove_downside: bool = True,
     remove_threshold_angle_deg: float = 20.0,
     tessellation_tolerance_mm: float = 0.0,
+    checkpoint: Callable[[], None] | None = None,
 ) -> LoadedPart:
     """Load a part (STL, OBJ, PLY, OFF, glTF; STEP only with a STEP reader installed) into the world in mm.
 
@@ -286,11 +288,14 @@ def load_part(
     measurable (the fixture holds the part from below); they stay in :attr:`LoadedPart.mesh`.
     STEP files (with ``cascadio`` installed) carry their unit: ``units`` and ``scale`` do not apply to them;
     ``tessellation_tolerance_mm`` is the linear deflection of their tessellation (0 = the reader's default).
+    ``checkpoint()`` is called between the steps (a time limit's check may raise there).
     """
+    checkpoint = checkpoint or (lambda: None)
     path = Path(path).expanduser()
     scale_to_mm = _scale_from(units, scale, path)
     placement = np.eye(4) if transform is None else validate_rigid_transform(transform)
     mesh = _read_mesh(path, tessellation_tolerance_mm)
+    checkpoint()
     messages: list[str] = []
     if path.suffix.lower() in STEP_SUFFIXES:
         if scale is not None or units not in (None, "mm"):
@@ -303,7 +308,9 @@ def load_part(
         mesh.remove_unreferenced_vertices()
         if len(mesh.faces) == 0:
             raise PartLoadError(f"{path}: every triangle of the mesh is degenerate")
+        checkpoint()
     _check_geometry(mesh, path, messages, merge_vertices)
+    checkpoint()
     mesh.apply_scale(scale_to_mm)
     _check_size(mesh, scale_to_mm, path, messages)
     mesh.apply_transform(placement)
@@ -411,6 +418,7 @@ def place_part(
     remove_downside: bool = True,
     remove_threshold_angle_deg: float = 20.0,
     tessellation_tolerance_mm: float = 0.0,
+    checkpoint: Callable[[], None] | None = None,
 ) -> LoadedPart:
     """Load a part and place it on the station: at ``scene``'s part pose times ``transform`` (4x4, translation
     mm), or (``placement='fixture'``) turned by that pose's rotation, its lowest point on the fixture's top and its
@@ -434,6 +442,7 @@ def place_part(
         remove_downside=remove_downside,
         remove_threshold_angle_deg=remove_threshold_angle_deg,
         tessellation_tolerance_mm=tessellation_tolerance_mm,
+        checkpoint=checkpoint,
     )
     if placement == "fixture":
         centred = fixture_placement(part.mesh.vertices, np.eye(3), scene)

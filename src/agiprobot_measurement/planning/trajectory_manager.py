@@ -199,11 +199,14 @@ class TrajectoryManager:
         check_choice(placement, PLACEMENTS, "placement")
         scene = self._base_scene if add_wbk_mirrors else self._base_scene.without_group("wbk_mirrors")
         args = (units, remove_downside, remove_threshold_angle_deg, tessellation_tolerance_mm)
-        part = place_part(file_name, scene, transform, placement, *args)
+        part = place_part(
+            file_name, scene, transform, placement, *args, checkpoint=lambda: self._check_time("sampling")
+        )
         for message in part.warnings:
             LOG.warning("%s", message)
         self.collision = CollisionChecker(self.kinematics, scene, self.collision.config, load_part=False)
         self.collision.set_part(part.mesh, pose=np.eye(4), name="part", scale_to_m=1e-3)
+        self._check_time("sampling")
         if check_scene_overlap:
             started = time.perf_counter()
             check_placement(part.mesh, scene, self.collision, self.current_state)

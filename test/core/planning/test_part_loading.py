@@ -268,3 +268,9 @@ def test_a_part_placed_absurdly_far_away_is_refused():
     transform[0, 3] = 1e300
     with pytest.raises(PartLoadError, match="more than"):
         validate_rigid_transform(transform)
+
+
+def test_loading_calls_the_checkpoint_between_its_steps():
+    calls = []
+    load_part(PACKAGE_ROOT / "parts" / "objectA_wuerfel.stl", checkpoint=lambda: calls.append(True))
+    assert len(calls) >= 3
