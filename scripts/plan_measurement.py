@@ -21,7 +21,8 @@ with --overwrite. A request beyond the work budget (config/trajectory_manager.ya
 budget: samples, candidate viewpoints, memory) is refused before any work, with the estimate.
 
 exit status: 0 planned; 2 bad input or nothing plannable (one 'error: ...' line); 1 internal error;
-130 interrupted (nothing written).
+130 interrupted (Ctrl-C), 143 terminated (SIGTERM): the files written before are named, no half-written file is
+left.
 """
 
 from __future__ import annotations
@@ -31,7 +32,9 @@ import dataclasses
 import logging
 import math
 import os
+import signal
 import sys
+import threading
 import time
 import warnings
 from pathlib import Path
@@ -88,6 +91,41 @@ BAR_FORMAT = "{desc} {percentage:3.0f}%|{bar:30}| "
 
 class UsageError(InputError):
     """Bad command-line input: reported as one 'error: ...' line, exit status 2."""
+
+
+class OutputWriteError(InputError):
+    """An output file could not be written (a full disk, permissions): names the file and what was written."""
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised in the main thread like Ctrl-C so that a file being written is removed, not left half."""
+
+
+#: exit status after SIGTERM (128 + 15, as a shell reports a process ended by it)
+EXIT_TERMINATED = 143
+#: the output files this run has written so far (kind, path), for the message of an interruption or a failure
+WRITTEN: list[tuple[str, Path]] = []
+
+
+def _terminate(signum, frame):
+    raise Terminated()
+
+
+def _written() -> str:
+    if not WRITTEN:
+        return "nothing written"
+    return "written before: " + ", ".join(f"{kind} {path}" for kind, path in WRITTEN)
+
+
+def _write(kind: str, path, write):
+    """``write()`` (an output's atomic write), its file recorded in :data:`WRITTEN`; an ``OSError`` as
+    :class:`OutputWriteError` naming the file."""
+    try:
+        result = write()
+    except OSError as exc:
+        raise OutputWriteError(f"{path}: cannot write the {kind}: {exc.strerror or exc}; {_written()}") from exc
+    WRITTEN.append((kind, Path(path)))
+    return result
 
 
 class _Parser(argparse.ArgumentParser):
@@ -493,7 +531,7 @@ def run(args: argparse.Namespace, request: PlanRequest, progress: StageProgress)
         if not ordered:
             raise PlanningError("no view could be connected: there is no plan to write")
         segments = manager.convert_viewpointlist_to_execution_plan(ordered)
-        manager.store_execution_plan(args.output, segments)
+        _write("plan", args.output, lambda: manager.store_execution_plan(args.output, segments))
         outputs["plan"] = manager.last_plan_path
     if args.report is not None:
         from agiprobot_measurement.planning.report.coverage_figure import plot_coverage
@@ -503,17 +541,21 @@ def run(args: argparse.Namespace, request: PlanRequest, progress: StageProgress)
             f"{100.0 * report.coverage_of_samples:.1f} % of samples covered, "
             f"est. {report.estimated_execution_time_s:.0f} s"
         )
-        outputs["report"] = plot_coverage(
+        outputs["report"] = _write(
+            "figure",
             args.report,
-            manager.samples.points,
-            manager.point_uncertainties(),
-            manager.scan_lines_mm(),
-            manager.sensor_model.get_min_uncertainty(),
-            manager.sensor_model.get_max_uncertainty(),
-            title=title,
-            mesh=manager.target_mesh,
-            metrology_coverable=manager.metrology_coverable_mask(),
-            executable_coverable=manager.coverable_mask(),
+            lambda: plot_coverage(
+                args.report,
+                manager.samples.points,
+                manager.point_uncertainties(),
+                manager.scan_lines_mm(),
+                manager.sensor_model.get_min_uncertainty(),
+                manager.sensor_model.get_max_uncertainty(),
+                title=title,
+                mesh=manager.target_mesh,
+                metrology_coverable=manager.metrology_coverable_mask(),
+                executable_coverable=manager.coverable_mask(),
+            ),
         )
     if args.summary is not None:
         outputs["summary"] = args.summary
@@ -527,9 +569,10 @@ def run(args: argparse.Namespace, request: PlanRequest, progress: StageProgress)
         if args.summary.suffix.lower() in (".yaml", ".yml"):
             import yaml
 
-            write_output(args.summary, yaml.safe_dump(data, sort_keys=False))
+            text = yaml.safe_dump(data, sort_keys=False)
         else:
-            write_output(args.summary, table + "\n")
+            text = table + "\n"
+        _write("summary", args.summary, lambda: write_output(args.summary, text))
     print(table, flush=True)
     return EXIT_OK
 
@@ -537,6 +580,9 @@ def run(args: argparse.Namespace, request: PlanRequest, progress: StageProgress)
 def main(argv=None) -> int:
     progress = None
     debug = False
+    WRITTEN.clear()
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, _terminate)
     try:
         args = build_parser().parse_args(argv)
         debug = args.debug
@@ -553,15 +599,18 @@ def main(argv=None) -> int:
         # the package's input errors are ValueErrors: PartLoadError, ConfigError, PlanError, SetCoverError
         _fail(progress, f"error: {exc}", debug)
         return EXIT_USAGE
+    except Terminated:
+        _fail(progress, f"terminated: {_written()}", debug)
+        return EXIT_TERMINATED
     except KeyboardInterrupt:
-        _fail(progress, "interrupted: nothing more written", debug)
+        _fail(progress, f"interrupted: {_written()}", debug)
         return EXIT_INTERRUPTED
     except RuntimeError as exc:
         # the module is loaded lazily (OMPL, FCL: slow imports); an error raised before it was loaded is not one
         # of its exceptions
         manager_module = sys.modules.get("agiprobot_measurement.planning.trajectory_manager")
         if manager_module is not None and isinstance(exc, manager_module.PlanningCancelled):
-            _fail(progress, "interrupted: nothing more written", debug)
+            _fail(progress, f"interrupted: {_written()}", debug)
             return EXIT_INTERRUPTED
         if manager_module is not None and isinstance(exc, manager_module.PlanningError):
             _fail(progress, f"error: planning failed: {exc}", debug)

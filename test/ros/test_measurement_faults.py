@@ -387,6 +387,27 @@ class MeasurementFaultTest(unittest.TestCase):
             self._load("load_plan", LoadPlan, refused_load, clients)
         self._serves_a_good_request()
 
+    def test_8b_a_plan_whose_file_cannot_be_written_is_kept(self):
+        late = self.root / "taken_meanwhile.yaml"
+        late.unlink(missing_ok=True)
+
+        def take_the_name(feedback):  # after the goal's up-front check: the final write is refused
+            if not late.exists():
+                late.write_text("someone else's file\n")
+
+        self.planner.send_goal(quick_goal(plan_file="taken_meanwhile"), feedback_cb=take_the_name)
+        self.assertTrue(self.planner.wait_for_result(rospy.Duration(240.0)), "planning timed out")
+        result = self.planner.get_result()
+        self.assertEqual(self.planner.get_state(), GoalStatus.ABORTED)
+        self.assertIn("is the current plan", result.error)
+        self.assertIn("taken_meanwhile.yaml", result.error)
+        self.assertGreater(result.number_of_views, 0)
+        self.assertEqual(late.read_text(), "someone else's file\n")
+        # the plan made is the current one: it can be stored elsewhere
+        self.assertIn("(planned, not stored)", self._plan_source())
+        stored = self.store(plan_file="rescued", overwrite=True)
+        self.assertTrue(stored.success, stored.message)
+
     # ------------------------------------------------------------------------------------- nothing outside
     def test_9_nothing_was_written_outside_the_plan_folder(self):
         outside_now = files_under(self.root.parent) - files_under(self.root)

@@ -7,7 +7,14 @@ from collections.abc import Callable
 from agiprobot_measurement.common.config import ConfigError
 from agiprobot_measurement.errors import InputError, InternalError
 
-__all__ = ["PlanningCancelled", "PlanningError", "PlanningInputError", "PlanningTypeError", "validated"]
+__all__ = [
+    "PlanningCancelled",
+    "PlanningError",
+    "PlanningInputError",
+    "PlanningTimeLimit",
+    "PlanningTypeError",
+    "validated",
+]
 
 
 class PlanningError(InternalError):
@@ -16,6 +23,11 @@ class PlanningError(InternalError):
 
 class PlanningInputError(InputError):
     """A planning call's argument is wrong (an unknown solver, a joint state of the wrong size...)."""
+
+
+class PlanningTimeLimit(PlanningInputError):
+    """The time limit ran out before the set cover could start (loading, sampling or the metrology of a part too
+    large for it): there is no plan to return, and more time or less work is the remedy."""
 
 
 class PlanningTypeError(PlanningInputError, TypeError):

@@ -15,6 +15,7 @@ from __future__ import annotations
 import importlib.util
 import math
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -23,12 +24,15 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from agiprobot_measurement.common import config
+from agiprobot_measurement.common.limits import LIMITS, check_count, check_file_size, excerpt
 from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.planning.errors import validated
 from agiprobot_measurement.station import UNIT_SCALES_TO_M
 from agiprobot_measurement.station.placement import fixture_placement
 
 __all__ = [
+    "MAX_COORDINATE",
+    "MAX_PLACEMENT_MM",
     "MESH_SUFFIXES",
     "PLAUSIBLE_SIZE_MM",
     "STEP_SUFFIXES",
@@ -50,6 +54,10 @@ UNIT_SCALES_TO_MM = {unit: scale * 1000.0 for unit, scale in UNIT_SCALES_TO_M.it
 
 #: Largest extent (mm) of a part the UR10e station can plausibly measure; outside it a warning suggests units.
 PLAUSIBLE_SIZE_MM = (10.0, 2000.0)
+#: vertex coordinates beyond this (file units) are refused: no part is that large, and squares of them overflow
+MAX_COORDINATE = 1e12
+#: a part placed farther than this from the world origin (mm) is refused: the station is a few metres across
+MAX_PLACEMENT_MM = 1e5
 
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".glb", ".gltf")
 STEP_SUFFIXES = (".step", ".stp")
@@ -125,6 +133,12 @@ def validate_rigid_transform(transform, tolerance: float = 1e-6) -> np.ndarray:
         raise PartLoadError(f"part transform must be a 4x4 matrix, got shape {matrix.shape}")
     if not np.all(np.isfinite(matrix)):
         raise PartLoadError("part transform contains NaN or infinite values")
+    distance = float(np.max(np.abs(matrix[:3, 3])))
+    if distance > MAX_PLACEMENT_MM:
+        raise PartLoadError(
+            f"part transform shifts the part by {distance:.3g} mm along an axis, more than "
+            f"{MAX_PLACEMENT_MM:g} mm: the translation is in mm and the station is a few metres across"
+        )
     if not np.allclose(matrix[3], (0.0, 0.0, 0.0, 1.0), atol=tolerance):
         raise PartLoadError(f"part transform's last row must be [0, 0, 0, 1], got {matrix[3].tolist()}")
     rotation = matrix[:3, :3]
@@ -175,6 +189,7 @@ def _read_mesh(path: Path, tessellation_tolerance_mm: float = 0.0) -> trimesh.Tr
             head = handle.read(64)
         if b"ISO-10303" not in head:
             raise PartLoadError(f"{path}: not a STEP file (no ISO-10303 header)")
+        check_file_size(path, LIMITS.step_file_bytes, "STEP file")
     elif suffix in UNREAD_CAD_SUFFIXES:
         raise PartLoadError(
             f"{path}: IGES is not read here (trimesh's loader tessellates STEP through cascadio, not IGES); "
@@ -185,15 +200,35 @@ def _read_mesh(path: Path, tessellation_tolerance_mm: float = 0.0) -> trimesh.Tr
             f"{path}: unsupported part format {suffix or '(no suffix)'!r}; "
             f"supported: {', '.join(MESH_SUFFIXES + STEP_SUFFIXES)}"
         )
+    else:
+        check_file_size(path, LIMITS.mesh_file_bytes, "mesh file")
     try:
         loaded = trimesh.load(str(path), force="mesh", process=False, **options)
     except Exception as exc:  # trimesh raises anything from ValueError to ModuleNotFoundError on bad files
-        raise PartLoadError(f"{path}: cannot read the part: {type(exc).__name__}: {exc}") from exc
+        raise PartLoadError(f"{path}: {_read_failure(suffix, exc)}") from exc
     if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
         raise PartLoadError(f"{path}: the file holds no triangles")
-    if not np.all(np.isfinite(loaded.vertices)):
-        raise PartLoadError(f"{path}: the mesh has NaN or infinite vertex coordinates")
+    check_count(len(loaded.faces), LIMITS.mesh_faces, f"{path}: triangles of the part's mesh")
+    with np.errstate(all="ignore"):
+        finite = np.all(np.isfinite(loaded.vertices)) and np.all(np.abs(loaded.vertices) < MAX_COORDINATE)
+    if not finite:
+        raise PartLoadError(
+            f"{path}: the mesh has NaN, infinite or absurd vertex coordinates (beyond {MAX_COORDINATE:g} file units)"
+        )
     return loaded
+
+
+def _read_failure(suffix: str, error: Exception) -> str:
+    """What went wrong reading a part file, in words: the readers' own errors on a corrupt file name a missing
+    text-decoding module (a binary STL or OBJ that is not one) or a converter's missing output (a STEP file
+    OpenCASCADE could not parse)."""
+    if suffix in STEP_SUFFIXES and isinstance(error, FileNotFoundError | OSError):
+        return "cannot read the STEP file: OpenCASCADE could not parse it (corrupt, truncated or not AP203/AP214)"
+    if isinstance(error, ImportError):
+        return (
+            f"cannot read the part: the file is not a valid {suffix.lstrip('.').upper()} file (corrupt or truncated?)"
+        )
+    return f"cannot read the part: {type(error).__name__}: {excerpt(str(error), 200)}"
 
 
 def _check_geometry(mesh: trimesh.Trimesh, path: Path, messages: list[str], merged: bool) -> None:
@@ -241,6 +276,7 @@ def load_part(
     remove_downside: bool = True,
     remove_threshold_angle_deg: float = 20.0,
     tessellation_tolerance_mm: float = 0.0,
+    checkpoint: Callable[[], None] | None = None,
 ) -> LoadedPart:
     """Load a part (STL, OBJ, PLY, OFF, glTF; STEP only with a STEP reader installed) into the world in mm.
 
@@ -252,11 +288,14 @@ def load_part(
     measurable (the fixture holds the part from below); they stay in :attr:`LoadedPart.mesh`.
     STEP files (with ``cascadio`` installed) carry their unit: ``units`` and ``scale`` do not apply to them;
     ``tessellation_tolerance_mm`` is the linear deflection of their tessellation (0 = the reader's default).
+    ``checkpoint()`` is called between the steps (a time limit's check may raise there).
     """
+    checkpoint = checkpoint or (lambda: None)
     path = Path(path).expanduser()
     scale_to_mm = _scale_from(units, scale, path)
     placement = np.eye(4) if transform is None else validate_rigid_transform(transform)
     mesh = _read_mesh(path, tessellation_tolerance_mm)
+    checkpoint()
     messages: list[str] = []
     if path.suffix.lower() in STEP_SUFFIXES:
         if scale is not None or units not in (None, "mm"):
@@ -269,7 +308,9 @@ def load_part(
         mesh.remove_unreferenced_vertices()
         if len(mesh.faces) == 0:
             raise PartLoadError(f"{path}: every triangle of the mesh is degenerate")
+        checkpoint()
     _check_geometry(mesh, path, messages, merge_vertices)
+    checkpoint()
     mesh.apply_scale(scale_to_mm)
     _check_size(mesh, scale_to_mm, path, messages)
     mesh.apply_transform(placement)
@@ -377,6 +418,7 @@ def place_part(
     remove_downside: bool = True,
     remove_threshold_angle_deg: float = 20.0,
     tessellation_tolerance_mm: float = 0.0,
+    checkpoint: Callable[[], None] | None = None,
 ) -> LoadedPart:
     """Load a part and place it on the station: at ``scene``'s part pose times ``transform`` (4x4, translation
     mm), or (``placement='fixture'``) turned by that pose's rotation, its lowest point on the fixture's top and its
@@ -400,6 +442,7 @@ def place_part(
         remove_downside=remove_downside,
         remove_threshold_angle_deg=remove_threshold_angle_deg,
         tessellation_tolerance_mm=tessellation_tolerance_mm,
+        checkpoint=checkpoint,
     )
     if placement == "fixture":
         centred = fixture_placement(part.mesh.vertices, np.eye(3), scene)

@@ -15,7 +15,7 @@ import numpy as np
 
 from agiprobot_measurement.planning.candidates.viewpoint import ViewPoint
 from agiprobot_measurement.planning.cover.solve import SOLVER_TYPES
-from agiprobot_measurement.planning.errors import PlanningError
+from agiprobot_measurement.planning.errors import PlanningError, PlanningTimeLimit
 from agiprobot_measurement.planning.report.report import CoverageReport, point_uncertainties
 from agiprobot_measurement.planning.request import REQUEST_TILT_MODES, check_choice, check_positive
 from agiprobot_measurement.planning.selection.loop import cover_points_with_verified
@@ -66,7 +66,7 @@ def plan_auto(manager, t0: float, deadline: float, settings: dict) -> list[ViewP
         try:
             plan_once(manager, "full", deadline, settings)
             second = manager.coverage_report()
-        except PlanningError as exc:
+        except (PlanningError, PlanningTimeLimit) as exc:
             second, reason = None, str(exc)
         tolerance = AUTO_SAME_COVERAGE * first.n_samples
         enough = second is not None and second.n_covered >= first.n_covered - tolerance
@@ -124,18 +124,23 @@ def cover_with_verified(manager, points: np.ndarray, settings: dict, deadline: f
     return manager.coverage_report()
 
 
-def plan(manager, viewpoint_tilt_mode, time_limit_s, **settings) -> list[ViewPoint]:
+def plan(manager, viewpoint_tilt_mode, time_limit_s, started_s=None, **settings) -> list[ViewPoint]:
     """The facade's ``plan`` (see there): the ordered views. ``settings``: its other arguments (``generation``:
-    the keyword arguments for the generation)."""
+    the keyword arguments for the generation). ``started_s``: the ``time.perf_counter()`` value the time limit
+    counts from (default: now; the loading of the part when it is part of the request)."""
     check_choice(settings["solver_type"], SOLVER_TYPES, "solver_type")
     check_choice(viewpoint_tilt_mode, REQUEST_TILT_MODES, "viewpoint_tilt_mode")
     limit = check_positive(time_limit_s, "time_limit_s", "time_limit_s (s)")
-    t0 = time.perf_counter()
+    t0 = time.perf_counter() if started_s is None else float(started_s)
     deadline = t0 + limit
-    if viewpoint_tilt_mode != "auto":
-        ordered = plan_once(manager, viewpoint_tilt_mode, deadline, settings)
-    else:
-        ordered = plan_auto(manager, t0, deadline, settings)
+    manager.stage_clock = (t0, limit)
+    try:
+        if viewpoint_tilt_mode != "auto":
+            ordered = plan_once(manager, viewpoint_tilt_mode, deadline, settings)
+        else:
+            ordered = plan_auto(manager, t0, deadline, settings)
+    finally:
+        manager.stage_clock = None
     manager.run.timings_s["total"] = time.perf_counter() - t0
     manager.run.parameters["time_limit_s"] = limit
     return ordered

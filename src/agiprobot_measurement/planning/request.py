@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import functools
+import os
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,6 +26,7 @@ import numpy as np
 from agiprobot_measurement._paths import CONFIG_DIR
 from agiprobot_measurement.common import config
 from agiprobot_measurement.common.config import ConfigError, read_yaml
+from agiprobot_measurement.common.limits import LIMITS, check_file_size, local_worker_limit
 from agiprobot_measurement.common.units import UNIT_SCALES_TO_M
 from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.planning.candidates.viewpoint import TILT_MODES, TILT_STEPS
@@ -120,8 +122,12 @@ VIEW_FOOTPRINT_MM2 = 150.0 * 150.0
 BYTES_PER_DRAWN_POINT = 3 * 8 + 3 * 8 + 8
 BYTES_PER_CANDIDATE = 16 * 8 + 3 * 8
 BYTES_PER_ENTRY = 4 + 8 + 8
-#: largest local Dask cluster a request may ask for (worker processes)
+#: largest local Dask cluster a request may ask for on any machine (worker processes); the machine's own bound,
+#: :func:`~agiprobot_measurement.common.limits.local_worker_limit`, is usually lower
 MAX_LOCAL_WORKERS = 256
+#: memory of one local Dask worker process before any work (interpreter, numpy, trimesh, the sensor model; measured
+#: 95 to 140 MB proportional set size per worker with 8 and 32 workers)
+WORKER_PROCESS_BYTES = 150e6
 
 
 @dataclass(frozen=True)
@@ -351,6 +357,11 @@ class PlanRequest:
             raise PlanRequestError("part_file", f"part file not found: {part}")
         if not part.is_file():
             raise PlanRequestError("part_file", f"part is not a regular file: {part}")
+        # refused before the readers are even imported (the part loader checks it again)
+        step = part.suffix.lower() in (".step", ".stp")
+        check_file_size(
+            part, LIMITS.step_file_bytes if step else LIMITS.mesh_file_bytes, "STEP file" if step else "mesh file"
+        )
         units = check_choice(self.units, tuple(UNIT_SCALES_TO_M), "units", label("units"))
         tilt = check_choice(
             self.viewpoint_tilt_mode, REQUEST_TILT_MODES, "viewpoint_tilt_mode", label("viewpoint_tilt_mode")
@@ -402,6 +413,14 @@ class PlanRequest:
             raise PlanRequestError(
                 "workers", f"{label('workers')} must be a whole number in [0, {MAX_LOCAL_WORKERS}], got {self.workers}"
             )
+        most = local_worker_limit()
+        if workers > most and not str(self.scheduler or "").strip():
+            raise PlanRequestError(
+                "workers",
+                f"{label('workers')} {workers} is more than this machine allows: {most} local worker processes "
+                f"({LIMITS.workers_per_core} per core, {os.cpu_count() or 1} cores); more processes than cores only "
+                "add memory; for more, start a Dask cluster on other machines and give its --scheduler",
+            )
         scheduler = str(self.scheduler or "").strip()
         if scheduler and not _looks_like_address(scheduler):
             raise PlanRequestError(
@@ -415,6 +434,12 @@ class PlanRequest:
         max_memory = _validated(
             lambda: config.non_negative(self.max_memory_gb, "max_memory_gb"), "max_memory_gb", message
         )
+        if max_memory and not scheduler and workers * WORKER_PROCESS_BYTES >= 0.5 * max_memory * 1e9:
+            raise PlanRequestError(
+                "workers",
+                f"{label('workers')} {workers}: the local worker processes alone take ~{workers * WORKER_PROCESS_BYTES / 1e9:.2f}"
+                f" GB, at least half of {label('max_memory_gb')} {max_memory:g}: fewer workers, or more memory",
+            )
         transform = np.asarray(self.part_transform_mm, dtype=float)
         if transform.shape != (4, 4) or not np.all(np.isfinite(transform)):
             raise PlanRequestError(

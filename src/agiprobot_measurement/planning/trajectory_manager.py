@@ -29,7 +29,7 @@ from agiprobot_measurement.planning.candidates.distributed import DaskEvaluator 
 from agiprobot_measurement.planning.candidates.streaming import EvaluationSettings
 from agiprobot_measurement.planning.candidates.viewpoint import ViewPoint
 from agiprobot_measurement.planning.connection import ConnectionPlanner, add_plan_part, station_robot
-from agiprobot_measurement.planning.errors import PlanningCancelled, PlanningError
+from agiprobot_measurement.planning.errors import PlanningCancelled, PlanningError, PlanningTimeLimit
 from agiprobot_measurement.planning.ordering import connect_views, p2p_durations
 from agiprobot_measurement.planning.part_loading import part_parameters, place_part
 from agiprobot_measurement.planning.plan import execution, plan_io
@@ -67,6 +67,10 @@ LOG = logging.getLogger(__name__)
 
 #: progress callback: (stage, fraction done 0..1, message)
 ProgressCallback = Callable[[str, float, str], None]
+
+
+#: the stages that check the time limit at their progress reports: the later ones end in time by themselves
+TIME_CHECKED_STAGES = ("sampling", "metrology")
 
 
 def _arguments(arguments: dict) -> dict:
@@ -121,8 +125,24 @@ class TrajectoryManager:
         self.preferred_state = joint_state(self.station.named_states, self.kinematics.dof, preferred_state)
         #: the state of the planning run (samples, candidates, views, cover, order, timings, warnings, ...)
         self.run = PlanningRun()
+        #: while planning: (start, limit) of the time limit, ``time.perf_counter()`` s; checked at every progress
+        #: report of the stages before the set cover (which ends in time by itself)
+        self.stage_clock: tuple[float, float] | None = None
+
+    def _check_time(self, stage: str) -> None:
+        if self.stage_clock is None or stage not in TIME_CHECKED_STAGES:
+            return
+        start, limit = self.stage_clock
+        elapsed = time.perf_counter() - start
+        if elapsed > limit:
+            raise PlanningTimeLimit(
+                f"the time limit of {limit:g} s ran out during {stage} ({elapsed:.1f} s, before the set cover): no "
+                "plan; allow more time, or lower the sampling density or the orientations (a finely meshed or "
+                "large part takes long to load and sample)"
+            )
 
     def _report(self, stage: str, fraction: float, message: str = "") -> None:
+        self._check_time(stage)
         if self.progress is not None:
             self.progress(stage, float(min(max(fraction, 0.0), 1.0)), message)
 
@@ -179,11 +199,14 @@ class TrajectoryManager:
         check_choice(placement, PLACEMENTS, "placement")
         scene = self._base_scene if add_wbk_mirrors else self._base_scene.without_group("wbk_mirrors")
         args = (units, remove_downside, remove_threshold_angle_deg, tessellation_tolerance_mm)
-        part = place_part(file_name, scene, transform, placement, *args)
+        part = place_part(
+            file_name, scene, transform, placement, *args, checkpoint=lambda: self._check_time("sampling")
+        )
         for message in part.warnings:
             LOG.warning("%s", message)
         self.collision = CollisionChecker(self.kinematics, scene, self.collision.config, load_part=False)
         self.collision.set_part(part.mesh, pose=np.eye(4), name="part", scale_to_m=1e-3)
+        self._check_time("sampling")
         if check_scene_overlap:
             started = time.perf_counter()
             check_placement(part.mesh, scene, self.collision, self.current_state)
@@ -408,9 +431,15 @@ class TrajectoryManager:
     def plan_request(self, request: PlanRequest) -> list[ViewPoint]:
         """Load the request's part and run the whole pipeline with its settings (``request`` validated with
         :meth:`PlanRequest.validate`; the manager made by :meth:`for_request`). Returns the ordered views."""
+        started = time.perf_counter()
         self._report("sampling", 0.0, f"loading {request.part_file}")
-        self.load_target_mesh(request.part_file, **request.part_arguments())
-        return self.plan(**request.plan_arguments())
+        self.stage_clock = (started, float(request.time_limit_s))
+        try:
+            self.load_target_mesh(request.part_file, **request.part_arguments())
+            self._report("sampling", 0.0, f"loaded {request.part_file}")
+        finally:
+            self.stage_clock = None
+        return self.plan(**request.plan_arguments(), started_s=started)
 
     def plan(
         self,
@@ -423,6 +452,7 @@ class TrajectoryManager:
         min_planning_time=0.2,
         time_limit_s=300.0,
         mip_gap=0.02,
+        started_s=None,
         **generation,
     ) -> list[ViewPoint]:
         """The whole pipeline on the loaded part: generate, solve the set cover, connect. Returns the ordered
@@ -433,7 +463,9 @@ class TrajectoryManager:
         cut it short). ``viewpoint_tilt_mode='auto'`` plans with tilt none first and, when the cover is large or
         leaves metrologically coverable points uncovered and time is left, with tilt full; the plan with fewer
         views at the same coverage (or clearly more coverage) is kept and the choice is in
-        ``parameters['tilt_choice']``.
+        ``parameters['tilt_choice']``. ``started_s``: the ``time.perf_counter()`` value the time limit counts
+        from (default: now). The stages before the set cover check the limit between their chunks and raise
+        :class:`~agiprobot_measurement.planning.errors.PlanningTimeLimit` when it ran out (no plan to return).
         """
         return pipeline.plan(self, **_arguments(locals()))
 

@@ -1,5 +1,6 @@
 """Part loading (units, transform, downward faces, bad input) and surface sampling."""
 
+import dataclasses
 import importlib.util
 import math
 import warnings
@@ -9,6 +10,8 @@ import pytest
 import trimesh
 from scipy.spatial import cKDTree
 
+from agiprobot_measurement.common import limits
+from agiprobot_measurement.planning import part_loading
 from agiprobot_measurement.planning.part_loading import (
     LoadedPart,
     PartLoadError,
@@ -230,3 +233,44 @@ def test_unreadable_step_and_iges_get_clear_errors(tmp_path):
     iges.write_text("S      1\n")
     with pytest.raises(PartLoadError, match="IGES is not read"):
         load_part(iges)
+
+
+def test_broken_part_files_are_named_with_their_problem(tmp_path):
+    rng = np.random.default_rng(1)
+    for suffix in ("stl", "obj"):
+        path = tmp_path / f"garbage.{suffix}"
+        path.write_bytes(rng.integers(0, 256, 4096, dtype=np.uint8).tobytes())
+        with pytest.raises(PartLoadError, match=f"not a valid {suffix.upper()} file") as info:
+            load_part(path)
+        assert str(path) in str(info.value) and "charset" not in str(info.value)
+    huge = tmp_path / "huge.obj"
+    huge.write_text("v 5e299 0 0\nv 0 5e299 0\nv -5e299 0 1e299\nf 1 2 3\n")
+    with pytest.raises(PartLoadError, match="absurd vertex coordinates"):
+        load_part(huge)
+
+
+def test_part_files_over_the_size_limits_are_refused_before_reading(tmp_path, monkeypatch):
+    monkeypatch.setattr(
+        part_loading, "LIMITS", dataclasses.replace(limits.LIMITS, mesh_file_bytes=100, step_file_bytes=100)
+    )
+    big = tmp_path / "big.STEP"
+    big.write_bytes(b"ISO-10303-21;\n" + b" " * 200)
+    with pytest.raises(limits.InputTooLarge, match="STEP file"):
+        load_part(big)
+    cube = tmp_path / "cube.stl"
+    trimesh.creation.box((10, 10, 10)).export(cube)
+    with pytest.raises(limits.InputTooLarge, match="mesh file"):
+        load_part(cube)
+
+
+def test_a_part_placed_absurdly_far_away_is_refused():
+    transform = np.eye(4)
+    transform[0, 3] = 1e300
+    with pytest.raises(PartLoadError, match="more than"):
+        validate_rigid_transform(transform)
+
+
+def test_loading_calls_the_checkpoint_between_its_steps():
+    calls = []
+    load_part(PACKAGE_ROOT / "parts" / "objectA_wuerfel.stl", checkpoint=lambda: calls.append(True))
+    assert len(calls) >= 3

@@ -1,10 +1,12 @@
 """scripts/plan_measurement.py as a user runs it: a subprocess, its exit status, its output and its files."""
 
+import importlib.util
 import os
 import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 import yaml
@@ -172,3 +174,51 @@ def test_a_huge_density_is_refused_before_any_work(tmp_path):
     assert result.returncode == 2, result.stderr
     assert "max_samples" in result.stderr and "samples" in result.stderr
     assert "Traceback" not in result.stderr and time.monotonic() - started < 60
+
+
+def load_script():
+    spec = importlib.util.spec_from_file_location("plan_measurement_script", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.skipif(os.name != "posix", reason="needs SIGTERM")
+def test_sigterm_while_writing_leaves_no_half_file_and_names_what_was_written(tmp_path, monkeypatch, capsys):
+    script = load_script()
+    real_write = script.write_output
+
+    def write_then_terminated(path, data, suffix=""):
+        def half(temporary):
+            Path(temporary).write_text("half")
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(1.0)  # the handler raises here
+
+        return real_write(path, half, suffix=".txt")
+
+    monkeypatch.setattr(script, "write_output", write_then_terminated)
+    previous = signal.getsignal(signal.SIGTERM)
+    try:
+        status = script.main(
+            [str(CUBE), *FAST, "-q", "--output-dir", str(tmp_path), "-o", "plan.yaml", "--summary", "s.txt"]
+        )
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert status == script.EXIT_TERMINATED
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["plan.yaml"]
+    assert "terminated: written before: plan" in capsys.readouterr().err
+
+
+def test_a_failed_write_names_the_file_and_what_was_written(tmp_path, monkeypatch, capsys):
+    script = load_script()
+
+    def full_disk(path, data, suffix=""):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(script, "write_output", full_disk)
+    status = script.main(
+        [str(CUBE), *FAST, "-q", "--output-dir", str(tmp_path), "-o", "plan.yaml", "--summary", "s.txt"]
+    )
+    assert status == 2
+    err = capsys.readouterr().err
+    assert "s.txt: cannot write the summary: No space left on device; written before: plan" in err

@@ -5,6 +5,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from agiprobot_measurement.common.limits import LIMITS, InputTooLarge
 from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.planning.request import PlanRequest, PlanRequestError, load_planning_defaults
 from agiprobot_measurement.station import PACKAGE_ROOT
@@ -70,3 +71,11 @@ def test_labels_name_fields_the_callers_way():
     request = dataclasses.replace(PlanRequest.from_defaults(part_file=CUBE), sampling_density=0.0)
     with pytest.raises(PlanRequestError, match=r"^--density must be a positive number, got 0.0$"):
         request.validate(base_dir=PACKAGE_ROOT, labels={"sampling_density": "--density"})
+
+
+def test_an_oversized_part_file_is_refused_by_the_request(tmp_path):
+    big = tmp_path / "big.STEP"
+    with big.open("wb") as handle:
+        handle.truncate(LIMITS.step_file_bytes + 1)
+    with pytest.raises(InputTooLarge, match="STEP file"):
+        PlanRequest(part_file=str(big)).validate()

@@ -16,6 +16,7 @@ from __future__ import annotations
 import logging
 import os
 import resource
+import threading
 import time
 from collections.abc import Callable
 
@@ -129,10 +130,7 @@ class DaskEvaluator:
             except ImportError as exc:  # pragma: no cover - pinned in requirements.txt
                 raise ClusterError("Dask is not installed: pip install dask distributed") from exc
             if self.scheduler:
-                try:
-                    self._client = Client(self.scheduler, timeout=CONNECT_TIMEOUT_S)
-                except (OSError, TimeoutError) as exc:
-                    raise ClusterError(f"cannot reach the Dask scheduler at {self.scheduler}: {exc}") from exc
+                self._client = _connect(Client, self.scheduler)
             else:
                 import dask.config
 
@@ -272,6 +270,35 @@ class DaskEvaluator:
                 pending.append(index)
             while pending and running.count() < limit:
                 running.add(submit(pending.pop()))
+
+
+def _connect(client_class, address: str):
+    """A client of the scheduler at ``address``, connected and past the handshake within
+    :data:`CONNECT_TIMEOUT_S`: Dask bounds a refused or unanswered connect, but not a peer that accepts and then
+    says nothing or speaks another protocol (an HTTP server), so the connect runs in a thread that is waited for
+    with that bound. :class:`ClusterError` otherwise (the thread, a daemon, is left to Dask's own timeouts)."""
+    outcome: dict = {}
+
+    def connect():
+        try:
+            outcome["client"] = client_class(address, timeout=CONNECT_TIMEOUT_S)
+        except BaseException as exc:  # handed to the caller below
+            outcome["error"] = exc
+
+    thread = threading.Thread(target=connect, name="dask-connect", daemon=True)
+    thread.start()
+    thread.join(CONNECT_TIMEOUT_S + 1.0)
+    if "client" in outcome:
+        return outcome["client"]
+    error = outcome.get("error")
+    if error is None:
+        raise ClusterError(
+            f"no Dask scheduler answered at {address} within {CONNECT_TIMEOUT_S:g} s: something accepts "
+            "connections there but does not speak Dask's protocol (another service on that port?)"
+        )
+    if isinstance(error, OSError | TimeoutError):
+        raise ClusterError(f"cannot reach the Dask scheduler at {address}: {error}") from error
+    raise error
 
 
 def _takes_n_workers() -> bool:

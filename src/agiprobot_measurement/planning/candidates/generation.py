@@ -115,7 +115,9 @@ def generate_samples_and_viewpoints(
         )
     run.samples = samples
     run.sampled_surface_points = [p for p in samples.points]
+    tools.report("sampling", 0.3, f"{len(samples)} samples")
     tools.sensor_model.set_processing_context(part.mesh, samples.points, samples.face_ids)
+    tools.report("sampling", 0.6, "occlusion context ready")
     candidates = generate_viewpoint_poses(
         samples.points, samples.normals, orientations_around_boresight, viewpoint_tilt_mode, tools.sensor_model
     )

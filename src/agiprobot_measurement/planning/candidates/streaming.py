@@ -55,7 +55,7 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from agiprobot_measurement.planning.request import WorkTooLarge
+from agiprobot_measurement.planning.request import WORKER_PROCESS_BYTES, WorkTooLarge
 from agiprobot_measurement.sensors.laser_line.model import MeasurabilityResult
 
 __all__ = [
@@ -163,7 +163,14 @@ class EvaluationSettings:
         return bool(self.scheduler) or self.workers > 0
 
     def budget_bytes(self) -> float:
-        return float(self.max_memory_bytes) if self.max_memory_bytes else float(default_max_memory_bytes())
+        """The store's budget: ``max_memory_bytes`` (or the default) less what the local workers take themselves
+        (:data:`WORKER_PROCESS_BYTES` each; an existing cluster's workers run elsewhere)."""
+        total = float(self.max_memory_bytes) if self.max_memory_bytes else float(default_max_memory_bytes())
+        return total - self.local_worker_bytes()
+
+    def local_worker_bytes(self) -> float:
+        """Memory the local Dask worker processes take by themselves (bytes; 0 in process or on a cluster)."""
+        return 0.0 if self.scheduler else float(self.workers) * WORKER_PROCESS_BYTES
 
 
 @dataclass
@@ -638,11 +645,18 @@ def evaluate_streaming(
             if drop
             else ""
         )
+        workers_note = (
+            f"(after {settings.local_worker_bytes() / 1e9:.2f} GB for {settings.workers} local worker processes: "
+            "fewer --workers leave more) "
+            if settings.local_worker_bytes()
+            else ""
+        )
         raise _refuse(
             f"request refused before the evaluation: a pilot of {pilot_n} of the {n:,} candidates measures "
             f"{pairs_per_view:.0f} points each, so the run would keep ~{stats.projected_pairs:,.0f} measurable pairs"
             f"{dropping} (~{store_bytes / 1e9:.2f} GB at {per_entry} bytes per pair, ~{stats.projected_bytes / 1e9:.2f}"
             f" GB with the later stages' copies and the candidates); the memory budget is {budget / 1e9:.2f} GB "
+            f"{workers_note}"
             f"(--max-memory / max_memory_gb, default {DEFAULT_MEMORY_SHARE:.0%} of the available memory): raise it, "
             "or lower the sampling density, the orientations or the tilt mode"
         )

@@ -30,6 +30,7 @@ gets a new version name. A refused ExecutePlan keeps the node's current plan.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import traceback
 from pathlib import Path
@@ -219,6 +220,11 @@ class TrajectoryManagerNode:
 
         try:
             request = plan_request_from_goal(goal, self.session)
+            store_name = request.plan_file
+            if store_name:  # a plan file that cannot be written is refused before minutes of planning
+                self.session.plan_path(store_name, overwrite=request.overwrite)
+            # the plan is stored after it became the session's plan: a failed write loses no planning
+            request = dataclasses.replace(request, plan_file="")
             outcome = self.session.plan_measurement(request, self._current_state(), progress)
         except PlanningCancelled as exc:
             result.error = str(exc)
@@ -237,7 +243,15 @@ class TrajectoryManagerNode:
         self._publish_plan_visuals()
         report = outcome.report
         result.success = True
-        result.plan_file = outcome.plan_file
+        write_error = ""
+        if store_name:
+            try:
+                result.plan_file = self._store_planned(store_name, request.overwrite)
+            except (AgiprobotError, OSError) as exc:
+                write_error = (
+                    f"the plan was made and is the current plan, but its file was not written: {exc}; "
+                    "store it elsewhere with store_plan"
+                )
         result.number_of_views = report.n_views
         result.coverage = report.coverage_of_coverable
         result.coverage_of_samples = report.coverage_of_samples
@@ -252,6 +266,12 @@ class TrajectoryManagerNode:
         result.tilt_mode_used = str(outcome.tilt_choice or report.tilt_mode)
         result.reachable_share = -1.0 if report.reachable_share is None else float(report.reachable_share)
         result.warnings = [str(w) for w in report.warnings]
+        if write_error:
+            result.success, result.error = False, write_error
+            result.warnings.append(write_error)
+            rospy.logwarn("trajectory_manager: %s", write_error)
+            self.plan_server.set_aborted(result, write_error)
+            return
         rospy.loginfo(
             "trajectory_manager: planned %d views covering %.1f %% of %d points coverable by executable views "
             "(%d measurable, %d samples; est. %.1f s)%s",
@@ -261,9 +281,18 @@ class TrajectoryManagerNode:
             report.n_coverable_metrology,
             report.n_samples,
             report.estimated_execution_time_s,
-            f", stored in {outcome.plan_file}" if outcome.plan_file else "",
+            f", stored in {result.plan_file}" if result.plan_file else "",
         )
         self.plan_server.set_succeeded(result)
+
+    def _store_planned(self, name: str, overwrite: bool) -> str:
+        """Write the plan just made (the session's) to ``name`` as the planning run writes it; the path."""
+        session = self.session
+        manager = session.manager
+        manager.store_execution_plan(str(session.plan_path(name, overwrite)), session.plan.segments)
+        with session.lock:
+            session.plan_source = str(manager.last_plan_path)
+        return str(manager.last_plan_path)
 
     # ------------------------------------------------------------------------------------ visuals
     def _publish_plan_visuals(self):

@@ -39,10 +39,11 @@ import trimesh
 from agiprobot_measurement.common.config import positive
 from agiprobot_measurement.errors import InternalError
 from agiprobot_measurement.sensors.errors import SensorInputError, SensorTypeError, ViewIndexError
-from agiprobot_measurement.sensors.laser_line.queries import Cells, RayCaster, build_cells, cull_pairs
+from agiprobot_measurement.sensors.laser_line.queries import Cells, RayCaster, build_cells, cull_pairs, support_test
 from agiprobot_measurement.station import load_scanner_config
 
 __all__ = [
+    "BRUTE_FORCE_FACES",
     "CELL_CULL_POINTS",
     "DEFAULT_CHUNK_ELEMENTS",
     "PARAMETER_NAMES",
@@ -238,27 +239,42 @@ class _Context:
     cells: Cells | None = None  # for CELL_CULL_POINTS samples or more
 
 
-def supporting_faces(mesh: trimesh.Trimesh, tolerance: float | None = None) -> np.ndarray:
-    """Boolean per face: does the face's plane support the mesh (no vertex lies in front of it)?
+#: up to this many faces, :func:`supporting_faces` tests them against every vertex (a few ns per pair) rather than
+#: build the convex hull (tens of microseconds per vertex: half a minute for a finely meshed part)
+BRUTE_FORCE_FACES = 4096
+
+
+def supporting_faces(mesh: trimesh.Trimesh, tolerance: float | None = None, faces=None) -> np.ndarray:
+    """Boolean per face (of ``faces``, default all): does the face's plane support the mesh (no vertex lies in
+    front of it)?
 
     Every face of a convex mesh does. A segment from a point in front of such a face to a point on it cannot
-    meet the mesh anywhere else. ``tolerance`` (mm) defaults to 1e-6 of the mesh's scale.
+    meet the mesh anywhere else. ``tolerance`` (mm) defaults to 1e-6 of the mesh's scale. A flat or degenerate
+    mesh (no convex hull) gets none. A few faces are tested against every vertex; many, by a climb on the convex
+    hull's vertex graph (:func:`~agiprobot_measurement.sensors.laser_line.queries.support_test`): near-linear.
     """
     if tolerance is None:
         tolerance = 1e-6 * float(mesh.scale)
-    try:
-        hull = np.asarray(mesh.convex_hull.vertices)
-    except Exception:  # qhull fails on flat or degenerate meshes: then nothing is culled
-        return np.zeros(len(mesh.faces), dtype=bool)
-    normals = np.asarray(mesh.face_normals)
-    origins = np.asarray(mesh.triangles[:, 0])
-    # the largest height of any hull vertex above each face plane, in blocks to bound the memory
-    result = np.zeros(len(normals), dtype=bool)
-    block = max(1, (1 << 22) // max(1, len(hull)))
-    for start in range(0, len(normals), block):
-        n = normals[start : start + block]
-        height = n @ hull.T - np.einsum("ij,ij->i", n, origins[start : start + block])[:, None]
-        result[start : start + block] = height.max(axis=1) <= tolerance
+    index = np.arange(len(mesh.faces)) if faces is None else np.asarray(faces, dtype=np.int64).reshape(-1)
+    normals = np.asarray(mesh.face_normals, dtype=float)[index]
+    origins = np.asarray(mesh.triangles[index, 0])
+    thresholds = np.einsum("ij,ij->i", normals, origins) + tolerance
+    vertices = np.asarray(mesh.vertices, dtype=float)
+    centred = vertices - vertices.mean(axis=0) if len(vertices) else np.zeros((0, 3))
+    if len(vertices) < 4 or np.linalg.svd(centred, compute_uv=False)[-1] <= 1e-9 * max(float(mesh.scale), 1e-300):
+        return np.zeros(len(index), dtype=bool)  # flat: no hull, nothing culled
+    if len(index) <= BRUTE_FORCE_FACES:
+        result = np.zeros(len(index), dtype=bool)
+        block = max(1, (1 << 22) // max(1, len(vertices)))
+        for start in range(0, len(index), block):
+            height = normals[start : start + block] @ vertices.T
+            result[start : start + block] = height.max(axis=1) <= thresholds[start : start + block]
+    else:
+        try:
+            hull = mesh.convex_hull
+        except Exception:  # qhull fails on flat or degenerate meshes: then nothing is culled
+            return np.zeros(len(index), dtype=bool)
+        result = support_test(hull, normals, thresholds, origins)
     # degenerate faces have no normal and so no front side
     result &= np.linalg.norm(normals, axis=1) > 0.5
     return result
@@ -415,7 +431,8 @@ class SensorModel:
         face_ids = face_ids.astype(np.int64)
         normals = np.asarray(mesh.face_normals, dtype=float)[face_ids]
         if cull_supporting_faces:
-            unoccludable = supporting_faces(mesh)[face_ids]
+            unique = np.unique(face_ids)
+            unoccludable = supporting_faces(mesh, faces=unique)[np.searchsorted(unique, face_ids)]
         else:
             unoccludable = np.zeros(face_ids.shape, dtype=bool)
         self._context = _Context(

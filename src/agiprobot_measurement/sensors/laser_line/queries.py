@@ -9,9 +9,10 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
+import scipy.spatial
 import trimesh
 
-__all__ = ["CELL_POINTS", "Cells", "RayCaster", "build_cells", "cull_pairs"]
+__all__ = ["CELL_POINTS", "SEED_DIRECTIONS", "Cells", "RayCaster", "build_cells", "cull_pairs", "support_test"]
 
 #: samples per cell of that grid, on average
 CELL_POINTS = 48
@@ -162,3 +163,69 @@ def build_cells(points: np.ndarray, area_mm2: float) -> Cells:
     distance = np.linalg.norm(sorted_points - np.repeat(center, np.diff(start), axis=0), axis=1)
     radius = np.maximum.reduceat(distance, start[:-1]) + 1e-6 * edge
     return Cells(order.astype(np.int64), start, center, radius)
+
+
+# ------------------------------------------------------------------------------------------- supporting faces
+#: directions whose extreme hull vertices seed the search of every face (besides the hull vertex next to it)
+SEED_DIRECTIONS = 32
+
+
+@numba.njit(cache=True, nogil=True)
+def _support_walk(normals, thresholds, starts, hull_vertices, indptr, neighbours, result):
+    """Per face: is no hull vertex above its threshold? Hill climbing on the hull's vertex graph: a vertex whose
+    neighbours are all lower is the maximum of a linear function over a convex polytope. Stops early at the first
+    vertex above the threshold, so a face costs the degrees of a few vertices."""
+    for f in range(normals.shape[0]):
+        nx, ny, nz = normals[f, 0], normals[f, 1], normals[f, 2]
+        threshold = thresholds[f]
+        v = starts[f]
+        value = nx * hull_vertices[v, 0] + ny * hull_vertices[v, 1] + nz * hull_vertices[v, 2]
+        supporting = value <= threshold
+        while supporting:
+            best, best_vertex = value, -1
+            for k in range(indptr[v], indptr[v + 1]):
+                u = neighbours[k]
+                x = nx * hull_vertices[u, 0] + ny * hull_vertices[u, 1] + nz * hull_vertices[u, 2]
+                if x > threshold:
+                    supporting = False
+                    break
+                if x > best:
+                    best, best_vertex = x, u
+            if best_vertex < 0:
+                break
+            v, value = best_vertex, best
+        result[f] = supporting
+
+
+def support_test(hull: trimesh.Trimesh, normals: np.ndarray, thresholds: np.ndarray, near: np.ndarray) -> np.ndarray:
+    """Boolean per plane ``normals[i] . x <= thresholds[i]``: does it hold for every vertex of the convex ``hull``?
+
+    Exact for a convex hull and near-linear in the number of planes: each search starts at the better of the hull
+    vertex nearest to ``near[i]`` (a point on the plane) and the extreme vertices in :data:`SEED_DIRECTIONS`
+    directions, then climbs the hull's vertex graph.
+    """
+    vertices = np.ascontiguousarray(hull.vertices, dtype=np.float64)
+    normals = np.ascontiguousarray(normals, dtype=np.float64)
+    edges = np.asarray(hull.edges_unique, dtype=np.int64)
+    both = np.concatenate([edges, edges[:, ::-1]])
+    order = np.argsort(both[:, 0], kind="stable")
+    neighbours = np.ascontiguousarray(both[order, 1])
+    indptr = np.zeros(len(vertices) + 1, dtype=np.int64)
+    np.cumsum(np.bincount(both[:, 0], minlength=len(vertices)), out=indptr[1:])
+    # seeds: the nearest hull vertex, or the extreme vertex of the best of a few fixed directions
+    start = scipy.spatial.cKDTree(vertices).query(np.asarray(near, dtype=np.float64))[1].astype(np.int64)
+    golden = np.pi * (3.0 - np.sqrt(5.0))
+    z = np.linspace(1.0 - 1.0 / SEED_DIRECTIONS, -1.0 + 1.0 / SEED_DIRECTIONS, SEED_DIRECTIONS)
+    radius = np.sqrt(1.0 - z * z)
+    angle = golden * np.arange(SEED_DIRECTIONS)
+    directions = np.stack([radius * np.cos(angle), radius * np.sin(angle), z], axis=1)
+    extremes = np.argmax(vertices @ directions.T, axis=0)
+    seed_values = normals @ vertices[extremes].T  # (F, SEED_DIRECTIONS)
+    best_seed = np.argmax(seed_values, axis=1)
+    near_values = np.einsum("ij,ij->i", normals, vertices[start])
+    start = np.where(seed_values[np.arange(len(normals)), best_seed] > near_values, extremes[best_seed], start)
+    result = np.zeros(len(normals), dtype=np.bool_)
+    _support_walk(
+        normals, np.ascontiguousarray(thresholds, dtype=np.float64), start, vertices, indptr, neighbours, result
+    )
+    return result

@@ -4,6 +4,7 @@ the ``dask scheduler`` / ``dask worker`` commands; a killed worker's chunks are 
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -13,6 +14,7 @@ import numpy as np
 import pytest
 import yaml
 
+from agiprobot_measurement.planning.candidates import distributed
 from agiprobot_measurement.planning.candidates.distributed import ClusterError, DaskEvaluator
 from agiprobot_measurement.planning.candidates.streaming import StreamStats, evaluate_streaming
 from agiprobot_measurement.planning.candidates.viewpoint import generate_viewpoint_poses
@@ -200,3 +202,18 @@ def test_without_the_options_nothing_is_distributed():
 
     assert not EvaluationSettings().distributed
     assert EvaluationSettings(workers=2).distributed and EvaluationSettings(scheduler="tcp://h:1").distributed
+
+
+def test_a_scheduler_address_that_accepts_but_never_answers_is_refused_in_bounded_time(monkeypatch):
+    monkeypatch.setattr(distributed, "CONNECT_TIMEOUT_S", 1.0)
+    listener = socket.socket()
+    listener.bind(("127.0.0.1", 0))
+    listener.listen(4)
+    try:
+        address = f"tcp://127.0.0.1:{listener.getsockname()[1]}"
+        start = time.monotonic()
+        with pytest.raises(ClusterError, match=r"does not speak Dask|cannot reach"):
+            DaskEvaluator(scheduler=address).client  # noqa: B018
+        assert time.monotonic() - start < 5.0
+    finally:
+        listener.close()

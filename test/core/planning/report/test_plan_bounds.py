@@ -7,9 +7,12 @@ import numpy as np
 import pytest
 import scipy.sparse
 
+from agiprobot_measurement.common.limits import local_worker_limit
+from agiprobot_measurement.planning.candidates.streaming import EvaluationSettings
 from agiprobot_measurement.planning.cover.solve import solve_set_cover
+from agiprobot_measurement.planning.errors import PlanningTimeLimit
 from agiprobot_measurement.planning.report.coverage_figure import plot_coverage
-from agiprobot_measurement.planning.request import PlanRequest, PlanRequestError
+from agiprobot_measurement.planning.request import WORKER_PROCESS_BYTES, PlanRequest, PlanRequestError
 from agiprobot_measurement.planning.trajectory_manager import TrajectoryManager
 from agiprobot_measurement.station import PACKAGE_ROOT
 
@@ -180,3 +183,26 @@ def test_request_fields_are_validated():
         with pytest.raises(PlanRequestError) as info:
             PlanRequest.from_defaults(part_file=str(CUBE), **{field: value}).validate()
         assert info.value.field == field
+
+
+def test_the_time_limit_reaches_the_stages_before_the_set_cover():
+    manager = TrajectoryManager()
+    manager.load_target_mesh(str(CUBE))
+    started = time.perf_counter()
+    # the limit counts from the request's start (the part's loading): here it ran out before the sampling
+    with pytest.raises(PlanningTimeLimit, match="time limit of 5 s ran out during sampling"):
+        manager.plan(0.02, 0.1, 12, "none", "IP_basic", time_limit_s=5.0, started_s=started - 6.0)
+    assert time.perf_counter() - started < 5.0
+    assert manager.stage_clock is None
+
+
+def test_local_workers_are_bounded_by_the_machine_and_counted_in_the_memory_budget():
+    too_many = local_worker_limit() + 1
+    with pytest.raises(PlanRequestError, match="more than this machine allows"):
+        PlanRequest(part_file=str(CUBE), workers=too_many).validate()
+    with pytest.raises(PlanRequestError, match="local worker processes alone"):
+        PlanRequest(part_file=str(CUBE), workers=local_worker_limit(), max_memory_gb=0.2).validate()
+    # an existing cluster's workers run elsewhere
+    PlanRequest(part_file=str(CUBE), workers=too_many, scheduler="tcp://127.0.0.1:8786").validate()
+    settings = EvaluationSettings(workers=2, max_memory_bytes=1e9)
+    assert settings.budget_bytes() == pytest.approx(1e9 - 2 * WORKER_PROCESS_BYTES)

@@ -1,6 +1,7 @@
 """SensorModel: the reference equations, the measurability rules, and batch == per-viewpoint."""
 
 import math
+import time
 
 import numpy as np
 import pytest
@@ -447,3 +448,24 @@ def test_set_processing_context_validates(cube_context):
         sm.set_processing_context(part.mesh, samples.points, samples.face_ids[:-1])
     with pytest.raises(ValueError, match="face indices"):
         sm.set_processing_context(part.mesh, samples.points[:1], [99])
+
+
+def brute_force_supporting(mesh, tolerance):
+    hull = np.asarray(mesh.convex_hull.vertices)
+    height = mesh.face_normals @ hull.T - np.einsum("ij,ij->i", mesh.face_normals, mesh.triangles[:, 0])[:, None]
+    return (height.max(axis=1) <= tolerance) & (np.linalg.norm(mesh.face_normals, axis=1) > 0.5)
+
+
+def test_supporting_faces_is_near_linear_and_equals_the_brute_force():
+    rng = np.random.default_rng(0)
+    bumpy = trimesh.creation.icosphere(4)
+    bumpy.vertices *= 1.0 + 0.1 * rng.random((len(bumpy.vertices), 1))
+    for mesh in (trimesh.creation.torus(50, 10), trimesh.creation.annulus(10, 30, 20), bumpy):
+        expected = brute_force_supporting(mesh, 1e-6 * mesh.scale)
+        assert np.array_equal(supporting_faces(mesh), expected)
+    # a convex mesh of 327,680 faces: every face supports; the brute force took minutes
+    sphere = trimesh.creation.icosphere(subdivisions=7, radius=50.0)
+    sphere.convex_hull  # noqa: B018 (qhull's own time is not the test's subject)
+    start = time.perf_counter()
+    assert supporting_faces(sphere).all()
+    assert time.perf_counter() - start < 10.0
