@@ -22,7 +22,7 @@ from benchmarks.harness import ROOT, OptionError, format_table, load_conditions,
 
 from . import inputs
 from .judge import Expectation, judge, run_watched
-from .nodes import NODE_PROBES
+from .nodes import NODE_PROBES, NodeProbe
 from .probes import CLI_PROBES, Probe
 
 __all__ = ["expectation", "main", "run_probe"]
@@ -172,10 +172,10 @@ def main(argv=None) -> int:
         rows, values = [], Ports()
         for probe in probes:
             print(f"{probe.id} {probe.tool} {probe.what} ...", file=sys.stderr, flush=True)
-            runner = getattr(probe, "run", None)
-            rows.append(
-                runner(folder, values, args.timeout) if runner else run_probe(probe, folder, values, args.timeout)
-            )
+            if isinstance(probe, NodeProbe):
+                rows.append(probe.run(folder, args.timeout, expectation(probe), CONDITIONS))
+            else:
+                rows.append(run_probe(probe, folder, values, args.timeout))
     print(format_rows(rows))
     defects = sum(r["result"] != "holds" for r in rows)
     print(f"\n{len(rows) - defects} holds, {defects} DEFECT, {len(rows)} probes")
