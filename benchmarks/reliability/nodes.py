@@ -113,6 +113,8 @@ class NodeProbe:
     prepare: Callable[[Path], list[str]]  # the launch's arguments, after building the probe's inputs
     ends: str = "refuse"
     bound: str = "refusal"
+    message: str = ""
+    forbid: tuple[str, ...] = ()
 
     def run(self, folder: Path, timeout_s: float, expect: Expectation, conditions) -> dict:
         """Launch, probe, stop; the table row (``peak_mb``: the node's growth during the request)."""
@@ -137,7 +139,7 @@ class NodeProbe:
             "exit": exit_code, "reason": verdict.reason,
         }  # fmt: skip
 
-    def _probe(self, launch_pid, env, expect, timeout_s, conditions) -> tuple[Verdict, float, float, int | None]:
+    def _probe(self, launch_pid, env, expect, timeout_s, conditions) -> tuple[Verdict, float, float, str | None]:
         started = time.perf_counter()
         node = None
         while time.perf_counter() - started < STARTUP_S:
@@ -164,6 +166,9 @@ class NodeProbe:
         watch.join()
         growth = max(0.0, watch.peak_mb - baseline)
         lines = [x for x in outcome.result.stdout.splitlines() if x.startswith("{")]
+        if outcome.killed == "time":
+            reason = f"no answer within {outcome.result.seconds:.0f} s (bound {expect.seconds:g} s)"
+            return Verdict(False, reason), outcome.result.seconds, growth, None
         if outcome.result.returncode != 0 or not lines:
             return judge(outcome, Expectation("succeed", kill_after, 1e9)), outcome.result.seconds, growth, None
         reply = json.loads(lines[-1])
@@ -182,7 +187,7 @@ class NodeProbe:
             verdict = Verdict(False, f"node grew by {growth:.0f} MB (bound {expect.memory_mb:g} MB)")
         else:
             verdict = Verdict(True, reply["message"][:90])
-        return verdict, seconds, growth, int(bool(reply["success"]))
+        return verdict, seconds, growth, {None: "-", True: "success", False: "failure"}[reply["success"]]
 
 
 def _stop(launch: subprocess.Popen) -> None:
