@@ -6,11 +6,11 @@ import sys
 
 import pytest
 
-from benchmarks.harness import ProcessResult
+from benchmarks.harness import OptionError, ProcessResult
 from benchmarks.reliability import inputs
 from benchmarks.reliability.judge import Expectation, Outcome, judge, run_watched
 from benchmarks.reliability.probes import CLI_PROBES
-from benchmarks.reliability.run import CONDITIONS, expectation, select
+from benchmarks.reliability.run import CONDITIONS, expectation, main, select
 
 REFUSE = Expectation("refuse", seconds=5.0, memory_mb=500.0, message="not found")
 FORBID = ("ModuleNotFoundError",)
@@ -98,3 +98,14 @@ def test_catalogue_ids_are_unique_and_inputs_known():
     for probe in CLI_PROBES:
         assert set(probe.inputs) <= set(inputs.GENERATORS), probe.id
         assert probe.ends in ("refuse", "succeed", "either") and probe.bound in CONDITIONS.mapping("bounds")
+
+
+def test_the_command_lists_its_probes_and_refuses_unknown_ids(capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(["--help"])
+    assert exit_.value.code == 0 and "usage:" in capsys.readouterr().out
+    assert main(["--list", "--only", "P4", "K22", "N19"]) == 0
+    listed = capsys.readouterr().out
+    assert "random bytes" in listed and "load_samples" in listed and "ReconstructObject" in listed
+    with pytest.raises(OptionError, match="unknown probe P999"):
+        main(["--list", "--only", "P999"])
