@@ -227,7 +227,7 @@ def _samples(count: int) -> Callable[[Path], None]:
         points = _rng(path.name).uniform(-0.5, 0.5, (count, 3))
         with open(path, "w") as f:
             for i, p in enumerate(points):
-                text = f"[{p[0]!r}, {p[1]!r}, {p[2]!r}]"
+                text = "[" + ", ".join(repr(float(x)) for x in p) + "]"
                 f.write(f"p_robot 3-DoF index:{i}\n{text}\np_camera 3-DoF index:{i}\n{text}\n")
 
     return build
