@@ -19,7 +19,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import psutil
@@ -66,7 +66,6 @@ class Expectation:
 class Verdict:
     holds: bool
     reason: str = ""
-    extra: dict = field(default_factory=dict)
 
     @property
     def label(self) -> str:

@@ -14,7 +14,6 @@ import socket
 import sys
 import tempfile
 import threading
-from dataclasses import asdict
 from pathlib import Path
 from typing import ClassVar
 
@@ -45,7 +44,9 @@ def expectation(probe: Probe, conditions=CONDITIONS) -> Expectation:
 
 
 # -------------------------------------------------------------------------------------------- fake schedulers
-class _Quiet(http.server.SimpleHTTPRequestHandler):
+class _Quiet(http.server.BaseHTTPRequestHandler):
+    """Answers every request with 501 (it serves no files), silently."""
+
     def log_message(self, *args):
         pass
 
@@ -180,5 +181,5 @@ def main(argv=None) -> int:
     defects = sum(r["result"] != "holds" for r in rows)
     print(f"\n{len(rows) - defects} holds, {defects} DEFECT, {len(rows)} probes")
     if args.json:
-        write_json(args.json, {"conditions": asdict(CONDITIONS)["values"], "rows": rows})
+        write_json(args.json, {"conditions": CONDITIONS.values, "rows": rows})
     return 1 if defects else 0
