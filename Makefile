@@ -9,7 +9,7 @@ BENCH_OUT ?= $(ROOT)/bench_results
 BENCH_ARGS ?=
 BENCHES := planning parts scale set-cover metrology motion collision nbv3d nbv-map nbv2d mild calibration phoxi
 
-.PHONY: setup demo demo-station test lint format pytest rostest bench $(addprefix bench-,$(BENCHES)) clean
+.PHONY: setup demo demo-station test lint format pytest rostest bench $(addprefix bench-,$(BENCHES)) fuzz clean
 
 setup:
 	@bash tools/setup.sh
@@ -85,6 +85,11 @@ bench-calibration: setup
 
 bench-phoxi: setup
 	$(call run_bench,phoxi,benchmarks.phoxi,)
+
+# The reliability probe replayed (minutes; not part of `make test`): hostile inputs to every command-line tool and
+# node, one row each, holds / DEFECT; the table goes to bench_results/fuzz.txt, the rows to fuzz.json.
+fuzz: setup
+	$(call run_bench,fuzz,benchmarks.reliability,--json "$(BENCH_OUT)/fuzz.json")
 
 clean:
 	rm -rf "$$(bash tools/workspace_path.sh)" .test_results .ros_home demo_output
