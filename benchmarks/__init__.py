@@ -5,7 +5,7 @@ Run from the checkout's root, e.g. ``python -m benchmarks.planning`` (see benchm
 
 Module index: ``harness`` (process runner, peak memory, timing, JSON and tables, options, targets, conditions),
 ``planning`` (pipeline, parts, scale, set_cover, metrology), ``motion`` (core, collision), ``nbv3d`` (loop, map),
-``nbv2d``, ``mild``, ``calibration``, ``phoxi``.
+``nbv2d``, ``mild``, ``calibration``, ``phoxi``, ``reliability`` (the hostile-input replay of ``make fuzz``).
 """
 
 import sys

@@ -46,6 +46,7 @@ MODULES = (
     "benchmarks.mild",
     "benchmarks.calibration",
     "benchmarks.phoxi",
+    "benchmarks.reliability.run",
 )
 
 
