@@ -100,13 +100,14 @@ def run(args) -> int:
     if args.cost_weight is not None:
         overrides["cost_weight"] = args.cost_weight
     request = ReconstructionRequest.with_config_defaults(**overrides)  # validates before the heavy imports
-    from agiprobot_measurement.nbv.simulation.ground_truth import GroundTruth, simulate
-    from agiprobot_measurement.nbv.simulation.station3d import SimulatedNBVStation
+    from agiprobot_measurement.nbv.simulation.station3d import SimulatedNBVStation, load_part_mesh
 
     t0 = time.perf_counter()
+    part_mesh_m = load_part_mesh(args.part, args.units, args.extent)  # checked before the heavy imports and work
+    from agiprobot_measurement.nbv.simulation.ground_truth import GroundTruth, simulate
+
     station = SimulatedNBVStation(
-        args.part, args.units, args.extent, args.model, noise=not args.no_noise, seed=args.seed,
-        pixel_step=args.pixel_step,
+        part_mesh_m, "m", None, args.model, noise=not args.no_noise, seed=args.seed, pixel_step=args.pixel_step,
     )  # fmt: skip
     print(f"part: {args.part}, extent {station.part_mesh.extents.max() * 1000:.0f} mm, on the fixture", file=sys.stderr)
     truth = None
