@@ -37,6 +37,7 @@ from agiprobot_measurement.station.placement import fixture_placement
 
 __all__ = ["SimulatedNBVStation", "SimulatedPhoXiCamera", "SimulatedRobot", "load_part_mesh"]
 
+
 def load_part_mesh(part, units: str = "mm", largest_extent_m: float | None = None):
     """A part as a ``trimesh.Trimesh`` in metres: a mesh path (STL, OBJ, PLY, OFF...) in ``units`` or a STEP file
     (in the unit it declares), a Trimesh (already in ``units``) or the name of a procedural shape of
