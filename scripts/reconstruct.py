@@ -35,6 +35,7 @@ except ImportError:  # run from a checkout without the catkin environment
 
 from agiprobot_measurement.common.cli import run_main  # noqa: E402
 from agiprobot_measurement.common.files import output_path, write_output  # noqa: E402
+from agiprobot_measurement.common.limits import excerpt  # noqa: E402
 from agiprobot_measurement.common.units import UNIT_SCALES_TO_M  # noqa: E402
 from agiprobot_measurement.errors import InputError  # noqa: E402
 
@@ -84,6 +85,10 @@ def run(args) -> int:
     if out.is_dir() and any(out.iterdir()) and not args.overwrite:
         raise InputError(f"--out {out} is not empty (use --overwrite to write into it)")
     summary_path = output_path(args.summary, args.overwrite, what="--summary") if args.summary else None
+    try:  # an unusable --out fails here, before any work
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"--out: cannot create the folder {excerpt(str(out))}: {exc.strerror}") from exc
     from agiprobot_measurement.nbv.volumetric.request import ReconstructionRequest
 
     overrides = {
@@ -126,7 +131,6 @@ def run(args) -> int:
                 f"  view {p.view:2d} {p.phase:<11} observed {p.observed_area_m2 * 1e4:.1f} cm^2{cov}", file=sys.stderr
             )
 
-    out.mkdir(parents=True, exist_ok=True)
     summary = simulate(station, request, truth, on_progress=progress)
     summary["part"] = str(args.part)
     summary["wall_time_total_s"] = time.perf_counter() - t0
@@ -141,6 +145,9 @@ def run(args) -> int:
         write_output(summary_path, json.dumps(summary, indent=1, default=float))
     if summary["termination_reason"] == "error":
         print(f"error: {summary['error']}", file=sys.stderr)
+        return 1
+    if summary.get("outputs_error"):
+        print(f"error: {summary['outputs_error']} (in {out})", file=sys.stderr)
         return 1
     return 0
 

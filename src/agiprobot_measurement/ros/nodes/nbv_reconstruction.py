@@ -288,8 +288,10 @@ class NBVReconstructionNode:
             if goal.execute:
                 outcome = reconstructor.run(on_progress=on_progress, should_cancel=self._cancel_requested)
                 self._fill_result(result, outcome)
+                outputs_error = outcome.outputs_error  # the run's files are not all written: the goal failed
                 pose = self.view_poses[-1] if self.view_poses else None
             else:
+                outputs_error = ""
                 pose = self._plan_only(result, reconstructor, output_dir, on_progress)
             if pose is not None:
                 result.next_view = pose_stamped(pose, self._header())
@@ -300,8 +302,8 @@ class NBVReconstructionNode:
                 result.termination_reason = "cancelled"
                 result.error = f"cancelled during {phase['name']} of view {phase['view']}"
                 self.server.set_preempted(result, result.error)
-            elif result.termination_reason == "error":
-                result.error = result.error or "the reconstruction failed (see the node's log)"
+            elif result.termination_reason == "error" or outputs_error:
+                result.error = result.error or outputs_error or "the reconstruction failed (see the node's log)"
                 rospy.logwarn("nbv_reconstruction: %s", result.error)
                 self.server.set_aborted(result, result.error)
             else:
