@@ -80,12 +80,12 @@ def main(argv=None) -> int:
 
 def run(args) -> int:
     out = Path(args.out).expanduser()
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out {out} exists and is not a folder")
-    if out.is_dir() and any(out.iterdir()) and not args.overwrite:
-        raise InputError(f"--out {out} is not empty (use --overwrite to write into it)")
     summary_path = output_path(args.summary, args.overwrite, what="--summary") if args.summary else None
     try:  # an unusable --out fails here, before any work
+        if out.exists() and not out.is_dir():
+            raise InputError(f"--out {excerpt(str(out))} exists and is not a folder")
+        if out.is_dir() and any(out.iterdir()) and not args.overwrite:
+            raise InputError(f"--out {excerpt(str(out))} is not empty (use --overwrite to write into it)")
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise InputError(f"--out: cannot create the folder {excerpt(str(out))}: {exc.strerror}") from exc
