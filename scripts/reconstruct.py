@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Reconstruct a part on the simulated station by next-best-view planning (no roscore needed).
 
-The part (a mesh file in --units, or a procedural shape: u_channel, cup, two_towers, l_bracket, torus) is placed on
+The part (a mesh file in --units, a STEP file in the unit it declares, or a procedural shape: u_channel, cup,
+two_towers, l_bracket, torus; read and checked as plan_measurement.py reads parts, 10 mm to 2 m across) is placed on
 the fixture, hidden from the planner, and scanned by the simulated PhoXi (model S, noise on) on the UR10e's flange,
 view after view, by the same loop as the ROS node (src/agiprobot_measurement/nbv/reconstruction.py).
 
@@ -16,7 +17,8 @@ coverage of the observable surface after each view, the planning time per view, 
 Chamfer distance. Progress goes to stderr. Files go where they are named (absolute, or relative to the working
 directory); a non-empty --out or an existing --summary is refused unless --overwrite.
 
-exit status: 0 done; 2 bad input (one 'error: ...' line); 1 internal error; 130 interrupted.
+exit status: 0 done; 2 bad input (one 'error: ...' line); 1 internal error or outputs not written (the folder
+keeps its previous files); 130 interrupted.
 """
 
 from __future__ import annotations
