@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Reconstruct a part on the simulated station by next-best-view planning (no roscore needed).
 
-The part (a mesh file in --units, or a procedural shape: u_channel, cup, two_towers, l_bracket, torus) is placed on
+The part (a mesh file in --units, a STEP file in the unit it declares, or a procedural shape: u_channel, cup,
+two_towers, l_bracket, torus; read and checked as plan_measurement.py reads parts, 10 mm to 2 m across) is placed on
 the fixture, hidden from the planner, and scanned by the simulated PhoXi (model S, noise on) on the UR10e's flange,
 view after view, by the same loop as the ROS node (src/agiprobot_measurement/nbv/reconstruction.py).
 
@@ -16,7 +17,8 @@ coverage of the observable surface after each view, the planning time per view, 
 Chamfer distance. Progress goes to stderr. Files go where they are named (absolute, or relative to the working
 directory); a non-empty --out or an existing --summary is refused unless --overwrite.
 
-exit status: 0 done; 2 bad input (one 'error: ...' line); 1 internal error; 130 interrupted.
+exit status: 0 done; 2 bad input (one 'error: ...' line); 1 internal error or outputs not written (the folder
+keeps its previous files); 130 interrupted.
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ except ImportError:  # run from a checkout without the catkin environment
 
 from agiprobot_measurement.common.cli import run_main  # noqa: E402
 from agiprobot_measurement.common.files import output_path, write_output  # noqa: E402
+from agiprobot_measurement.common.limits import excerpt  # noqa: E402
 from agiprobot_measurement.common.units import UNIT_SCALES_TO_M  # noqa: E402
 from agiprobot_measurement.errors import InputError  # noqa: E402
 
@@ -79,11 +82,15 @@ def main(argv=None) -> int:
 
 def run(args) -> int:
     out = Path(args.out).expanduser()
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out {out} exists and is not a folder")
-    if out.is_dir() and any(out.iterdir()) and not args.overwrite:
-        raise InputError(f"--out {out} is not empty (use --overwrite to write into it)")
     summary_path = output_path(args.summary, args.overwrite, what="--summary") if args.summary else None
+    try:  # an unusable --out fails here, before any work
+        if out.exists() and not out.is_dir():
+            raise InputError(f"--out {excerpt(str(out))} exists and is not a folder")
+        if out.is_dir() and any(out.iterdir()) and not args.overwrite:
+            raise InputError(f"--out {excerpt(str(out))} is not empty (use --overwrite to write into it)")
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"--out: cannot create the folder {excerpt(str(out))}: {exc.strerror}") from exc
     from agiprobot_measurement.nbv.volumetric.request import ReconstructionRequest
 
     overrides = {
@@ -100,13 +107,14 @@ def run(args) -> int:
     if args.cost_weight is not None:
         overrides["cost_weight"] = args.cost_weight
     request = ReconstructionRequest.with_config_defaults(**overrides)  # validates before the heavy imports
-    from agiprobot_measurement.nbv.simulation.ground_truth import GroundTruth, simulate
-    from agiprobot_measurement.nbv.simulation.station3d import SimulatedNBVStation
+    from agiprobot_measurement.nbv.simulation.station3d import SimulatedNBVStation, load_part_mesh
 
     t0 = time.perf_counter()
+    part_mesh_m = load_part_mesh(args.part, args.units, args.extent)  # checked before the heavy imports and work
+    from agiprobot_measurement.nbv.simulation.ground_truth import GroundTruth, simulate
+
     station = SimulatedNBVStation(
-        args.part, args.units, args.extent, args.model, noise=not args.no_noise, seed=args.seed,
-        pixel_step=args.pixel_step,
+        part_mesh_m, "m", None, args.model, noise=not args.no_noise, seed=args.seed, pixel_step=args.pixel_step,
     )  # fmt: skip
     print(f"part: {args.part}, extent {station.part_mesh.extents.max() * 1000:.0f} mm, on the fixture", file=sys.stderr)
     truth = None
@@ -125,7 +133,6 @@ def run(args) -> int:
                 f"  view {p.view:2d} {p.phase:<11} observed {p.observed_area_m2 * 1e4:.1f} cm^2{cov}", file=sys.stderr
             )
 
-    out.mkdir(parents=True, exist_ok=True)
     summary = simulate(station, request, truth, on_progress=progress)
     summary["part"] = str(args.part)
     summary["wall_time_total_s"] = time.perf_counter() - t0
@@ -140,6 +147,9 @@ def run(args) -> int:
         write_output(summary_path, json.dumps(summary, indent=1, default=float))
     if summary["termination_reason"] == "error":
         print(f"error: {summary['error']}", file=sys.stderr)
+        return 1
+    if summary.get("outputs_error"):
+        print(f"error: {summary['outputs_error']} (in {out})", file=sys.stderr)
         return 1
     return 0
 

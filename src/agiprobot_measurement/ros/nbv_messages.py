@@ -35,11 +35,12 @@ _NUMBER_FIELDS = (
 )
 
 
-def request_mapping_from_goal(goal, defaults: dict, max_voxels: float) -> dict:
+def request_mapping_from_goal(goal, defaults: dict, max_voxels: float, default_roi_size_m=None) -> dict:
     """The :class:`ReconstructionRequest` fields of a ReconstructObject goal over ``defaults`` (config/nbv.yaml's
     ``request``): zero / empty goal fields keep the default. Raises InputError naming the field for NaN or infinite
     numbers, negative values, a ROI edge that is zero or negative while another is given, or a grid larger than
-    ``max_voxels`` (the ROI's default size is checked by the loop)."""
+    ``max_voxels``: the goal's ROI, or ``default_roi_size_m`` (m, the station's a-priori ROI) when the goal leaves
+    it at the default, at the goal's or the default resolution."""
     values = dict(defaults)
     centre, size = xyz_array(goal.roi_center), xyz_array(goal.roi_size)
     for name, value in (("roi_center", centre), ("roi_size", size)):
@@ -62,13 +63,10 @@ def request_mapping_from_goal(goal, defaults: dict, max_voxels: float) -> dict:
                 f"size), got {size.tolist()} m"
             )
         values["roi_size_m"] = size
-        resolution = float(values.get("resolution_m", 0.002))
-        cells = float(np.prod(np.ceil(size / resolution))) if resolution > 0 else math.inf
-        if cells > max_voxels:
-            raise InputError(
-                f"roi_size: {size.tolist()} m at resolution {resolution} m is {cells:.3g} voxels, more than the "
-                f"node's limit of {max_voxels:.3g} (~max_voxels): choose a smaller ROI or a coarser resolution_m"
-            )
+        _check_voxels(size, float(values.get("resolution_m", 0.002)), max_voxels, "roi_size")
+    elif default_roi_size_m is not None:
+        default_size = np.asarray(default_roi_size_m, dtype=float)
+        _check_voxels(default_size, float(values.get("resolution_m", 0.002)), max_voxels, "the default ROI")
     if goal.max_views < 0:
         raise InputError(f"max_views must not be negative (0 = the default), got {goal.max_views}")
     if goal.max_views > 0:
@@ -80,6 +78,15 @@ def request_mapping_from_goal(goal, defaults: dict, max_voxels: float) -> dict:
     values["execute"] = bool(goal.execute)
     values["seed"] = int(goal.seed)
     return values
+
+
+def _check_voxels(size: np.ndarray, resolution: float, max_voxels: float, what: str) -> None:
+    cells = float(np.prod(np.ceil(size / resolution))) if resolution > 0 else math.inf
+    if not cells <= max_voxels:
+        raise InputError(
+            f"{what}: {size.tolist()} m at resolution {resolution} m is {cells:.3g} voxels, more than the node's "
+            f"limit of {max_voxels:.3g} (~max_voxels): choose a smaller ROI or a coarser resolution_m"
+        )
 
 
 def candidate_arrays(candidates) -> tuple[np.ndarray, np.ndarray, list[str]]:

@@ -21,7 +21,9 @@ import math
 from pathlib import Path
 
 import numpy as np
+from PIL import Image
 
+from agiprobot_measurement.common.limits import LIMITS, InputTooLarge, check_count
 from agiprobot_measurement.nbv.planar.errors import NbvInputError
 from agiprobot_measurement.nbv.planar.grid import validate_truth
 
@@ -81,6 +83,22 @@ def make_object(name: str) -> np.ndarray:
     return validate_truth(mask, name)
 
 
+def _npy_shape(path: Path) -> tuple[int, ...]:
+    """The array shape a ``.npy`` file's header declares (nothing of the data is read)."""
+    with path.open("rb") as f:
+        version = np.lib.format.read_magic(f)
+        if version == (1, 0):
+            shape, _, _ = np.lib.format.read_array_header_1_0(f)
+        else:
+            shape, _, _ = np.lib.format.read_array_header_2_0(f)
+    return tuple(int(n) for n in shape)
+
+
+def _check_pixels(shape: tuple[int, ...], path: Path) -> None:
+    """:class:`InputTooLarge` when an image or mask of ``shape`` has more cells than ``LIMITS.image_pixels``."""
+    check_count(math.prod(shape), LIMITS.image_pixels, f"{path}: cells of the object ({' x '.join(map(str, shape))})")
+
+
 def load_object_file(path: Path | str) -> np.ndarray:
     """A body from a ``.npy`` mask (indexed ``[i, j]`` like the model; > 0 is body) or an image.
 
@@ -92,20 +110,27 @@ def load_object_file(path: Path | str) -> np.ndarray:
         raise NbvInputError(f"object file not found: {p}")
     if p.suffix.lower() == ".npy":
         try:
+            _check_pixels(_npy_shape(p), p)
             arr = np.load(p, allow_pickle=False)
-        except (OSError, ValueError) as exc:
+        except InputTooLarge:
+            raise
+        except (OSError, ValueError, MemoryError) as exc:
             raise NbvInputError(f"cannot read the mask {p}: {exc}") from exc
         if arr.dtype != bool and not np.issubdtype(arr.dtype, np.number):
             raise NbvInputError(f"{p}: a mask must be boolean or numeric, got {arr.dtype}")
         return validate_truth(arr, str(p))
     try:
-        import matplotlib.image as mpimg
-
-        img = np.asarray(mpimg.imread(p), dtype=float)
-    except (OSError, ValueError, SyntaxError) as exc:
+        with Image.open(p) as header:  # reads the header only: the size is checked before decoding
+            width, height = header.size
+            _check_pixels((height, width), p)
+            if header.mode in ("1", "L", "I", "F") or header.mode.startswith("I;"):
+                img = np.asarray(header, dtype=np.float32)
+            else:  # colour, palette, with alpha: the mean of red, green and blue
+                img = np.asarray(header.convert("RGB"), dtype=np.float32).mean(axis=2)
+    except InputTooLarge:
+        raise
+    except (OSError, ValueError, SyntaxError, Image.DecompressionBombError) as exc:
         raise NbvInputError(f"cannot read the image {p}: {exc}") from exc
-    if img.ndim == 3:
-        img = img[..., :3].mean(axis=2)
     if img.ndim != 2 or img.size == 0:
         raise NbvInputError(f"{p}: not a 2D image")
     lo, hi = float(img.min()), float(img.max())

@@ -28,6 +28,7 @@ import numpy as np
 import yaml
 
 from agiprobot_measurement._paths import CONFIG_DIR
+from agiprobot_measurement.common.limits import LIMITS
 from agiprobot_measurement.nbv.planar.errors import NbvInputError
 from agiprobot_measurement.nbv.planar.grid import EMPTY, FULL
 from agiprobot_measurement.nbv.planar.traversal import first_blocking, line8_cells, segment_box_entry, supercover_cells
@@ -61,11 +62,23 @@ def default_laser_scanner_config_path() -> Path:
     return CONFIG_DIR / "laser_scanner.yaml"
 
 
+#: the longest laser-camera distance (cells): a ray's traversal buffer grows with it
+MAX_RF_LENGTH_CELLS = 5 * math.isqrt(LIMITS.image_pixels)
+
+
 def _check_finite(name: str, value: float) -> float:
     v = float(value)
     if not math.isfinite(v):
         raise NbvInputError(f"{name} must be a finite number, got {value!r}")
     return v
+
+
+def _check_length(length: float) -> None:
+    if not 0 < length <= MAX_RF_LENGTH_CELLS:
+        raise NbvInputError(
+            f"rf_length_cells (RFlength) must be > 0 and <= {MAX_RF_LENGTH_CELLS:,} cells (5 times the side of the "
+            f"largest object grid read), got {length:g}"
+        )
 
 
 @dataclass(frozen=True)
@@ -82,8 +95,7 @@ class RangeFinder2D:
         alpha = _check_finite("rf_alpha_rad (RFalpha)", self.rf_alpha_rad)
         beta = _check_finite("rf_beta_rad (RFbeta)", self.rf_beta_rad)
         gamma = _check_finite("fr_gamma_rad (FRgamma)", self.fr_gamma_rad)
-        if length <= 0:
-            raise NbvInputError(f"rf_length_cells (RFlength) must be > 0 cells, got {length}")
+        _check_length(length)
         if not (0 < alpha < math.pi and 0 < beta < math.pi and alpha + beta < math.pi):
             raise NbvInputError(
                 f"RFalpha and RFbeta must lie in (0, pi) with RFalpha + RFbeta < pi so that the laser and the camera "
@@ -129,8 +141,7 @@ class RangeFinder2D:
         report's section 7.1 names.
         """
         length = _check_finite("rf_length_cells (RFlength)", rf_length_cells)
-        if length <= 0:
-            raise NbvInputError(f"rf_length_cells (RFlength) must be > 0 cells, got {length}")
+        _check_length(length)
         s = self.standoff_cells
         a = self.rf_alpha_rad
         beta = math.atan2(s * math.sin(a), length - s * math.cos(a))

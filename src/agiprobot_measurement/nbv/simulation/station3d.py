@@ -13,16 +13,20 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
+import trimesh
 
 from agiprobot_measurement._paths import PACKAGE_ROOT
+from agiprobot_measurement.common.limits import LIMITS, check_count, check_file_size, excerpt
 from agiprobot_measurement.common.units import UNIT_SCALES_TO_M
 from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.nbv.simulation.objects3d import SHAPES, make_shape
 from agiprobot_measurement.nbv.volumetric.interfaces import CapturedView, MotionError
 from agiprobot_measurement.nbv.volumetric.station3d import HOUSING_LINK, NBVStation
+from agiprobot_measurement.planning.part_loading import PLAUSIBLE_SIZE_MM, STEP_SUFFIXES, PartWarning, load_part
 from agiprobot_measurement.sensors.phoxi.renderer import (
     RobotGeometry,
     ScanSettings,
@@ -33,51 +37,69 @@ from agiprobot_measurement.station.placement import fixture_placement
 
 __all__ = ["SimulatedNBVStation", "SimulatedPhoXiCamera", "SimulatedRobot", "load_part_mesh"]
 
-#: largest mesh file the loader reads (bytes): a bound on memory for a user-given path
-MAX_MESH_BYTES = 200 * 1024 * 1024
-
 
 def load_part_mesh(part, units: str = "mm", largest_extent_m: float | None = None):
-    """A part as a ``trimesh.Trimesh`` in metres: a mesh path (STL, OBJ, PLY, OFF...) in ``units``, a Trimesh
-    (already in ``units``) or the name of a procedural shape of :mod:`.objects3d` (mm); ``largest_extent_m`` rescales it so that its largest bounding-box edge has that length.
+    """A part as a ``trimesh.Trimesh`` in metres: a mesh path (STL, OBJ, PLY, OFF...) in ``units`` or a STEP file
+    (in the unit it declares), a Trimesh (already in ``units``) or the name of a procedural shape of
+    :mod:`.objects3d` (mm); ``largest_extent_m`` rescales it so that its largest bounding-box edge has that length.
 
-    Raises :class:`InputError` for a missing, oversized, empty or non-finite mesh or an unknown unit.
+    Files are read by the planner's :func:`~agiprobot_measurement.planning.part_loading.load_part`, so the two tools
+    accept and refuse the same files. Raises :class:`InputError` for a missing, oversized, empty, degenerate or
+    non-finite mesh, an unknown unit, or a part whose largest extent lies outside
+    :data:`~agiprobot_measurement.planning.part_loading.PLAUSIBLE_SIZE_MM` (the station cannot scan it).
     """
-    import trimesh
-
     if units not in UNIT_SCALES_TO_M:
         raise InputError(f"units: unknown unit {units!r}; one of {', '.join(sorted(UNIT_SCALES_TO_M))}")
 
     if isinstance(part, trimesh.Trimesh):
         mesh = part.copy()
+        mesh.apply_scale(UNIT_SCALES_TO_M[units])
     elif isinstance(part, str) and part in SHAPES:
         mesh = make_shape(part)  # mm
-        units = "mm"
+        mesh.apply_scale(UNIT_SCALES_TO_M["mm"])
     else:
-        path = Path(part)
-        if not path.is_absolute() and not path.exists():
-            shared = PACKAGE_ROOT / path
-            path = shared if shared.exists() else path
-        if not path.is_file():
-            raise InputError(f"part: mesh file {part} does not exist")
-        if path.stat().st_size > MAX_MESH_BYTES:
-            raise InputError(f"part: mesh file {part} is larger than {MAX_MESH_BYTES // 2**20} MB")
-        try:
-            mesh = trimesh.load(str(path), force="mesh")
-        except Exception as exc:  # trimesh raises many kinds for unreadable files
-            raise InputError(f"part: cannot read mesh {part}: {exc}") from exc
-    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-        raise InputError(f"part: {part} holds no triangles")
+        mesh = _read_part_file(part, units)
+    if len(mesh.faces) == 0:
+        raise InputError(f"part: {excerpt(str(part))} holds no triangles")
     if not np.all(np.isfinite(mesh.vertices)):
-        raise InputError(f"part: {part} has non-finite vertices")
-    mesh.apply_scale(UNIT_SCALES_TO_M[units])
+        raise InputError(f"part: {excerpt(str(part))} has non-finite vertices")
     extent = float(np.max(mesh.extents))
     if not extent > 0:
-        raise InputError(f"part: {part} is degenerate (zero extent)")
+        raise InputError(f"part: {excerpt(str(part))} is degenerate (zero extent)")
     if largest_extent_m is not None:
         if not (math.isfinite(largest_extent_m) and largest_extent_m > 0):
             raise InputError(f"largest_extent_m must be a positive length, got {largest_extent_m}")
         mesh.apply_scale(float(largest_extent_m) / extent)
+        extent = float(np.max(mesh.extents))
+    low, high = PLAUSIBLE_SIZE_MM
+    if not low <= extent * 1000.0 <= high:
+        raise InputError(
+            f"part: {excerpt(str(part))} is {extent * 1000.0:.4g} mm across, outside what the station scans "
+            f"({low:g} to {high:g} mm): check the unit (--units) or rescale it (--extent)"
+        )
+    return mesh
+
+
+def _read_part_file(part, units: str):
+    """The mesh of a part file in metres, read and checked as the planner reads it."""
+    path = Path(part)
+    if not path.is_absolute() and not path.exists():
+        shared = PACKAGE_ROOT / path
+        path = shared if shared.exists() else path
+    if not path.is_file():
+        raise InputError(f"part: mesh file {excerpt(str(part))} does not exist or is not a regular file")
+    is_step = path.suffix.lower() in STEP_SUFFIXES
+    if is_step:
+        check_file_size(path, LIMITS.step_file_bytes, "part: STEP file")
+    else:
+        check_file_size(path, LIMITS.mesh_file_bytes, "part: mesh file")
+    with warnings.catch_warnings():
+        # the planner's doubts (open mesh, size before --extent) are not refusals; the size is checked after
+        warnings.simplefilter("ignore", PartWarning)
+        loaded = load_part(path, "mm" if is_step else units, remove_downside=False)  # STEP carries its unit
+    check_count(len(loaded.mesh.faces), LIMITS.mesh_faces, f"part: faces of {excerpt(str(part))}")
+    mesh = loaded.mesh
+    mesh.apply_scale(1e-3)  # mm -> m
     return mesh
 
 

@@ -1,9 +1,16 @@
-"""The files of a 3D reconstruction, each written atomically into one folder: ``cloud.ply`` (fused raw points),
+"""The files of a 3D reconstruction, written as one set into one folder: ``cloud.ply`` (fused raw points),
 ``map.npz`` (+ ``map.bt`` with an OctoMap binding), ``mesh.ply`` (TSDF + marching cubes) and ``views.yaml``
-(method, request, ROI, per-view poses, joints, gains and timings, the result)."""
+(method, request, ROI, per-view poses, joints, gains and timings, the result).
+
+The set is written into a hidden staging folder inside the output folder first and moved into place only when every
+file was written, so a failure (a full disk) leaves the previous set untouched and no mixture of old and new files;
+a file of an earlier set that the new set lacks (no points, no mesh) is removed when the new set is moved in."""
 
 from __future__ import annotations
 
+import os
+import shutil
+import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
@@ -12,7 +19,16 @@ import yaml
 
 from agiprobot_measurement.common.files import atomic_write, atomic_write_text
 
-__all__ = ["attach_outputs", "save_outputs"]
+__all__ = ["OUTPUT_NAMES", "attach_outputs", "save_outputs"]
+
+#: the files of one output set, by kind
+OUTPUT_NAMES = {
+    "cloud": "cloud.ply",
+    "map": "map.npz",
+    "octomap": "map.bt",
+    "mesh": "mesh.ply",
+    "log": "views.yaml",
+}
 
 
 def save_outputs(output_dir, voxel_map, tsdf, request, roi_min_m, roi_max_m, views, termination_reason: str = "",
@@ -21,6 +37,23 @@ def save_outputs(output_dir, voxel_map, tsdf, request, roi_min_m, roi_max_m, vie
     ``views``: the view records; ``result``: the ReconstructionResult when there is one."""
     out = Path(output_dir)
     out.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=".outputs.", suffix=".tmp", dir=out))
+    try:
+        staged = _write_set(staging, voxel_map, tsdf, request, roi_min_m, roi_max_m, views, termination_reason, result)
+        files = {}
+        for kind, name in OUTPUT_NAMES.items():  # renames in one folder: they need no space
+            if kind in staged:
+                os.replace(staged[kind], out / name)
+                files[kind] = str(out / name)
+            else:
+                (out / name).unlink(missing_ok=True)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    return files
+
+
+def _write_set(out: Path, voxel_map, tsdf, request, roi_min_m, roi_max_m, views, termination_reason, result) -> dict:
+    """The files of the set written into ``out`` (the staging folder); {kind: path}."""
     files = {}
     cloud = out / "cloud.ply"
     if voxel_map.export_cloud_ply(cloud) > 0:
@@ -54,12 +87,14 @@ def save_outputs(output_dir, voxel_map, tsdf, request, roi_min_m, roi_max_m, vie
 
 
 def attach_outputs(result, write: Callable[[], dict]) -> None:
-    """Write the outputs with ``write()`` and name the files in ``result``; a failed write is added to the result's
-    error instead of raising (the run's measurements stay in the result)."""
+    """Write the outputs with ``write()`` and name the files in ``result``; a failed write sets the result's
+    ``outputs_error`` and is added to its error instead of raising (the run's measurements stay in the result;
+    callers report the run as failed)."""
     try:
         files = write()
     except OSError as exc:
-        result.error = (result.error + "; " if result.error else "") + f"writing the outputs failed: {exc}"
+        result.outputs_error = f"writing the outputs failed (the folder keeps its previous files): {exc}"
+        result.error = (result.error + "; " if result.error else "") + result.outputs_error
         files = {}
     result.cloud_file = files.get("cloud", "")
     result.mesh_file = files.get("mesh", "")

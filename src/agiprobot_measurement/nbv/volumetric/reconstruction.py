@@ -5,8 +5,8 @@ simulation of :mod:`agiprobot_measurement.nbv.simulation.station3d` or the ROS n
 
 1. the home pose (config/nbv.yaml ``motion.home_rad``); the opening view: the feasible pose of the global view
    sphere around the ROI nearest ``motion.opening_elevation_deg`` (90: the most top-down one); if the ROI is still
-   empty, an a-priori search of ``motion.search_views`` hemisphere views; if still nothing, the result is
-   ``nothing_found``;
+   empty, an a-priori search of ``motion.search_views`` hemisphere views; if still nothing (or no view of the ROI
+   can be reached, or the candidates run out before any surface was seen), the result is ``nothing_found``;
 2. per view: capture, fuse into the output map (``resolution_m``) and the planning map (``planning_resolution_m``,
    fused from the same frames so that its free space is carved at its own resolution), update the labels, generate
    and filter candidates (:mod:`.candidates`), score them (:mod:`.gains`), weigh the estimated joint-move time,
@@ -232,6 +232,10 @@ class Reconstructor:
     def object_seen(self) -> bool:
         return bool(self.map.full_mask().any())
 
+    def _unless_nothing_seen(self, reason: str) -> str:
+        """``reason``, or ``nothing_found`` when it is ``frontier_exhausted`` and the ROI never held a surface."""
+        return "nothing_found" if reason == "frontier_exhausted" and not self.object_seen() else reason
+
     # ------------------------------------------------------------------------------------ planning
     def current_joints(self) -> np.ndarray:
         q = np.asarray(self.robot.current_joints(), dtype=float).reshape(-1)
@@ -257,11 +261,11 @@ class Reconstructor:
         if not self._captures:
             choice = self._opening_choice(q)
             if choice is None:
-                return None, None, 0.0, "frontier_exhausted"
+                return None, None, 0.0, "frontier_exhausted" if self.object_seen() else "nothing_found"
             return choice.pose, choice.joints, 0.0, ""
         choice, reason, _ = self._choose(q)
         if choice is None:
-            return None, None, 0.0, reason
+            return None, None, 0.0, self._unless_nothing_seen(reason)
         return choice.pose, choice.joints, float(choice.gain), ""
 
     def _opening_choice(self, q: np.ndarray, source: str = "sphere") -> ViewChoice | None:
@@ -363,10 +367,9 @@ class Reconstructor:
         # the opening view, then the a-priori search while the ROI stays empty
         self._progress("search")
         opening = self._opening_choice(self.current_joints())
-        if opening is None:
-            return "frontier_exhausted"
-        if not self._visit(opening, planning_s=0.0, stats={}):
-            return "frontier_exhausted"
+        if opening is None or not self._visit(opening, planning_s=0.0, stats={}):
+            # no view of the ROI can be reached (a ROI out of the robot's reach): nothing_found unless seen before
+            return self._unless_nothing_seen("frontier_exhausted")
         if not self.object_seen():
             reason = self._search()
             if reason:
@@ -379,7 +382,7 @@ class Reconstructor:
             q = self.current_joints()
             choice, reason, stats = self._choose(q)
             if choice is None:
-                return reason
+                return self._unless_nothing_seen(reason)
             area = choice.new_area_m2 if choice.remaining_area_m2 is None else choice.remaining_area_m2
             gain = choice.gain if choice.remaining_gain is None else choice.remaining_gain
             if self.policy.uses_stopping_rule:

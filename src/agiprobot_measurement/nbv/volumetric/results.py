@@ -83,6 +83,7 @@ class ReconstructionResult:
     map_file: str = ""
     log_file: str = ""
     error: str = ""
+    outputs_error: str = ""  # the outputs could not be written (a full disk): the run failed
     motion_failures: int = 0
     wall_time_s: float = 0.0
     next_view_pose: np.ndarray | None = None  # plan-only: the next best view (world <- sensor)
@@ -93,6 +94,7 @@ class ReconstructionResult:
         return {
             "termination_reason": self.termination_reason,
             "error": self.error,
+            "outputs_error": self.outputs_error,
             "views": len(self.views),
             "joint_path_rad": float(self.joint_path_rad),
             "tcp_path_m": float(self.tcp_path_m),

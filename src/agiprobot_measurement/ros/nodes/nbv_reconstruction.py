@@ -60,6 +60,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from agiprobot_measurement.common.config import ConfigError, number, whole
 from agiprobot_measurement.common.files import FileRoot
+from agiprobot_measurement.common.limits import LIMITS
 from agiprobot_measurement.errors import AgiprobotError, InputError
 from agiprobot_measurement.msg import (
     ReconstructObjectAction,
@@ -145,6 +146,10 @@ class NBVReconstructionNode:
         self.max_cubes = settings.marker_max_cubes
         if not (self.max_voxels > 0 and self.cloud_voxel_m > 0 and self.max_cubes > 0):
             raise ConfigError("~max_voxels, ~cloud_voxel_m and ~marker_max_cubes must be positive")
+        if self.max_voxels > LIMITS.map_voxels:
+            raise ConfigError(
+                f"~max_voxels {self.max_voxels:.3g} is above the package's limit of {LIMITS.map_voxels:.3g}"
+            )
 
         self.server = actionlib.SimpleActionServer(
             "~reconstruct_object", ReconstructObjectAction, execute_cb=self.on_goal, auto_start=False
@@ -236,7 +241,7 @@ class NBVReconstructionNode:
         """The loop for ``goal`` and its output folder; a plan-only goal over the same map as the last plan-only
         goal (ROI, resolutions, gain, candidates) goes on with that map, so a user who moves the robot between
         plan-only goals builds one map (``~reset`` starts a new one)."""
-        values = request_mapping_from_goal(goal, self.defaults, self.max_voxels)
+        values = request_mapping_from_goal(goal, self.defaults, self.max_voxels, self.station.default_roi()[1])
         output_dir = self._output_dir(goal.output_dir)
         values["output_dir"] = str(output_dir)
         request = ReconstructionRequest.from_mapping(values)
@@ -283,8 +288,10 @@ class NBVReconstructionNode:
             if goal.execute:
                 outcome = reconstructor.run(on_progress=on_progress, should_cancel=self._cancel_requested)
                 self._fill_result(result, outcome)
+                outputs_error = outcome.outputs_error  # the run's files are not all written: the goal failed
                 pose = self.view_poses[-1] if self.view_poses else None
             else:
+                outputs_error = ""
                 pose = self._plan_only(result, reconstructor, output_dir, on_progress)
             if pose is not None:
                 result.next_view = pose_stamped(pose, self._header())
@@ -295,8 +302,8 @@ class NBVReconstructionNode:
                 result.termination_reason = "cancelled"
                 result.error = f"cancelled during {phase['name']} of view {phase['view']}"
                 self.server.set_preempted(result, result.error)
-            elif result.termination_reason == "error":
-                result.error = result.error or "the reconstruction failed (see the node's log)"
+            elif result.termination_reason == "error" or outputs_error:
+                result.error = result.error or outputs_error or "the reconstruction failed (see the node's log)"
                 rospy.logwarn("nbv_reconstruction: %s", result.error)
                 self.server.set_aborted(result, result.error)
             else:

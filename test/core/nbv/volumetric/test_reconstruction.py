@@ -164,6 +164,16 @@ def test_reconstruct_cli_refuses_bad_input_before_any_work(tmp_path, capsys, loa
     assert "resolution_m" in capsys.readouterr().err
 
 
+def test_reconstruct_cli_refuses_unusable_outputs_before_any_work(tmp_path, capsys, load_script):
+    cli = load_script("reconstruct")
+    assert cli.main(["cup", "--out", "/proc/no_such_folder"]) == 2
+    assert "--out: cannot create the folder" in capsys.readouterr().err
+    assert cli.main(["cup", "--out", str(tmp_path / ("a" * 300))]) == 2
+    assert "--out: cannot create the folder" in capsys.readouterr().err
+    assert cli.main(["cup", "--out", str(tmp_path / "new"), "--summary", str(tmp_path)]) == 2
+    assert "is a directory" in capsys.readouterr().err
+
+
 # --------------------------------------------------------------------------------------------- ours' motion weight
 def ours_policy(**planning):
     return OursPolicy(None, PlanningSettings.from_mapping(planning))
@@ -378,3 +388,10 @@ def test_bad_motion_settings_are_named(station, key, value):
             motion.pop(key)
         else:
             motion[key] = saved
+
+
+def test_a_roi_out_of_reach_ends_with_nothing_found(station):
+    recon, _ = make(station, max_views=3, roi_center_m=[1e6, 1e6, 1e6], roi_size_m=[0.2, 0.2, 0.2])
+    result = recon.run()
+    assert result.termination_reason == "nothing_found"
+    assert result.observed_surface_area_m2 == 0.0
