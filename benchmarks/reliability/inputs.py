@@ -182,9 +182,9 @@ def step_boxes(count: int, size_mm: float = 10.0, pitch_mm: float = 15.0) -> str
     )
 
 
-def _step(count: int) -> Callable[[Path], None]:
+def _step(count: int, size_mm: float = 10.0) -> Callable[[Path], None]:
     def build(path: Path) -> None:
-        path.write_text(step_boxes(count))
+        path.write_text(step_boxes(count, size_mm, pitch_mm=1.5 * size_mm))
 
     return build
 
@@ -267,7 +267,7 @@ GENERATORS: dict[str, Callable[[Path], None]] = {
     "adir": _directory,
     "devzero.stl": _devzero,
     "fifo.stl": _fifo,
-    "box.STEP": _step(1),
+    "box.STEP": _step(1, size_mm=100.0),  # a part the station can scan
     "truncated.STEP": _truncated_step,
     "textjunk.STEP": _textjunk_step,
     "huge_boxes.STEP": _step(16_000),  # ~96,000 B-rep faces

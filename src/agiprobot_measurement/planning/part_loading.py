@@ -12,8 +12,13 @@ implausible size for the station) is reported with a :class:`PartWarning` and ke
 
 from __future__ import annotations
 
+import contextlib
 import importlib.util
 import math
+import os
+import re
+import sys
+import tempfile
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -202,10 +207,14 @@ def _read_mesh(path: Path, tessellation_tolerance_mm: float = 0.0) -> trimesh.Tr
         )
     else:
         check_file_size(path, LIMITS.mesh_file_bytes, "mesh file")
+    console: list[str] = []
     try:
-        loaded = trimesh.load(str(path), force="mesh", process=False, **options)
+        with _native_console_captured(console) if suffix in STEP_SUFFIXES else contextlib.nullcontext():
+            loaded = trimesh.load(str(path), force="mesh", process=False, **options)
     except Exception as exc:  # trimesh raises anything from ValueError to ModuleNotFoundError on bad files
-        raise PartLoadError(f"{path}: {_read_failure(suffix, exc)}") from exc
+        said = next((line.strip() for line in "".join(console).splitlines() if "ERR" in line), "")
+        detail = f"; it says {excerpt(said, 120)}" if said else ""
+        raise PartLoadError(f"{path}: {_read_failure(suffix, exc)}{detail}") from exc
     if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
         raise PartLoadError(f"{path}: the file holds no triangles")
     check_count(len(loaded.faces), LIMITS.mesh_faces, f"{path}: triangles of the part's mesh")
@@ -216,6 +225,33 @@ def _read_mesh(path: Path, tessellation_tolerance_mm: float = 0.0) -> trimesh.Tr
             f"{path}: the mesh has NaN, infinite or absurd vertex coordinates (beyond {MAX_COORDINATE:g} file units)"
         )
     return loaded
+
+
+#: terminal colour codes (OpenCASCADE colours its console messages)
+_ANSI_CODES = re.compile(r"\x1b\[[0-9;]*m")
+#: bytes of a converter's console output kept for an error message
+_CONSOLE_KEPT_BYTES = 4096
+
+
+@contextlib.contextmanager
+def _native_console_captured(into: list[str]):
+    """Capture what native code writes to file descriptors 1 and 2 (OpenCASCADE prints its STEP parse errors
+    there, in colour, bypassing Python) into ``into`` (colour codes removed, at most :data:`_CONSOLE_KEPT_BYTES`),
+    so that a user sees one clear error instead of the converter's console."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = {fd: os.dup(fd) for fd in (1, 2)}
+    with tempfile.TemporaryFile() as sink:
+        for fd in saved:
+            os.dup2(sink.fileno(), fd)
+        try:
+            yield into
+        finally:
+            for fd, copy in saved.items():
+                os.dup2(copy, fd)
+                os.close(copy)
+            sink.seek(0)
+            into.append(_ANSI_CODES.sub("", sink.read(_CONSOLE_KEPT_BYTES).decode("utf-8", "replace")))
 
 
 def _read_failure(suffix: str, error: Exception) -> str:

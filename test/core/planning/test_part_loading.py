@@ -274,3 +274,18 @@ def test_loading_calls_the_checkpoint_between_its_steps():
     calls = []
     load_part(PACKAGE_ROOT / "parts" / "objectA_wuerfel.stl", checkpoint=lambda: calls.append(True))
     assert len(calls) >= 3
+
+
+def test_a_truncated_step_gives_one_clear_error_and_no_converter_console(shared_dir, tmp_path, capfd):
+    if importlib.util.find_spec("cascadio") is None:
+        pytest.skip("no STEP reader (cascadio) installed")
+    text = (shared_dir / "parts" / "featuretype.STEP").read_text(errors="replace")
+    broken = tmp_path / "half.STEP"
+    broken.write_text(text[: len(text) // 2])
+    capfd.readouterr()
+    with pytest.raises(PartLoadError, match="OpenCASCADE could not parse it") as info:
+        load_part(broken)
+    printed = capfd.readouterr()
+    # OpenCASCADE's own (coloured) parse error is quoted in the message, not printed on the console
+    assert "ERR" not in printed.out + printed.err and "\x1b[" not in printed.out + printed.err
+    assert "it says" in str(info.value) and "\x1b[" not in str(info.value)
