@@ -92,7 +92,10 @@ def parse_vector(text: str, length: int | None, where: str, quote: bool = True) 
     match = _VECTOR_RE.match(text)
     if not match:
         raise CalibrationError(f"{where}: expected '[x, y, z]'{_got(text, quote)}")
-    items = match.group(1).split(",")
+    body = match.group(1)
+    if length is not None and body.count(",") > length:  # counted before splitting: a huge line costs no memory
+        raise CalibrationError(f"{where}: expected {length} finite numbers{_got(text, quote)}")
+    items = body.split(",")
     if len(items) > 1 and not items[-1].strip():  # the original writes a separator after every value
         items = items[:-1]
     try:

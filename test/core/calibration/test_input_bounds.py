@@ -6,6 +6,7 @@ import os
 import subprocess
 import sys
 import time
+import tracemalloc
 
 import numpy as np
 import pytest
@@ -19,6 +20,7 @@ from agiprobot_measurement.calibration.registration import (
     CalibrationError,
     Sample,
     parse_data_text,
+    parse_vector,
     read_data_file,
     read_flag_points,
     write_data_file,
@@ -224,3 +226,16 @@ def test_calibrate_cli_does_not_replace_an_existing_output(tmp_path):
     out = subprocess.run([*cli, "-o", str(existing), "--overwrite"], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
     assert "matrix" in existing.read_text() and os.path.getsize(existing) > 100
+
+
+def test_a_vector_line_of_millions_of_values_is_refused_without_splitting_it():
+    line = "[" + "0.5, " * 5_000_000 + "0.5]"
+    tracemalloc.start()
+    try:
+        with pytest.raises(CalibrationError, match="expected 3 finite numbers"):
+            parse_vector(line, 3, "line 2")
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 100e6  # one copy of the 25 MB body at most; split, it would be 5 million strings (> 250 MB)
+    assert parse_vector("[1, 2, 3, ]", 3, "line 4").tolist() == [1.0, 2.0, 3.0]
