@@ -13,9 +13,14 @@ import time
 
 import numpy as np
 
+from agiprobot_measurement.motion.collision import CollisionChecker
+from agiprobot_measurement.motion.placement_check import check_placement
 from agiprobot_measurement.planning.candidates.viewpoint import ViewPoint
+from agiprobot_measurement.planning.connection import ConnectionPlanner
 from agiprobot_measurement.planning.cover.solve import SOLVER_TYPES
+from agiprobot_measurement.planning.deadline import StageClock
 from agiprobot_measurement.planning.errors import PlanningError, PlanningTimeLimit
+from agiprobot_measurement.planning.part_loading import part_parameters, place_part
 from agiprobot_measurement.planning.report.report import CoverageReport, point_uncertainties
 from agiprobot_measurement.planning.request import REQUEST_TILT_MODES, check_choice, check_positive
 from agiprobot_measurement.planning.selection.loop import cover_points_with_verified
@@ -133,14 +138,14 @@ def plan(manager, viewpoint_tilt_mode, time_limit_s, started_s=None, **settings)
     limit = check_positive(time_limit_s, "time_limit_s", "time_limit_s (s)")
     t0 = time.perf_counter() if started_s is None else float(started_s)
     deadline = t0 + limit
-    manager.stage_clock = (t0, limit)
+    manager.run.clock = StageClock(t0, limit)
     try:
         if viewpoint_tilt_mode != "auto":
             ordered = plan_once(manager, viewpoint_tilt_mode, deadline, settings)
         else:
             ordered = plan_auto(manager, t0, deadline, settings)
     finally:
-        manager.stage_clock = None
+        manager.run.clock = None
     manager.run.timings_s["total"] = time.perf_counter() - t0
     manager.run.parameters["time_limit_s"] = limit
     return ordered
@@ -165,3 +170,31 @@ def plan_once(manager, tilt_mode, deadline, settings: dict) -> list[ViewPoint]:
         deadline_s=deadline - reserve,
     )
     return manager.connect_viewpoints(chosen, min_planning_time=settings["min_planning_time"])
+
+
+def load_target(
+    manager, file_name, transform, add_wbk_mirrors, remove_downside, remove_threshold_angle_deg, units, placement,
+    check_scene_overlap, tessellation_tolerance_mm,
+) -> bool:  # fmt: skip
+    """The facade's ``load_target_mesh`` (see there): read and place the part, put it into the collision world,
+    check its placement and start a new connection planner in that world. Returns True."""
+    scene = manager._base_scene if add_wbk_mirrors else manager._base_scene.without_group("wbk_mirrors")
+    args = (units, remove_downside, remove_threshold_angle_deg, tessellation_tolerance_mm)
+    part = place_part(file_name, scene, transform, placement, *args, checkpoint=lambda: manager.check_time("sampling"))
+    for message in part.warnings:
+        LOG.warning("%s", message)
+    manager.collision = CollisionChecker(manager.kinematics, scene, manager.collision.config, load_part=False)
+    manager.collision.set_part(part.mesh, pose=np.eye(4), name="part", scale_to_m=1e-3)
+    manager.check_time("sampling")
+    if check_scene_overlap:
+        started = time.perf_counter()
+        check_placement(part.mesh, scene, manager.collision, manager.current_state)
+        manager.timings_s["placement_check"] = time.perf_counter() - started
+    manager.warnings = list(part.warnings)
+    manager.connection = ConnectionPlanner(manager.collision, manager.limits, manager.planner_name, manager.seed)
+    manager.part, manager.target_mesh, manager.samples = part, part.mesh, None
+    angle, mirrors = remove_threshold_angle_deg, add_wbk_mirrors
+    manager.parameters.update(
+        part_parameters(part, file_name, units, mirrors, remove_downside, angle, placement, manager.seed)
+    )
+    return True

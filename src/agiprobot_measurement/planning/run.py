@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from agiprobot_measurement.common.config import ConfigError
+from agiprobot_measurement.planning.deadline import StageClock
 from agiprobot_measurement.planning.errors import PlanningInputError
 
 __all__ = ["DEFAULT_MECHANICS", "PlanningRun", "PlanningTools", "Reserve", "RunField", "joint_state"]
@@ -61,6 +62,8 @@ class PlanningRun:
 
     part: object = None
     target_mesh: object = None
+    #: while a plan runs: its time limit (checked between the chunks of the stages before the set cover)
+    clock: StageClock | None = None
     samples: object = None
     sampled_surface_points: list = field(default_factory=list)
     candidates: object = None

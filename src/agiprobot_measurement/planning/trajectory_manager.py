@@ -20,8 +20,6 @@ from collections.abc import Callable, Iterable
 import numpy as np
 
 import agiprobot_measurement
-from agiprobot_measurement.motion.collision import CollisionChecker
-from agiprobot_measurement.motion.placement_check import check_placement
 from agiprobot_measurement.motion.trajectory import check_trajectory
 from agiprobot_measurement.planning import pipeline
 from agiprobot_measurement.planning.candidates import generation
@@ -29,9 +27,9 @@ from agiprobot_measurement.planning.candidates.distributed import DaskEvaluator 
 from agiprobot_measurement.planning.candidates.streaming import EvaluationSettings
 from agiprobot_measurement.planning.candidates.viewpoint import ViewPoint
 from agiprobot_measurement.planning.connection import ConnectionPlanner, add_plan_part, station_robot
-from agiprobot_measurement.planning.errors import PlanningCancelled, PlanningError, PlanningTimeLimit
+from agiprobot_measurement.planning.deadline import StageClock
+from agiprobot_measurement.planning.errors import PlanningCancelled, PlanningError
 from agiprobot_measurement.planning.ordering import connect_views, p2p_durations
-from agiprobot_measurement.planning.part_loading import part_parameters, place_part
 from agiprobot_measurement.planning.plan import execution, plan_io
 from agiprobot_measurement.planning.plan.execution import (
     ExecutionCancelled,
@@ -67,10 +65,6 @@ LOG = logging.getLogger(__name__)
 
 #: progress callback: (stage, fraction done 0..1, message)
 ProgressCallback = Callable[[str, float, str], None]
-
-
-#: the stages that check the time limit at their progress reports: the later ones end in time by themselves
-TIME_CHECKED_STAGES = ("sampling", "metrology")
 
 
 def _arguments(arguments: dict) -> dict:
@@ -125,24 +119,14 @@ class TrajectoryManager:
         self.preferred_state = joint_state(self.station.named_states, self.kinematics.dof, preferred_state)
         #: the state of the planning run (samples, candidates, views, cover, order, timings, warnings, ...)
         self.run = PlanningRun()
-        #: while planning: (start, limit) of the time limit, ``time.perf_counter()`` s; checked at every progress
-        #: report of the stages before the set cover (which ends in time by itself)
-        self.stage_clock: tuple[float, float] | None = None
 
-    def _check_time(self, stage: str) -> None:
-        if self.stage_clock is None or stage not in TIME_CHECKED_STAGES:
-            return
-        start, limit = self.stage_clock
-        elapsed = time.perf_counter() - start
-        if elapsed > limit:
-            raise PlanningTimeLimit(
-                f"the time limit of {limit:g} s ran out during {stage} ({elapsed:.1f} s, before the set cover): no "
-                "plan; allow more time, or lower the sampling density or the orientations (a finely meshed or "
-                "large part takes long to load and sample)"
-            )
+    def check_time(self, stage: str) -> None:
+        """Raise when the running plan's time limit ran out in ``stage`` (see :mod:`.deadline`)."""
+        if self.run.clock is not None:
+            self.run.clock.check(stage)
 
     def _report(self, stage: str, fraction: float, message: str = "") -> None:
-        self._check_time(stage)
+        self.check_time(stage)
         if self.progress is not None:
             self.progress(stage, float(min(max(fraction, 0.0), 1.0)), message)
 
@@ -197,28 +181,7 @@ class TrajectoryManager:
         implausible input; returns True when everything was loaded.
         """
         check_choice(placement, PLACEMENTS, "placement")
-        scene = self._base_scene if add_wbk_mirrors else self._base_scene.without_group("wbk_mirrors")
-        args = (units, remove_downside, remove_threshold_angle_deg, tessellation_tolerance_mm)
-        part = place_part(
-            file_name, scene, transform, placement, *args, checkpoint=lambda: self._check_time("sampling")
-        )
-        for message in part.warnings:
-            LOG.warning("%s", message)
-        self.collision = CollisionChecker(self.kinematics, scene, self.collision.config, load_part=False)
-        self.collision.set_part(part.mesh, pose=np.eye(4), name="part", scale_to_m=1e-3)
-        self._check_time("sampling")
-        if check_scene_overlap:
-            started = time.perf_counter()
-            check_placement(part.mesh, scene, self.collision, self.current_state)
-            self.timings_s["placement_check"] = time.perf_counter() - started
-        self.warnings = list(part.warnings)
-        self.connection = ConnectionPlanner(self.collision, self.limits, self.planner_name, self.seed)
-        self.part, self.target_mesh, self.samples = part, part.mesh, None
-        angle, mirrors = remove_threshold_angle_deg, add_wbk_mirrors
-        self.parameters.update(
-            part_parameters(part, file_name, units, mirrors, remove_downside, angle, placement, self.seed)
-        )
-        return True
+        return pipeline.load_target(self, **_arguments(locals()))
 
     def generate_samples_and_viewpoints(
         self,
@@ -433,12 +396,12 @@ class TrajectoryManager:
         :meth:`PlanRequest.validate`; the manager made by :meth:`for_request`). Returns the ordered views."""
         started = time.perf_counter()
         self._report("sampling", 0.0, f"loading {request.part_file}")
-        self.stage_clock = (started, float(request.time_limit_s))
+        self.run.clock = StageClock(started, float(request.time_limit_s))
         try:
             self.load_target_mesh(request.part_file, **request.part_arguments())
             self._report("sampling", 0.0, f"loaded {request.part_file}")
         finally:
-            self.stage_clock = None
+            self.run.clock = None
         return self.plan(**request.plan_arguments(), started_s=started)
 
     def plan(

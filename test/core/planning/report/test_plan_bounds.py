@@ -193,7 +193,7 @@ def test_the_time_limit_reaches_the_stages_before_the_set_cover():
     with pytest.raises(PlanningTimeLimit, match="time limit of 5 s ran out during sampling"):
         manager.plan(0.02, 0.1, 12, "none", "IP_basic", time_limit_s=5.0, started_s=started - 6.0)
     assert time.perf_counter() - started < 5.0
-    assert manager.stage_clock is None
+    assert manager.run.clock is None
 
 
 def test_local_workers_are_bounded_by_the_machine_and_counted_in_the_memory_budget():
