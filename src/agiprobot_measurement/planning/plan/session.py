@@ -276,13 +276,28 @@ class MeasurementSession:
         return result
 
     # ------------------------------------------------------------------------------------ reports
+    def _is_planned(self, plan: plan_io.ExecutionPlan) -> bool:
+        """Whether ``plan`` is the planning run's plan: that plan, or one loaded from a file whose measurement
+        segments are the run's (a plan stored and loaded again; its connections may differ by a start adaptation)."""
+        planned = self.planned_plan
+        if plan is planned:
+            return True
+        if planned is None:
+            return False
+        ours, theirs = ([s for s in p.segments if s.kind == plan_io.MEASURE] for p in (planned, plan))
+        return len(ours) == len(theirs) and all(
+            a.trajectory.positions.shape == b.trajectory.positions.shape
+            and np.allclose(a.trajectory.positions, b.trajectory.positions, rtol=0.0, atol=1e-9)
+            for a, b in zip(ours, theirs, strict=True)
+        )
+
     def summary(self) -> PlanSummary:
         """The report of the session's plan: the planning run's coverage report while the plan is that run's,
         else the loaded plan's own view count and duration (the last planning run's numbers describe another
         plan). :class:`GoalError` without a plan."""
         with self.lock:
             plan, source, manager, measured = self.plan, self.plan_source, self.manager, self.last_measured_coverage
-            own = manager is not None and plan is not None and plan is self.planned_plan
+            own = manager is not None and plan is not None and self._is_planned(plan)
         if plan is None:
             raise GoalError("nothing planned or loaded yet")
         views = sum(1 for segment in plan.segments if segment.kind == plan_io.MEASURE)
@@ -316,7 +331,7 @@ class MeasurementSession:
         manager = self.manager
         if manager is None:
             raise GoalError("nothing planned yet")
-        if self.plan is not self.planned_plan:
+        if self.plan is None or not self._is_planned(self.plan):
             raise GoalError(
                 f"the plan {self.plan_source} was loaded from a file: the figure shows a planning run's prediction, "
                 "plan it to get one"
