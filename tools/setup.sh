@@ -41,12 +41,28 @@ fi
 WS="$(bash tools/workspace_path.sh)"
 mkdir -p "$WS/src"
 [ "$(readlink "$WS/src/agiprobot_measurement")" = "$ROOT" ] || ln -sfn "$ROOT" "$WS/src/agiprobot_measurement"
-# The interface packages of packages/ (phoxi_camera, asr_robot_model_services): catkin does not look for packages
+# The interface packages of packages/ (phoxi_camera, asr_robot_model_services, control_msgs, ...): catkin does not look for packages
 # inside another package's folder, so each gets its own link beside the repository's.
+# A machine that has the real package (ROS Noetic's control_msgs, a MoveIt install's moveit_msgs, a driver's own
+# workspace) keeps it: the carried copy is not linked there, since it would shadow the real one (for moveit_msgs, a
+# subset, it would break MoveIt).
+system_package() {  # prints where a package of that name is installed outside this checkout, if anywhere
+  local name="$1" dir
+  for dir in /usr/share /opt/ros/*/share; do
+    [ -f "$dir/$name/package.xml" ] && { echo "$dir/$name"; return 0; }
+  done
+  return 1
+}
 for pkg_dir in "$ROOT"/packages/*/; do
   pkg_dir="${pkg_dir%/}"
   [ -f "$pkg_dir/package.xml" ] || continue
-  link="$WS/src/$(basename "$pkg_dir")"
+  name="$(basename "$pkg_dir")"
+  link="$WS/src/$name"
+  if real="$(system_package "$name")"; then
+    log "not linking packages/$name: this machine has the real package at $real"
+    [ -L "$link" ] && rm -f "$link"
+    continue
+  fi
   [ "$(readlink "$link")" = "$pkg_dir" ] || ln -sfn "$pkg_dir" "$link"
 done
 # First-build trap: without this folder catkin records an empty PYTHONPATH in setup_cached.sh.
@@ -55,7 +71,7 @@ mkdir -p "$WS/devel/lib/python3/dist-packages"
 # Rebuild only when something that the build consumes changed (interfaces, CMake, package, entry points).
 BUILD_HASH="$( { ls nodes scripts tools packages packages/*/nodes; cat CMakeLists.txt package.xml setup.py msg/* srv/* \
   action/* test/ros/*.test packages/*/CMakeLists.txt packages/*/package.xml packages/*/msg/* packages/*/srv/* \
-  packages/*/srv/*/* 2>/dev/null || true; } | sha256sum | cut -d' ' -f1)"
+  packages/*/srv/*/* packages/*/action/* 2>/dev/null || true; } | sha256sum | cut -d' ' -f1)"
 if [ "$(cat "$WS/.build.sha256" 2>/dev/null)" != "$BUILD_HASH" ] || [ ! -f "$WS/devel/setup.bash" ]; then
   log "building the catkin workspace $WS"
   set +u; export PATH="$ROOT/.venv/bin:$PATH"; set -u

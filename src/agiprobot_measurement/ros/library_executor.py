@@ -22,8 +22,9 @@ from agiprobot_measurement.msg import ExecuteJointTrajectoryAction
 from agiprobot_measurement.planning.plan.execution import ExecutionError, PlanPart
 from agiprobot_measurement.ros.action_client import ActionClient
 from agiprobot_measurement.ros.conversions import xyz_point_cloud
-from agiprobot_measurement.ros.executor import ControllerWatch, RosSegmentExecutor, ScannerClient
+from agiprobot_measurement.ros.executor import ControllerWatch, RosSegmentExecutor
 from agiprobot_measurement.ros.joint_states import JointStateCache
+from agiprobot_measurement.ros.scanner_client import ScannerClient
 
 __all__ = ["MEASURED_POINTS_TOPIC", "station_executor"]
 

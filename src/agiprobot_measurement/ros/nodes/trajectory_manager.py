@@ -61,11 +61,12 @@ from agiprobot_measurement.planning.request import PlanRequest, PlanRequestError
 from agiprobot_measurement.planning.trajectory_manager import PlanningCancelled
 from agiprobot_measurement.ros.action_client import ActionClient
 from agiprobot_measurement.ros.conversions import pose_to_matrix, xyz_cloud, xyz_point_cloud
-from agiprobot_measurement.ros.executor import ControllerWatch, RosSegmentExecutor, ScannerClient
+from agiprobot_measurement.ros.executor import ControllerWatch, RosSegmentExecutor
 from agiprobot_measurement.ros.joint_states import JointStateCache
 from agiprobot_measurement.ros.markers import part_markers, path_marker, scan_line_markers
 from agiprobot_measurement.ros.node import run_node
 from agiprobot_measurement.ros.params import Param, file_param, read_params
+from agiprobot_measurement.ros.scanner_client import ScannerClient
 from agiprobot_measurement.srv import (
     GetCoverageReport,
     GetCoverageReportResponse,
