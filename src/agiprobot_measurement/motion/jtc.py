@@ -545,10 +545,9 @@ class JointTrajectoryController:
             joint = self._violation(error, goal.path_rad)
             if joint is None:
                 joint = self._violation(velocity_error, goal.path_velocity_rad_s)
-            if joint is not None:
-                value = error[joint] if abs(error[joint]) > goal.path_rad[joint] > 0 else velocity_error[joint]
+            if joint is not None:  # the JTC names the position error even when the velocity failed
                 return self._end_aborted(
-                    ErrorCode.PATH_TOLERANCE_VIOLATED, f"{self.joint_names[joint]} path error {value:f}"
+                    ErrorCode.PATH_TOLERANCE_VIOLATED, f"{self.joint_names[joint]} path error {error[joint]:f}"
                 )
             return []
         joint = self._violation(error, goal.goal_rad)
@@ -560,8 +559,9 @@ class JointTrajectoryController:
             return [GoalOutcome(goal.goal_id, GoalEnd.SUCCEEDED)]
         if self._uptime_s < goal.end_uptime_s + goal.goal_time_tolerance_s:
             return []
-        value = error[joint] if abs(error[joint]) > goal.goal_rad[joint] > 0 else self._actual_velocity[joint]
-        return self._end_aborted(ErrorCode.GOAL_TOLERANCE_VIOLATED, f"{self.joint_names[joint]} goal error {value:f}")
+        return self._end_aborted(
+            ErrorCode.GOAL_TOLERANCE_VIOLATED, f"{self.joint_names[joint]} goal error {error[joint]:f}"
+        )
 
     @staticmethod
     def _violation(values: np.ndarray, tolerance: np.ndarray) -> int | None:

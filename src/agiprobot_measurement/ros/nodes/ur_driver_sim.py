@@ -29,7 +29,8 @@ Private parameters: ~robot_config, ~joint_limits, ~named_states (project configu
 ~initial_state (a named state or six values, "home"), ~servoj_lookahead_time (0.03 s: the simulated robot's
 position lag), ~start_tolerance_rad
 (0.01), ~velocity_tolerance_fraction (0.01), ~acceleration_tolerance_fraction (0.05), and the driver's own
-(robot_ip, ports, kinematics/... as the bringup sets them; the simulator does not use them).
+(robot_ip, ports, kinematics/... as the bringup sets them; the simulator does not use them), and ~joints (the
+controller configuration's joint list, checked against ~robot_config's joints).
 """
 
 from __future__ import annotations
@@ -162,6 +163,9 @@ class UrDriverSimNode:
         settings = read_params(PARAMETERS)
         robot = load_robot_config(settings.robot_config)
         self.joint_names = list(robot.joint_names)
+        driver_joints = param("~joints", self.joint_names)
+        if not isinstance(driver_joints, list) or sorted(map(str, driver_joints)) != sorted(self.joint_names):
+            raise ConfigError(f"~joints {driver_joints} are not the robot's joints {self.joint_names}")
         self.limits = load_joint_limits(settings.joint_limits, robot.joint_names)
         self.named_states = load_named_states(settings.named_states, len(self.joint_names))
         self.check_tolerances = CheckTolerances(
