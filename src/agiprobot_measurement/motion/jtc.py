@@ -26,8 +26,8 @@ JointTrajectoryController 0.21 with the UR's speed scaling) does for a ``FollowJ
   the program runs again.
 
 The simulated robot follows the controller's desired positions as the UR's servo loop does: a first-order lag
-(``tracking_time_constant_s``, the driver's servoj look-ahead time 0.03 s) with the joint speed saturated at the
-robot's joint velocity limits (UR10e: 120 deg/s for the two base joints, 180 deg/s for the others), so a too fast
+(``tracking_time_constant_s``, the driver's servoj look-ahead time 0.03 s; a joint held still settles exactly on its
+target once closer than ``SETTLED_RAD``) with the joint speed saturated at the robot's joint velocity limits (UR10e: 120 deg/s for the two base joints, 180 deg/s for the others), so a too fast
 trajectory is followed late (and may violate its tolerances) rather than rejected.
 
 The controller is driven from outside: :meth:`update` with the current time (seconds) advances it and returns the
@@ -48,6 +48,7 @@ from agiprobot_measurement.errors import InputError
 
 __all__ = [
     "DEFAULT_CONSTRAINTS",
+    "SETTLED_RAD",
     "STOP_TRAJECTORY_DURATION_S",
     "TRACKING_TIME_CONSTANT_S",
     "UR10E_JOINT_NAMES",
@@ -87,6 +88,8 @@ UR10E_VELOCITY_LIMITS_RAD_S = {
 }
 #: the time constant (s) of the simulated robot's position tracking (the driver's servoj_lookahead_time)
 TRACKING_TIME_CONSTANT_S = 0.03
+#: a joint whose desired position holds still is exactly there once it is closer than this (rad)
+SETTLED_RAD = 1e-8
 #: the JTC's stop_trajectory_duration in ur10e_controllers.yaml (s)
 STOP_TRAJECTORY_DURATION_S = 0.5
 #: the speed slider range the driver accepts (set_speed_slider answers success false outside it)
@@ -532,8 +535,12 @@ class JointTrajectoryController:
         else:
             step = target - self._actual
         step = np.clip(step, -self.velocity_limits * dt, self.velocity_limits * dt)
-        self._actual = self._actual + step
-        self._actual_velocity = step / dt
+        actual = self._actual + step
+        # a joint held still settles exactly on its target once the lag is below SETTLED_RAD
+        settled = (self._desired[1] == 0.0) & (np.abs(target - actual) < SETTLED_RAD)
+        actual[settled] = target[settled]
+        self._actual_velocity = (actual - self._actual) / dt
+        self._actual = actual
 
     def _check(self) -> list[GoalOutcome]:
         goal = self._active

@@ -206,3 +206,23 @@ def test_alias_cancel_stops_where_the_robot_is():
     stopped = node.controller.positions()
     _run(node, 1.0)
     np.testing.assert_allclose(node.controller.positions(), stopped, atol=1e-9)
+
+
+def test_alias_single_point_at_the_current_state_succeeds_at_once():
+    node = _node()
+    msg = JointTrajectoryMsg(joint_names=JOINTS)
+    msg.points.append(JointTrajectoryPoint(positions=list(NAMED["home"] + 0.005), time_from_start=rospy.Duration(0)))
+    handle = _Handle(ExecuteJointTrajectoryGoal(trajectory=msg))
+    node.on_alias_goal(handle)
+    assert [c[0] for c in handle.calls] == ["accepted", "succeeded"]
+    np.testing.assert_array_equal(node.controller.positions(), NAMED["home"] + 0.005)
+
+
+def test_alias_success_is_exactly_at_the_end():
+    node = _node()
+    handle = _Handle(_alias_goal(NAMED["home"] - 0.3, 3.0))
+    node.on_alias_goal(handle)
+    assert handle.calls == [("accepted",)]
+    _run(node, 4.0, dt=0.002)
+    assert handle.calls[-1][0] == "succeeded"
+    np.testing.assert_array_equal(node.controller.positions(), NAMED["home"] - 0.3)

@@ -56,6 +56,7 @@ from agiprobot_measurement.common.config import ConfigError, number, positive
 from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.motion.jtc import (
     DEFAULT_CONSTRAINTS,
+    SETTLED_RAD,
     STOP_TRAJECTORY_DURATION_S,
     Constraints,
     ControllerState,
@@ -88,8 +89,8 @@ CONTROLLER = "scaled_pos_joint_traj_controller"
 DEFAULT_LOOP_HZ = 500.0
 #: the JTC's action_monitor_rate default (Hz)
 DEFAULT_ACTION_MONITOR_HZ = 20.0
-#: the alias's goal position tolerance (rad): its SUCCEEDED means "at the trajectory's end", as robot_sim's did
-ALIAS_GOAL_TOLERANCE_RAD = 1e-4
+#: the alias's goal position tolerance (rad): its SUCCEEDED means "exactly at the trajectory's end", as robot_sim's did
+ALIAS_GOAL_TOLERANCE_RAD = SETTLED_RAD
 
 PARAMETERS = (
     Param("~robot_config", None),
@@ -405,6 +406,14 @@ class UrDriverSimNode:
                 refuse(verdict.reason)
                 return
             ordered = trajectory.reordered(self.joint_names)
+            if ordered.duration <= 0.0:  # one point, where the robot is: robot_sim put it there at once
+                active = self.controller.active_goal_id
+                if active is not None:
+                    self.finish(self.controller.halt(active, rospy.Time.now().to_sec()))
+                self.controller.place(ordered.end)
+                handle.set_accepted()
+                handle.set_succeeded(ExecuteJointTrajectoryResult(success=True, error=""))
+                return
             velocities = ordered.knot_velocities()
             goal = TrajectoryGoal(
                 self.joint_names,
