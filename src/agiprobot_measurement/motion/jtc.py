@@ -11,7 +11,9 @@ JointTrajectoryController 0.21 with the UR's speed scaling) does for a ``FollowJ
 * An accepted goal replaces the active one, which ends PREEMPTED. Its trajectory starts at the goal's start time
   (0 = now); a first point at ``time_from_start`` 0 is dropped, and the controller moves from its current *desired*
   state to the first point (the goal need not start where the robot is). Segments are linear (positions only),
-  cubic (with velocities) or quintic (with velocities and accelerations), as the JTC's spline segments.
+  cubic (with velocities) or quintic (with velocities and accelerations), as the JTC's spline segments. (One
+  simplification: with a start time in the future the move to the first point begins at once and arrives on time,
+  where the JTC keeps the old trajectory until the start time.)
 * Trajectory time advances by the control period times the speed scaling (speed slider fraction x the robot's
   target speed fraction); a scaling of 0 holds the trajectory where it is and the goal stays active.
 * Tolerances: path position tolerance per joint (``trajectory``, default 0.2 rad) while the segments run, goal
