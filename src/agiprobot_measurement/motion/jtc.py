@@ -91,7 +91,7 @@ UR10E_VELOCITY_LIMITS_RAD_S = {
 #: the time constant (s) of the simulated robot's position tracking (the driver's servoj_lookahead_time)
 TRACKING_TIME_CONSTANT_S = 0.03
 #: a joint whose desired position holds still is exactly there once it is closer than this (rad)
-SETTLED_RAD = 1e-8
+SETTLED_RAD = 1e-5
 #: the JTC's stop_trajectory_duration in ur10e_controllers.yaml (s)
 STOP_TRAJECTORY_DURATION_S = 0.5
 #: the speed slider range the driver accepts (set_speed_slider answers success false outside it)
