@@ -30,6 +30,13 @@ from agiprobot_measurement.srv import SetJointState
 
 CAMERA_FRAME = "PhoXi3Dscanner_sensor"
 OUT_OF_VIEW = [0.0, -1.5707, 0.0, -1.5707, 0.0, 0.0]  # named state "up": the flange above the scanner's view
+JOINTS = ["shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint", "wrist_3_joint"]
+
+
+def _positions(state):
+    """The joint positions in kinematic order (the driver publishes them in alphabetical order)."""
+    by_name = dict(zip(state.name, state.position, strict=True))
+    return [by_name[name] for name in JOINTS]
 
 
 def _service(name):
@@ -128,7 +135,7 @@ class CalibrationNodeTest(unittest.TestCase):
         deadline = rospy.Time.now() + rospy.Duration(10.0)
         while rospy.Time.now() < deadline:  # joint states and tf of the new pose are out
             state = rospy.wait_for_message("/joint_states", JointState, 5.0)
-            if np.allclose(state.position, OUT_OF_VIEW, atol=1e-3):
+            if np.allclose(_positions(state), OUT_OF_VIEW, atol=1e-3):
                 break
         rospy.sleep(0.5)
         response = self.take_sample()
@@ -165,7 +172,7 @@ class CalibrationNodeTest(unittest.TestCase):
         self.assertGreater(np.ptp(reached[:, 0]) + np.ptp(reached[:, 1]), 0.33)
         # and came back out of the camera's view
         state = rospy.wait_for_message("/joint_states", JointState, 5.0)
-        np.testing.assert_allclose(state.position, OUT_OF_VIEW, atol=1e-3)
+        np.testing.assert_allclose(_positions(state), OUT_OF_VIEW, atol=1e-3)
 
     def _place(self, positions):
         set_state = rospy.ServiceProxy("/robot_sim/set_joint_state", SetJointState)
@@ -174,7 +181,7 @@ class CalibrationNodeTest(unittest.TestCase):
         deadline = rospy.Time.now() + rospy.Duration(10.0)
         while rospy.Time.now() < deadline:
             state = rospy.wait_for_message("/joint_states", JointState, 5.0)
-            if np.allclose(state.position, positions, atol=1e-3):
+            if np.allclose(_positions(state), positions, atol=1e-3):
                 break
         rospy.sleep(0.5)  # tf of the new pose reaches the camera
 

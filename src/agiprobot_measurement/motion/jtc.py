@@ -11,7 +11,9 @@ JointTrajectoryController 0.21 with the UR's speed scaling) does for a ``FollowJ
 * An accepted goal replaces the active one, which ends PREEMPTED. Its trajectory starts at the goal's start time
   (0 = now); a first point at ``time_from_start`` 0 is dropped, and the controller moves from its current *desired*
   state to the first point (the goal need not start where the robot is). Segments are linear (positions only),
-  cubic (with velocities) or quintic (with velocities and accelerations), as the JTC's spline segments.
+  cubic (with velocities) or quintic (with velocities and accelerations), as the JTC's spline segments. (One
+  simplification: with a start time in the future the move to the first point begins at once and arrives on time,
+  where the JTC keeps the old trajectory until the start time.)
 * Trajectory time advances by the control period times the speed scaling (speed slider fraction x the robot's
   target speed fraction); a scaling of 0 holds the trajectory where it is and the goal stays active.
 * Tolerances: path position tolerance per joint (``trajectory``, default 0.2 rad) while the segments run, goal
@@ -26,8 +28,8 @@ JointTrajectoryController 0.21 with the UR's speed scaling) does for a ``FollowJ
   the program runs again.
 
 The simulated robot follows the controller's desired positions as the UR's servo loop does: a first-order lag
-(``tracking_time_constant_s``, the driver's servoj look-ahead time 0.03 s) with the joint speed saturated at the
-robot's joint velocity limits (UR10e: 120 deg/s for the two base joints, 180 deg/s for the others), so a too fast
+(``tracking_time_constant_s``, the driver's servoj look-ahead time 0.03 s; a joint held still settles exactly on its
+target once closer than ``SETTLED_RAD``) with the joint speed saturated at the robot's joint velocity limits (UR10e: 120 deg/s for the two base joints, 180 deg/s for the others), so a too fast
 trajectory is followed late (and may violate its tolerances) rather than rejected.
 
 The controller is driven from outside: :meth:`update` with the current time (seconds) advances it and returns the
@@ -48,6 +50,7 @@ from agiprobot_measurement.errors import InputError
 
 __all__ = [
     "DEFAULT_CONSTRAINTS",
+    "SETTLED_RAD",
     "STOP_TRAJECTORY_DURATION_S",
     "TRACKING_TIME_CONSTANT_S",
     "UR10E_JOINT_NAMES",
@@ -87,6 +90,8 @@ UR10E_VELOCITY_LIMITS_RAD_S = {
 }
 #: the time constant (s) of the simulated robot's position tracking (the driver's servoj_lookahead_time)
 TRACKING_TIME_CONSTANT_S = 0.03
+#: a joint whose desired position holds still is exactly there once it is closer than this (rad)
+SETTLED_RAD = 1e-5
 #: the JTC's stop_trajectory_duration in ur10e_controllers.yaml (s)
 STOP_TRAJECTORY_DURATION_S = 0.5
 #: the speed slider range the driver accepts (set_speed_slider answers success false outside it)
@@ -532,8 +537,12 @@ class JointTrajectoryController:
         else:
             step = target - self._actual
         step = np.clip(step, -self.velocity_limits * dt, self.velocity_limits * dt)
-        self._actual = self._actual + step
-        self._actual_velocity = step / dt
+        actual = self._actual + step
+        # a joint held still settles exactly on its target once the lag is below SETTLED_RAD
+        settled = (self._desired[1] == 0.0) & (np.abs(target - actual) < SETTLED_RAD)
+        actual[settled] = target[settled]
+        self._actual_velocity = (actual - self._actual) / dt
+        self._actual = actual
 
     def _check(self) -> list[GoalOutcome]:
         goal = self._active
@@ -545,10 +554,9 @@ class JointTrajectoryController:
             joint = self._violation(error, goal.path_rad)
             if joint is None:
                 joint = self._violation(velocity_error, goal.path_velocity_rad_s)
-            if joint is not None:
-                value = error[joint] if abs(error[joint]) > goal.path_rad[joint] > 0 else velocity_error[joint]
+            if joint is not None:  # the JTC names the position error even when the velocity failed
                 return self._end_aborted(
-                    ErrorCode.PATH_TOLERANCE_VIOLATED, f"{self.joint_names[joint]} path error {value:f}"
+                    ErrorCode.PATH_TOLERANCE_VIOLATED, f"{self.joint_names[joint]} path error {error[joint]:f}"
                 )
             return []
         joint = self._violation(error, goal.goal_rad)
@@ -560,8 +568,9 @@ class JointTrajectoryController:
             return [GoalOutcome(goal.goal_id, GoalEnd.SUCCEEDED)]
         if self._uptime_s < goal.end_uptime_s + goal.goal_time_tolerance_s:
             return []
-        value = error[joint] if abs(error[joint]) > goal.goal_rad[joint] > 0 else self._actual_velocity[joint]
-        return self._end_aborted(ErrorCode.GOAL_TOLERANCE_VIOLATED, f"{self.joint_names[joint]} goal error {value:f}")
+        return self._end_aborted(
+            ErrorCode.GOAL_TOLERANCE_VIOLATED, f"{self.joint_names[joint]} goal error {error[joint]:f}"
+        )
 
     @staticmethod
     def _violation(values: np.ndarray, tolerance: np.ndarray) -> int | None:

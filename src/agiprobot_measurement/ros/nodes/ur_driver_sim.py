@@ -29,7 +29,8 @@ Private parameters: ~robot_config, ~joint_limits, ~named_states (project configu
 ~initial_state (a named state or six values, "home"), ~servoj_lookahead_time (0.03 s: the simulated robot's
 position lag), ~start_tolerance_rad
 (0.01), ~velocity_tolerance_fraction (0.01), ~acceleration_tolerance_fraction (0.05), and the driver's own
-(robot_ip, ports, kinematics/... as the bringup sets them; the simulator does not use them).
+(robot_ip, ports, kinematics/... as the bringup sets them; the simulator does not use them), and ~joints (the
+controller configuration's joint list, checked against ~robot_config's joints).
 """
 
 from __future__ import annotations
@@ -55,6 +56,7 @@ from agiprobot_measurement.common.config import ConfigError, number, positive
 from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.motion.jtc import (
     DEFAULT_CONSTRAINTS,
+    SETTLED_RAD,
     STOP_TRAJECTORY_DURATION_S,
     Constraints,
     ControllerState,
@@ -87,8 +89,8 @@ CONTROLLER = "scaled_pos_joint_traj_controller"
 DEFAULT_LOOP_HZ = 500.0
 #: the JTC's action_monitor_rate default (Hz)
 DEFAULT_ACTION_MONITOR_HZ = 20.0
-#: the alias's goal position tolerance (rad): its SUCCEEDED means "at the trajectory's end", as robot_sim's did
-ALIAS_GOAL_TOLERANCE_RAD = 1e-4
+#: the alias's goal position tolerance (rad): its SUCCEEDED means "exactly at the trajectory's end", as robot_sim's did
+ALIAS_GOAL_TOLERANCE_RAD = SETTLED_RAD
 
 PARAMETERS = (
     Param("~robot_config", None),
@@ -162,6 +164,9 @@ class UrDriverSimNode:
         settings = read_params(PARAMETERS)
         robot = load_robot_config(settings.robot_config)
         self.joint_names = list(robot.joint_names)
+        driver_joints = param("~joints", self.joint_names)
+        if not isinstance(driver_joints, list) or sorted(map(str, driver_joints)) != sorted(self.joint_names):
+            raise ConfigError(f"~joints {driver_joints} are not the robot's joints {self.joint_names}")
         self.limits = load_joint_limits(settings.joint_limits, robot.joint_names)
         self.named_states = load_named_states(settings.named_states, len(self.joint_names))
         self.check_tolerances = CheckTolerances(
@@ -401,6 +406,14 @@ class UrDriverSimNode:
                 refuse(verdict.reason)
                 return
             ordered = trajectory.reordered(self.joint_names)
+            if ordered.duration <= 0.0:  # one point, where the robot is: robot_sim put it there at once
+                active = self.controller.active_goal_id
+                if active is not None:
+                    self.finish(self.controller.halt(active, rospy.Time.now().to_sec()))
+                self.controller.place(ordered.end)
+                handle.set_accepted()
+                handle.set_succeeded(ExecuteJointTrajectoryResult(success=True, error=""))
+                return
             velocities = ordered.knot_velocities()
             goal = TrajectoryGoal(
                 self.joint_names,
