@@ -192,10 +192,48 @@ class KinematicModel:
         return frame_to_matrix(frame)
 
     # --------------------------------------------------------------------------------------- numpy
+    @cached_property
+    def _segments(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The chain folded for FK: per movable joint the transform from the previous joint's moving frame to its
+        frame (dof, 4, 4) and its unit axis (dof, 3); the last moving frame -> tip (4, 4)."""
+        pre, axes, acc = [], [], np.eye(4)
+        for joint in self.chain_joints:
+            acc = acc @ joint.origin
+            if joint.type != "fixed":
+                pre.append(acc)
+                axes.append(np.asarray(joint.axis, dtype=float) / np.linalg.norm(joint.axis))
+                acc = np.eye(4)
+        return np.array(pre).reshape(-1, 4, 4), np.array(axes).reshape(-1, 3), acc
+
+    def _moving_frames(self, q: np.ndarray, joints: bool = False) -> tuple[np.ndarray | None, np.ndarray]:
+        """The tip poses (N, 4, 4) and, with ``joints``, each joint's frame before its rotation (N, dof, 4, 4), for
+        (N, dof) joint states: rotations and translations kept apart, a turn about z as two column mixes."""
+        pre, axes, tip = self._segments
+        n = q.shape[0]
+        rotation = np.broadcast_to(np.eye(3), (n, 3, 3))
+        translation = np.zeros((n, 3))
+        frames = np.zeros((n, self.dof, 4, 4)) if joints else None
+        for k in range(self.dof):
+            translation = translation + rotation @ pre[k, :3, 3]
+            rotation = rotation @ pre[k, :3, :3]
+            if joints:
+                frames[:, k, :3, :3], frames[:, k, :3, 3], frames[:, k, 3, 3] = rotation, translation, 1.0
+            if axes[k, 2] == 1.0:
+                c, s = np.cos(q[:, k])[:, None], np.sin(q[:, k])[:, None]
+                x, y = rotation[:, :, 0], rotation[:, :, 1]
+                rotation = np.stack([x * c + y * s, y * c - x * s, rotation[:, :, 2]], axis=2)
+            else:
+                rotation = rotation @ _axis_rotation_batch(axes[k], q[:, k])
+        poses = np.zeros((n, 4, 4))
+        poses[:, :3, :3] = rotation @ tip[:3, :3]
+        poses[:, :3, 3] = translation + rotation @ tip[:3, 3]
+        poses[:, 3, 3] = 1.0
+        return frames, poses
+
     def fk(self, q: np.ndarray) -> np.ndarray:
         """Tip pose for one joint state (4x4) or a batch (N, 4, 4)."""
         q = self._check_q(q)
-        poses = self.link_poses_batch(np.atleast_2d(q), links=[self.tip_frame])[self.tip_frame]
+        poses = self._moving_frames(np.atleast_2d(q))[1]
         return poses[0] if q.ndim == 1 else poses
 
     def fk_batch(self, q: np.ndarray) -> np.ndarray:
@@ -240,26 +278,11 @@ class KinematicModel:
         """Tip poses (N, 4, 4) and geometric Jacobians (N, 6, dof) for (N, dof) joint states, in the base frame:
         rows 0-2 the tip origin's velocity (m/rad), rows 3-5 the angular velocity (rad/rad)."""
         q = self._check_q(np.atleast_2d(q))
-        n = q.shape[0]
-        current = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
-        axes, points = [], []
-        index = 0
-        for joint in self.chain_joints:
-            current = current @ joint.origin
-            if joint.type != "fixed":
-                axis = np.asarray(joint.axis, dtype=float) / np.linalg.norm(joint.axis)
-                axes.append(current[:, :3, :3] @ axis)
-                points.append(current[:, :3, 3].copy())
-                motion = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
-                motion[:, :3, :3] = _axis_rotation_batch(joint.axis, q[:, index])
-                current = current @ motion
-                index += 1
-        jacobian = np.empty((n, 6, self.dof))
-        tip = current[:, :3, 3]
-        for k, (axis, point) in enumerate(zip(axes, points, strict=True)):
-            jacobian[:, :3, k] = np.cross(axis, tip - point)
-            jacobian[:, 3:, k] = axis
-        return current, jacobian
+        joints, tip = self._moving_frames(q, joints=True)
+        axes = np.einsum("nkij,kj->nki", joints[:, :, :3, :3], self._segments[1])  # (N, dof, 3)
+        lever = tip[:, None, :3, 3] - joints[:, :, :3, 3]
+        jacobian = np.concatenate([np.cross(axes, lever), axes], axis=2)  # (N, dof, 6)
+        return tip, np.swapaxes(jacobian, 1, 2)
 
     def within_limits(self, q: np.ndarray, tolerance: float = 0.0) -> np.ndarray:
         q = np.asarray(q, dtype=float)
@@ -320,6 +343,7 @@ def with_arm_kinematics(model: KinematicModel, arm: UrKinematics, deviation_scal
     out.urdf = urdf
     out.chain_joints = urdf.chain(model.base_frame, model.tip_frame)
     out.__dict__.pop("kdl_chain", None)
+    out.__dict__.pop("_segments", None)
     out._kdl_fk = PyKDL.ChainFkSolverPos_recursive(out.kdl_chain)
     return out
 
