@@ -111,3 +111,21 @@ def test_station_option_from_the_config(tmp_path):
     )
     options = true_kinematics_from_config(path)
     assert options["deviation_scale"] == 0.5 and options["true_kinematics"].hash == "calib_1811142273362460997"
+
+
+def test_a_station_that_knows_its_robot_reports_the_true_flange(real_arm):
+    """SimulatedStation: the true robot = the real UR10e's file; with the same file as the planner's model the
+    reported flange is the true one, with the nominal model it is millimetres off."""
+    from agiprobot_measurement.calibration.simulation import SimulatedStation, nominal_camera_pose
+
+    pose = np.eye(4)
+    pose[:3, :3] = np.diag([1.0, -1.0, -1.0])
+    pose[:3, 3] = [-0.6, 0.3, 0.4]
+    offsets = {}
+    for planner in (None, CONFIG_DIR / "my_robot_calibration.yaml"):
+        sim = SimulatedStation(nominal_camera_pose(), true_kinematics=real_arm, planner_kinematics=planner)
+        q = sim.joints_for(pose[:3, 3], pose[:3, :3])
+        assert q is not None
+        offsets[planner is None] = np.linalg.norm(sim.true_flange_pose(q)[:3, 3] - pose[:3, 3])
+        np.testing.assert_allclose(sim.reported_flange_pose(q), pose, atol=1e-9)
+    assert offsets[True] > 5e-4 and offsets[False] < 1e-9
