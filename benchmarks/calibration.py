@@ -23,11 +23,16 @@ the mean / max over the seeds.
 --compare: the flange method against its peers, OpenCV's eye-to-hand AX = XB solvers (calibrateHandEye: TSAI, PARK,
 HORAUD, ANDREFF, DANIILIDIS; calibrateRobotWorldHandEye: SHAH, LI) with a 6 x 9 chessboard plate (25 mm squares) on
 the flange, on the same robot poses and frame budgets (--frames, default 8 15 30), noise on, for a robot whose true
-kinematics differ from the nominal ones by the correction of config/ur10e_kinematics_correction.yaml times each
---scales factor (0 = the perfect robot). See compare_seed for how the poses are chosen and frames spoiled.
+kinematics deviate from the planner's model by each --scales factor times the deviation of the true robot's
+kinematics file (config/ur10e_kinematics_correction.yaml names it: the original station's real UR10e,
+config/my_robot_calibration.yaml) from that model (0 = the perfect robot, 1 = that robot). The planner's model (IK,
+what the robot reports, the calibration's flange poses) is config/ur10e.yaml's kinematics_config (the nominal arm),
+or --planner-kinematics FILE (e.g. config/my_robot_calibration.yaml: a station that knows its robot's calibration).
+See compare_seed for how the poses are chosen and frames spoiled.
 
     python -m benchmarks.calibration --compare --workers 2 --json compare.json --plot compare.png      # 20 seeds
     python -m benchmarks.calibration --compare --seeds 5 --workers 2
+    python -m benchmarks.calibration --compare --seeds 5 --scales 1 --planner-kinematics config/my_robot_calibration.yaml
 """
 
 import argparse
@@ -286,19 +291,26 @@ def compare_seed(args):
     the same frames and glitches for every method. Path frames' flange detection crops around the perfect robot's
     coarse prediction (on a real station a large kinematic error also moves the crop: at scale 2 this favours the
     flange method)."""
-    seed, frames, scales, spoil, tilt_deg, chessboard, flange_tilted = args
+    seed, frames, scales, spoil, tilt_deg, chessboard, flange_tilted, planner_kinematics = args
 
     started = time.monotonic()
     rng = np.random.default_rng(5000 + seed)
     camera = perturbed_pose(nominal_camera_pose(), rng, 0.05, np.radians(3.0))
     _, correction, _ = load_kinematics_correction()
     scene = CONFIG_DIR / "calibration_scene.yaml"
-    sim = SimulatedStation(camera, noise_seed=seed, scene_path=scene, true_kinematics=correction)
+    sim = SimulatedStation(
+        camera, noise_seed=seed, scene_path=scene, true_kinematics=correction, planner_kinematics=planner_kinematics
+    )
     board_sim = SimulatedStation(
-        camera, noise_seed=seed, scene_path=scene, true_kinematics=correction, board=hand_eye.FlangeBoard()
+        camera,
+        noise_seed=seed,
+        scene_path=scene,
+        true_kinematics=correction,
+        board=hand_eye.FlangeBoard(),
+        planner_kinematics=planner_kinematics,
     )
     sim.scanner.workers = board_sim.scanner.workers = 1
-    true_models = {s: TrueKinematics(sim.kinematics, sim.station.robot, correction, s) for s in scales}
+    true_models = {s: TrueKinematics(sim.kinematics, correction, s) for s in scales}
     cfg = load_calibration_config()
     detector = detector_config(cfg)
     detector.seed = seed
@@ -499,8 +511,18 @@ def compare_main(args) -> int:
         return 2
     started = time.monotonic()
     rows, infos, failed = [], [], 0
+    print(f"planner's model: {args.planner_kinematics or 'config/ur10e.yaml kinematics_config'}", flush=True)
     jobs = [
-        (s, frames, scales, args.spoil, args.tilt_deg, not args.no_chessboard, args.flange_tilted)
+        (
+            s,
+            frames,
+            scales,
+            args.spoil,
+            args.tilt_deg,
+            not args.no_chessboard,
+            args.flange_tilted,
+            args.planner_kinematics,
+        )
         for s in range(args.seeds)
     ]
     with ProcessPoolExecutor(args.workers) as pool:
@@ -624,7 +646,11 @@ def main(argv=None) -> int:
         type=float,
         nargs="+",
         default=list(DEFAULTS["scales"]),
-        help="--compare: factors on config/ur10e_kinematics_correction.yaml's correction (0 = perfect)",
+        help="--compare: factors on the true robot's deviation from the planner's model (0 = perfect)",
+    )
+    parser.add_argument(
+        "--planner-kinematics",
+        help="--compare: the kinematics file of the planner's model (default config/ur10e.yaml's kinematics_config)",
     )
     parser.add_argument(
         "--tilt-deg", type=float, default=DEFAULTS["tilt_deg"], help="--compare: largest tilt / roll of the poses"

@@ -115,7 +115,7 @@ class CalibrationNodeTest(unittest.TestCase):
         self.assertTrue((self.output_dir / "calibration_data.txt").is_file())
         estimate = read_result_yaml(result_file)
         world_from_base = transform_to_matrix(
-            self.tf_buffer.lookup_transform("world", "base_link", rospy.Time(0), rospy.Duration(10.0))
+            self.tf_buffer.lookup_transform("world", "base", rospy.Time(0), rospy.Duration(10.0))
         )
         truth = np.linalg.inv(world_from_base) @ nominal_camera_pose()
         t_mm, r_deg = pose_error(estimate, truth)
@@ -123,7 +123,7 @@ class CalibrationNodeTest(unittest.TestCase):
         self.assertLess(t_mm, 0.3, response.message)
         self.assertLess(r_deg, 0.1, response.message)
         published = transform_to_matrix(
-            self.tf_buffer.lookup_transform("base_link", CAMERA_FRAME, rospy.Time(0), rospy.Duration(10.0))
+            self.tf_buffer.lookup_transform("base", CAMERA_FRAME, rospy.Time(0), rospy.Duration(10.0))
         )
         np.testing.assert_allclose(published, estimate, atol=1e-6)
 
@@ -193,7 +193,7 @@ class CalibrationNodeTest(unittest.TestCase):
         from agiprobot_measurement.station import Station
 
         station = Station.load()
-        model = KinematicModel.from_station(station, tip_frame="tool0", base_frame="base_link")
+        model = KinematicModel.from_station(station, tip_frame="tool0", base_frame="base")
         ik = make_ik_solver(model, station.robot)
         config = load_calibration_config()
         self.assertTrue(_service("/calibration/clear")().success)

@@ -58,7 +58,7 @@ class OriginalCalibrationTest(unittest.TestCase):
         tf_buffer = tf2_ros.Buffer()
         tf2_ros.TransformListener(tf_buffer)
         world_from_base = transform_to_matrix(
-            tf_buffer.lookup_transform("world", "base_link", rospy.Time(0), rospy.Duration(20.0))
+            tf_buffer.lookup_transform("world", "base", rospy.Time(0), rospy.Duration(20.0))
         )
         cls.truth = np.linalg.inv(world_from_base) @ nominal_camera_pose()
 

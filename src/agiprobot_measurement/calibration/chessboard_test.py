@@ -146,7 +146,7 @@ def chessboard_truth(scene, inner_corners) -> ChessboardTruth | None:
     boards = [b for b in scene_chessboards(scene) if tuple(b.inner_corners) == tuple(inner_corners)]
     if not boards:
         return None
-    base_from_scene = np.linalg.inv(scene.robot_base_pose)
+    base_from_scene = np.linalg.inv(scene.robot_dh_base_pose)
     corners = np.vstack([transform_points(base_from_scene, scene_chessboard_corners(b)) for b in boards])
     return ChessboardTruth(corners, (base_from_scene[:3, :3] @ boards[0].pose[:3, :3])[:, 2])
 

@@ -67,18 +67,23 @@ def tool_rotation(z_towards_m: np.ndarray, position_m: np.ndarray) -> np.ndarray
     return np.column_stack([x, np.cross(z, x), z])
 
 
-def flange_station_urdf(scene: str | Path | None = None) -> str:
+def flange_station_urdf(scene: str | Path | None = None, kinematics: str | Path | None = None) -> str:
     """The station URDF with ``tool:=flange_disc`` (xacro in-process); ``scene``: a scene file (default
-    config/scene.yaml) for the robot's mounting."""
+    config/scene.yaml) for the robot's mounting; ``kinematics``: the arm's kinematics file (default config/
+    ur10e.yaml's kinematics_config)."""
     import xacro  # lazily: xacro pulls in the ROS xml tooling, needed only when a URDF is built
 
     mappings = {"tool": "flange_disc"}
     if scene:
         mappings["scene"] = str(Path(scene).resolve())
+    if kinematics:
+        mappings["kinematics"] = str(Path(kinematics).resolve())
     return xacro.process_file(str(URDF_DIR / "station.urdf.xacro"), mappings=mappings).toprettyxml()
 
 
-def flange_station(scene: str | Path | None = None) -> Station:
+def flange_station(scene: str | Path | None = None, kinematics: str | Path | None = None) -> Station:
     """The station of ``scene`` (default config/scene.yaml) with the bare flange disc on tool0, for IK and
-    collision checks."""
-    return dataclasses.replace(Station.load(scene=scene), urdf_xml=flange_station_urdf(scene))
+    collision checks; ``kinematics``: the arm's kinematics file (default config/ur10e.yaml's)."""
+    return dataclasses.replace(
+        Station.load(scene=scene, kinematics=kinematics), urdf_xml=flange_station_urdf(scene, kinematics)
+    )

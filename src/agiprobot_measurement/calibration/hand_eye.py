@@ -10,7 +10,7 @@ poses (base -> gripper) in place of gripper -> base; the "cam2gripper" result is
 The project pins OpenCV 4.14 (opencv-python-headless==4.14.0.94): the 5.0.0 wheels lack these two solvers in their
 Python bindings (opencv/opencv#29565, fixed after that release).
 
-Frames: ``base`` = the robot base frame (base_link), ``tool0`` = the flange, ``board`` = the board's corner plane
+Frames: ``base`` = the robot base frame (the DH base, ur_description's ``base``), ``tool0`` = the flange, ``board`` = the board's corner plane
 (origin at the centre of the inner corners, z out of the printed face), ``camera`` = the optical frame. Metres.
 """
 

@@ -7,11 +7,14 @@ truth). :class:`SimulatedJointDriver` and :class:`SimulatedCamera` are the ROS n
 that :mod:`~agiprobot_measurement.calibration.procedure` runs in pytest; ``python -m benchmarks.calibration`` uses the
 station directly. Metres and rad throughout.
 
-Two options of the station (both off by default): ``true_kinematics`` (a
-:class:`~agiprobot_measurement.motion.kinematics.DhCorrection`, e.g. from ``config/ur10e_kinematics_correction.yaml``):
-the links are rendered where a robot with that kinematic error puts them, while IK and everything the robot reports
-stay nominal, as on a real station; ``board`` (a :class:`~agiprobot_measurement.calibration.hand_eye.FlangeBoard`):
-a chessboard plate on the flange, the target of the OpenCV hand-eye peers.
+Options of the station (off by default): ``true_kinematics`` (a
+:class:`~agiprobot_measurement.station.UrKinematics`, the true robot's kinematics file, e.g. the one
+``config/ur10e_kinematics_correction.yaml`` names: the original station's real UR10e): the links are rendered where
+that robot puts them, while IK and everything the robot reports follow the station's model, as on a real station;
+``planner_kinematics``: the kinematics file of that model (default config/ur10e.yaml's ``kinematics_config``, the
+nominal arm; the true robot's file = a station whose planner and calibration know the robot); ``board`` (a
+:class:`~agiprobot_measurement.calibration.hand_eye.FlangeBoard`): a chessboard plate on the flange, the target of
+the OpenCV hand-eye peers.
 """
 
 from __future__ import annotations
@@ -30,7 +33,6 @@ from agiprobot_measurement.common.config import read_yaml
 from agiprobot_measurement.common.geometry import look_at
 from agiprobot_measurement.motion.ik import make_ik_solver
 from agiprobot_measurement.motion.kinematics import (
-    DhCorrection,
     KinematicModel,
     TrueKinematics,
     load_kinematics_correction,
@@ -44,10 +46,11 @@ from agiprobot_measurement.sensors.phoxi.renderer import (
     load_scanner_model,
     scene_geometry,
 )
-from agiprobot_measurement.station import Station, load_joint_limits
+from agiprobot_measurement.station import Station, UrKinematics, load_joint_limits
 from agiprobot_measurement.station.urdf_model import UrdfModel
 
 __all__ = [
+    "BASE_FRAME",
     "SimulatedCamera",
     "SimulatedJointDriver",
     "SimulatedStation",
@@ -58,6 +61,10 @@ __all__ = [
 ]
 
 
+#: the robot base frame of the calibration (hand-eye ``base``): the DH base, ur_description's ``base``
+BASE_FRAME = "base"
+
+
 @dataclass
 class SimulatedStation:
     """Robot (bare flange), scene and a PhoXi model at a camera pose (world <- camera) kept from the calibration."""
@@ -66,35 +73,35 @@ class SimulatedStation:
     model_name: str = "L"
     noise_seed: int = 0
     scene_path: str | Path | None = None  # None: config/scene.yaml
-    true_kinematics: DhCorrection | None = None  # None: the robot is the nominal model
+    true_kinematics: UrKinematics | None = None  # None: the robot is the station's model
     deviation_scale: float = 1.0  # TrueKinematics.deviation_scale of the true robot
     board: object | None = None  # hand_eye.FlangeBoard on the flange, or None (the bare flange disc)
+    planner_kinematics: str | Path | None = None  # the model's kinematics file (None: config/ur10e.yaml's)
 
     def __post_init__(self):
-        self.station = Station.load(scene=self.scene_path)
-        self.kinematics = KinematicModel.from_station(self.station, tip_frame="tool0", base_frame="base_link")
+        self.station = Station.load(scene=self.scene_path, kinematics=self.planner_kinematics)
+        # the robot base frame of the calibration: `base`, the DH base (the controller's Base)
+        self.kinematics = KinematicModel.from_station(self.station, tip_frame="tool0", base_frame=BASE_FRAME)
         self.world_kinematics = KinematicModel.from_station(self.station, tip_frame="tool0", base_frame="world")
         self.ik = make_ik_solver(self.kinematics, self.station.robot)
-        self.urdf = UrdfModel(flange_station_urdf(self.scene_path))
+        self.urdf = UrdfModel(flange_station_urdf(self.scene_path, self.planner_kinematics))
         self.robot = RobotGeometry(self.urdf)
         self.scene = scene_geometry(self.station.scene, exclude_groups=("wbk_mirrors",))
         self.scanner = StructuredLightScanner(load_scanner_model(self.model_name))
-        self.world_from_base = self.urdf.fixed_transform("world", "base_link")
+        self.world_from_base = self.urdf.fixed_transform("world", BASE_FRAME)
         self.limits = load_joint_limits()
         self.seed_q = np.array([0.0, -1.5707, 1.5707, -1.5707, -1.5707, 0.0])
         self.true_world_kinematics = None
         if self.true_kinematics is not None:
             self.true_world_kinematics = TrueKinematics(
-                self.world_kinematics, self.station.robot, self.true_kinematics, self.deviation_scale
+                self.world_kinematics, self.true_kinematics, self.deviation_scale
             )
-            self.true_base_kinematics = TrueKinematics(
-                self.kinematics, self.station.robot, self.true_kinematics, self.deviation_scale
-            )
+            self.true_base_kinematics = TrueKinematics(self.kinematics, self.true_kinematics, self.deviation_scale)
         self._board_geometry = None if self.board is None else self.board.geometry()
 
     @property
     def camera_in_base(self) -> np.ndarray:
-        """The hidden truth: base_link <- camera (4x4)."""
+        """The hidden truth: base <- camera (4x4)."""
         return np.linalg.inv(self.world_from_base) @ self.camera_pose_world
 
     def joints_for(self, position_base_m: np.ndarray, rotation: np.ndarray) -> np.ndarray | None:
@@ -105,17 +112,17 @@ class SimulatedStation:
         return np.asarray(q) if ok else None
 
     def reported_flange_pose(self, q: np.ndarray) -> np.ndarray:
-        """base_link <- tool0 as the robot reports it at ``q``: the nominal model, whatever the true kinematics."""
+        """base <- tool0 as the robot reports it at ``q``: the station's model, whatever the true kinematics."""
         return self.kinematics.fk(np.asarray(q, dtype=float))
 
     def true_flange_pose(self, q: np.ndarray) -> np.ndarray:
-        """base_link <- tool0 where the flange really is at ``q``."""
+        """base <- tool0 where the flange really is at ``q``."""
         if self.true_world_kinematics is None:
             return self.reported_flange_pose(q)
         return self.true_base_kinematics.fk(np.asarray(q, dtype=float))
 
     def joints_placing(self, flange_pose_base: np.ndarray) -> np.ndarray | None:
-        """The joint state at which the TRUE flange is at ``flange_pose_base`` (base_link <- tool0): nominal IK, then
+        """The joint state at which the TRUE flange is at ``flange_pose_base`` (base <- tool0): the model's IK, then
         Gauss-Newton on the true kinematics; None without an IK solution."""
         q, ok = self.ik.solve_nearest(np.asarray(flange_pose_base, dtype=float), self.seed_q)
         if not ok:
@@ -220,7 +227,9 @@ def simulated_robot_and_camera(
     collision = None
     if check_collisions:
         collision = flange_collision_checker(
-            dataclasses.replace(station.station, urdf_xml=flange_station_urdf(station.scene_path))
+            dataclasses.replace(
+                station.station, urdf_xml=flange_station_urdf(station.scene_path, station.planner_kinematics)
+            )
         )
     robot = PlannedFlangeRobot(
         driver,

@@ -1,13 +1,16 @@
 """Forward kinematics of the station's robot from its URDF: a PyKDL chain, and a vectorised numpy form.
 
 ``KinematicModel`` is built from the URDF produced by ``urdf/station.urdf.xacro`` (see
-:mod:`agiprobot_measurement.station.urdf_model`). Poses are 4x4 homogeneous matrices in metres; joint values in rad,
-in the order of the chain's movable joints.
+:mod:`agiprobot_measurement.station.urdf_model`), whose arm joint origins come from the robot's kinematics file
+(ur_calibration's output in ur_description's format, :mod:`agiprobot_measurement.station.ur_kinematics`; config/
+ur10e.yaml's ``kinematics_config``). :func:`ur_arm_frames` is the same chain straight from such a file, without a
+URDF. Poses are 4x4 homogeneous matrices in metres; joint values in rad, in the order of the chain's movable joints.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import copy
+import dataclasses
 from functools import cached_property
 from pathlib import Path
 
@@ -15,18 +18,23 @@ import numpy as np
 import PyKDL
 
 from agiprobot_measurement._paths import CONFIG_DIR
-from agiprobot_measurement.common.config import number, read_yaml, require, vector
+from agiprobot_measurement.common.config import number, read_yaml, require
+from agiprobot_measurement.common.geometry import pose_matrix
 from agiprobot_measurement.motion.errors import MotionInputError
-from agiprobot_measurement.station import ConfigError, JointLimits, Station
+from agiprobot_measurement.station import ConfigError, JointLimits, Station, UrKinematics, load_ur_kinematics
+from agiprobot_measurement.station.ur_kinematics import UR_BASE_RPY_RAD, UR_FLANGE_RPY_RAD, UR_TOOL0_RPY_RAD
 from agiprobot_measurement.station.urdf_model import UrdfJoint, UrdfModel
 
 __all__ = [
-    "DhCorrection",
+    "UR_ARM_LINKS",
+    "UR_FIXED_FRAMES",
     "KinematicModel",
     "TrueKinematics",
-    "dh_frames",
     "frame_to_matrix",
     "load_kinematics_correction",
+    "scaled_origin",
+    "ur_arm_frames",
+    "with_arm_kinematics",
 ]
 
 
@@ -54,6 +62,43 @@ def _axis_rotation_batch(axis: np.ndarray, angles: np.ndarray) -> np.ndarray:
     k = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
     s, c = np.sin(angles)[:, None, None], np.cos(angles)[:, None, None]
     return np.eye(3) + s * k + (1.0 - c) * (k @ k)
+
+
+#: ur_description's fixed frames of a UR arm (parent, child, xyz m, rpy rad)
+UR_FIXED_FRAMES = (
+    ("base_link", "base_link_inertia", (0.0, 0.0, 0.0), UR_BASE_RPY_RAD),
+    ("base_link", "base", (0.0, 0.0, 0.0), UR_BASE_RPY_RAD),
+    ("wrist_3_link", "flange", (0.0, 0.0, 0.0), UR_FLANGE_RPY_RAD),
+    ("flange", "tool0", (0.0, 0.0, 0.0), UR_TOOL0_RPY_RAD),
+)
+UR_ARM_LINKS = ("shoulder_link", "upper_arm_link", "forearm_link", "wrist_1_link", "wrist_2_link", "wrist_3_link")
+
+
+def ur_arm_frames(arm: UrKinematics, q: np.ndarray) -> dict[str, np.ndarray]:
+    """ur_description's frames of a UR arm in ``base_link`` (REP-103) for joint states (N, 6) rad: (N, 4, 4) each.
+
+    The chain of ur_description's ur_macro.xacro: base_link -> base_link_inertia rpy(0, 0, pi) -> shoulder_pan_joint
+    (origin ``arm``'s shoulder) -> shoulder_link -> ... -> wrist_3_link; base_link -> base rpy(0, 0, pi) (the DH
+    base, the controller's Base); wrist_3_link -> flange rpy(0, -pi/2, -pi/2) -> tool0 rpy(pi/2, 0, pi/2). Every
+    joint turns about its frame's z axis."""
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    if q.ndim != 2 or q.shape[1] != 6 or not np.all(np.isfinite(q)):
+        raise MotionInputError(f"expected finite joint states of shape (N, 6), got shape {q.shape}")
+    n = q.shape[0]
+    fixed = {child: (parent, pose_matrix(xyz, rpy)) for parent, child, xyz, rpy in UR_FIXED_FRAMES}
+    frames = {"base_link": np.broadcast_to(np.eye(4), (n, 4, 4)).copy()}
+    frames["base_link_inertia"] = frames["base_link"] @ fixed["base_link_inertia"][1]
+    frames["base"] = frames["base_link"] @ fixed["base"][1]
+    current = frames["base_link_inertia"]
+    z = np.array([0.0, 0.0, 1.0])
+    for i, (link, origin) in enumerate(zip(UR_ARM_LINKS, arm.joint_origins(), strict=True)):
+        motion = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
+        motion[:, :3, :3] = _axis_rotation_batch(z, q[:, i])
+        current = current @ origin @ motion
+        frames[link] = current
+    frames["flange"] = frames["wrist_3_link"] @ fixed["flange"][1]
+    frames["tool0"] = frames["flange"] @ fixed["tool0"][1]
+    return frames
 
 
 class KinematicModel:
@@ -147,10 +192,48 @@ class KinematicModel:
         return frame_to_matrix(frame)
 
     # --------------------------------------------------------------------------------------- numpy
+    @cached_property
+    def _segments(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The chain folded for FK: per movable joint the transform from the previous joint's moving frame to its
+        frame (dof, 4, 4) and its unit axis (dof, 3); the last moving frame -> tip (4, 4)."""
+        pre, axes, acc = [], [], np.eye(4)
+        for joint in self.chain_joints:
+            acc = acc @ joint.origin
+            if joint.type != "fixed":
+                pre.append(acc)
+                axes.append(np.asarray(joint.axis, dtype=float) / np.linalg.norm(joint.axis))
+                acc = np.eye(4)
+        return np.array(pre).reshape(-1, 4, 4), np.array(axes).reshape(-1, 3), acc
+
+    def _moving_frames(self, q: np.ndarray, joints: bool = False) -> tuple[np.ndarray | None, np.ndarray]:
+        """The tip poses (N, 4, 4) and, with ``joints``, each joint's frame before its rotation (N, dof, 4, 4), for
+        (N, dof) joint states: rotations and translations kept apart, a turn about z as two column mixes."""
+        pre, axes, tip = self._segments
+        n = q.shape[0]
+        rotation = np.broadcast_to(np.eye(3), (n, 3, 3))
+        translation = np.zeros((n, 3))
+        frames = np.zeros((n, self.dof, 4, 4)) if joints else None
+        for k in range(self.dof):
+            translation = translation + rotation @ pre[k, :3, 3]
+            rotation = rotation @ pre[k, :3, :3]
+            if joints:
+                frames[:, k, :3, :3], frames[:, k, :3, 3], frames[:, k, 3, 3] = rotation, translation, 1.0
+            if axes[k, 2] == 1.0:
+                c, s = np.cos(q[:, k])[:, None], np.sin(q[:, k])[:, None]
+                x, y = rotation[:, :, 0], rotation[:, :, 1]
+                rotation = np.stack([x * c + y * s, y * c - x * s, rotation[:, :, 2]], axis=2)
+            else:
+                rotation = rotation @ _axis_rotation_batch(axes[k], q[:, k])
+        poses = np.zeros((n, 4, 4))
+        poses[:, :3, :3] = rotation @ tip[:3, :3]
+        poses[:, :3, 3] = translation + rotation @ tip[:3, 3]
+        poses[:, 3, 3] = 1.0
+        return frames, poses
+
     def fk(self, q: np.ndarray) -> np.ndarray:
         """Tip pose for one joint state (4x4) or a batch (N, 4, 4)."""
         q = self._check_q(q)
-        poses = self.link_poses_batch(np.atleast_2d(q), links=[self.tip_frame])[self.tip_frame]
+        poses = self._moving_frames(np.atleast_2d(q))[1]
         return poses[0] if q.ndim == 1 else poses
 
     def fk_batch(self, q: np.ndarray) -> np.ndarray:
@@ -191,53 +274,27 @@ class KinematicModel:
             raise ConfigError(f"unknown frame(s) {unknown}; frames: {', '.join(poses)}")
         return {link: poses[link] for link in links}
 
+    def fk_and_jacobian(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Tip poses (N, 4, 4) and geometric Jacobians (N, 6, dof) for (N, dof) joint states, in the base frame:
+        rows 0-2 the tip origin's velocity (m/rad), rows 3-5 the angular velocity (rad/rad)."""
+        q = self._check_q(np.atleast_2d(q))
+        joints, tip = self._moving_frames(q, joints=True)
+        axes = np.einsum("nkij,kj->nki", joints[:, :, :3, :3], self._segments[1])  # (N, dof, 3)
+        lever = tip[:, None, :3, 3] - joints[:, :, :3, 3]
+        jacobian = np.concatenate([np.cross(axes, lever), axes], axis=2)  # (N, dof, 6)
+        return tip, np.swapaxes(jacobian, 1, 2)
+
     def within_limits(self, q: np.ndarray, tolerance: float = 0.0) -> np.ndarray:
         q = np.asarray(q, dtype=float)
         return np.all((q >= self.lower - tolerance) & (q <= self.upper + tolerance), axis=-1)
 
 
 # ------------------------------------------------------------------------------ true (calibrated) kinematics
-@dataclass(frozen=True)
-class DhCorrection:
-    """A robot's kinematic calibration in the UR controller's form: per joint, deltas added to the nominal standard
-    DH parameters, ``Rz(theta + delta_theta + q) Tz(d + delta_d) Tx(a + delta_a) Rx(alpha + delta_alpha)``
-    (metres, rad, joint order of the robot configuration)."""
-
-    delta_a_m: np.ndarray
-    delta_d_m: np.ndarray
-    delta_alpha_rad: np.ndarray
-    delta_theta_rad: np.ndarray
-
-    def __post_init__(self):
-        for name in ("delta_a_m", "delta_d_m", "delta_alpha_rad", "delta_theta_rad"):
-            value = np.asarray(getattr(self, name), dtype=float)
-            if value.shape != (6,) or not np.all(np.isfinite(value)):
-                raise ConfigError(f"kinematics correction: '{name}' must be 6 finite numbers, got {value.tolist()}")
-            object.__setattr__(self, name, value)
-
-    @classmethod
-    def zero(cls) -> DhCorrection:
-        return cls(np.zeros(6), np.zeros(6), np.zeros(6), np.zeros(6))
-
-    def scaled(self, factor: float) -> DhCorrection:
-        """Every delta times ``factor`` (0: the nominal robot)."""
-        return DhCorrection(
-            self.delta_a_m * factor,
-            self.delta_d_m * factor,
-            self.delta_alpha_rad * factor,
-            self.delta_theta_rad * factor,
-        )
-
-    @property
-    def is_zero(self) -> bool:
-        return not any(
-            np.any(v != 0.0) for v in (self.delta_a_m, self.delta_d_m, self.delta_alpha_rad, self.delta_theta_rad)
-        )
-
-
-def load_kinematics_correction(path: str | Path | None = None) -> tuple[bool, DhCorrection]:
-    """``(true_kinematics enabled, correction, deviation scale)`` from a correction file (default
-    ``config/ur10e_kinematics_correction.yaml``); ConfigError naming the key on bad content."""
+def load_kinematics_correction(path: str | Path | None = None) -> tuple[bool, UrKinematics, float]:
+    """``(true_kinematics enabled, the true robot's kinematics file, deviation scale)`` from the simulation's true
+    robot file (default ``config/ur10e_kinematics_correction.yaml``: ``true_kinematics``, ``kinematics_config`` (a
+    kinematics file in ur_calibration's format, relative to the file's folder), ``scale``); ConfigError naming the
+    key on bad content."""
     path = Path(path) if path else CONFIG_DIR / "ur10e_kinematics_correction.yaml"
     data = read_yaml(path)
     where = str(path)
@@ -246,122 +303,76 @@ def load_kinematics_correction(path: str | Path | None = None) -> tuple[bool, Dh
     enabled = require(data, "true_kinematics", where)
     if not isinstance(enabled, bool):
         raise ConfigError(f"{where}: 'true_kinematics' must be true or false")
-    scale = number(data.get("scale", 1.0), f"{where}: 'scale'")
-    deltas = require(data, "dh_delta", where)
-    correction = DhCorrection(
-        *(
-            vector(require(deltas, key, where), 6, f"{where}: dh_delta.{key}")
-            for key in ("delta_a_m", "delta_d_m", "delta_alpha_rad", "delta_theta_rad")
-        )
-    )
-    return enabled, correction, scale
+    scale = number(data.get("scale", 1.0), f"{where}: 'scale'", low=0.0, high=100.0)
+    name = require(data, "kinematics_config", where)
+    if not isinstance(name, str) or not name.strip():
+        raise ConfigError(f"{where}: 'kinematics_config' must be a file name, got {name!r}")
+    arm_path = Path(name) if Path(name).is_absolute() else path.parent / name
+    return enabled, load_ur_kinematics(arm_path), scale
 
 
-def dh_frames(q: np.ndarray, d_m, a_m, alpha_rad, theta_offset_rad=None) -> np.ndarray:
-    """Frames 0..6 of a standard-DH chain in its base frame for joint states (N, 6): (N, 7, 4, 4)."""
-    q = np.atleast_2d(np.asarray(q, dtype=float))
-    theta = q + (0.0 if theta_offset_rad is None else np.asarray(theta_offset_rad, dtype=float))
-    n = q.shape[0]
-    frames = np.empty((n, 7, 4, 4))
-    frames[:, 0] = np.eye(4)
-    for i in range(6):
-        ct, st = np.cos(theta[:, i]), np.sin(theta[:, i])
-        ca, sa = np.cos(alpha_rad[i]), np.sin(alpha_rad[i])
-        link = np.zeros((n, 4, 4))
-        link[:, 0, 0], link[:, 0, 1], link[:, 0, 2], link[:, 0, 3] = ct, -st * ca, st * sa, a_m[i] * ct
-        link[:, 1, 0], link[:, 1, 1], link[:, 1, 2], link[:, 1, 3] = st, ct * ca, -ct * sa, a_m[i] * st
-        link[:, 2, 1], link[:, 2, 2], link[:, 2, 3] = sa, ca, d_m[i]
-        link[:, 3, 3] = 1.0
-        frames[:, i + 1] = frames[:, i] @ link
-    return frames
+def scaled_origin(nominal: np.ndarray, true: np.ndarray, scale: float) -> np.ndarray:
+    """A joint origin (4x4) deviating from ``nominal`` by ``scale`` times ``true``'s deviation, in the nominal
+    frame's own coordinates (offset times the scale, rotation angle times the scale)."""
+    from scipy.spatial.transform import Rotation
+
+    local = np.linalg.inv(nominal) @ true
+    out = np.eye(4)
+    out[:3, :3] = Rotation.from_rotvec(Rotation.from_matrix(local[:3, :3]).as_rotvec() * scale).as_matrix()
+    out[:3, 3] = local[:3, 3] * scale
+    return nominal @ out
+
+
+def with_arm_kinematics(model: KinematicModel, arm: UrKinematics, deviation_scale: float = 1.0) -> KinematicModel:
+    """``model`` with the arm's joint origins taken from ``arm`` (a kinematics file): the same chain, links, limits
+    and geometry, the robot of that file. ``deviation_scale`` != 1: each joint origin deviates from ``model``'s by
+    that multiple of ``arm``'s deviation (0: ``model`` itself)."""
+    urdf = copy.copy(model.urdf)
+    urdf.joints = dict(model.urdf.joints)
+    urdf.joint_by_child = dict(model.urdf.joint_by_child)
+    for name, origin in zip(arm.joint_names, arm.joint_origins(), strict=True):
+        joint = urdf.joints.get(name)
+        if joint is None:
+            raise ConfigError(f"kinematics file {arm.source}: the URDF has no joint '{name}'")
+        if deviation_scale != 1.0:
+            origin = scaled_origin(joint.origin, origin, deviation_scale)
+        changed = dataclasses.replace(joint, origin=origin)
+        urdf.joints[name] = changed
+        urdf.joint_by_child[changed.child] = changed
+    out = copy.copy(model)
+    out.urdf = urdf
+    out.chain_joints = urdf.chain(model.base_frame, model.tip_frame)
+    out.__dict__.pop("kdl_chain", None)
+    out.__dict__.pop("_segments", None)
+    out._kdl_fk = PyKDL.ChainFkSolverPos_recursive(out.kdl_chain)
+    return out
 
 
 class TrueKinematics:
-    """Where a robot with a kinematic error really puts its links: the nominal model's link poses moved by the
-    difference between the corrected and the nominal DH frames.
+    """Where a robot whose kinematics differ from the model's really puts its links: the model's chain with the
+    joint origins of the true robot's kinematics file (ur_calibration's output of that robot).
 
-    The URDF is built from the DH parameters (``urdf/ur10e.xacro``): ``base_link`` is the DH base frame and the child
-    link of joint k moves rigidly with DH frame k, as do the links fixed to it (``tool0`` = frame 6, the flange disc,
-    a board on it). So a link's true pose is ``F_true_k(q) F_nom_k(q)^-1`` (base_link frame) times its nominal pose.
-    The planner, IK and calibration keep the nominal :class:`KinematicModel`; only the simulation uses this.
-    Same call signatures as :class:`KinematicModel` for ``link_poses_batch`` and ``fk``.
+    The simulation renders and moves the links by this; the planner, IK and calibration keep their
+    :class:`KinematicModel` (the nominal arm, or a kinematics file of their own). Same call signatures as
+    :class:`KinematicModel` for ``link_poses_batch`` and ``fk``.
 
-    ``deviation_scale``: a robot whose every DH frame deviates from the nominal one by this multiple of the
-    correction's deviation, in the frame's own coordinates (offset times the scale, rotation angle times the scale):
-    the flange error grows linearly with it. Multiplying the controller's deltas instead (:meth:`DhCorrection.scaled`)
-    does not: they compensate each other (the metre-sized delta_d of the parallel joints), so half the deltas can
-    give a larger error than all of them.
+    ``deviation_scale``: a robot whose every joint origin deviates from the model's by this multiple of the true
+    file's deviation (offset times the scale, rotation angle times the scale): the flange error grows about
+    linearly with it.
     """
 
-    def __init__(self, nominal: KinematicModel, robot, correction: DhCorrection, deviation_scale: float = 1.0):
-        if list(robot.joint_names) != nominal.joint_names:
-            raise ConfigError(
-                f"true kinematics: the chain's joints {nominal.joint_names} are not the robot's {list(robot.joint_names)}"
-            )
+    def __init__(self, nominal: KinematicModel, true_arm: UrKinematics, deviation_scale: float = 1.0):
         self.nominal = nominal
-        self.robot = robot
-        self.correction = correction
+        self.arm = true_arm
         self.deviation_scale = float(deviation_scale)
+        self.model = with_arm_kinematics(nominal, true_arm, self.deviation_scale)
         self.dof = nominal.dof
         self.joint_names = nominal.joint_names
         self.base_frame, self.tip_frame = nominal.base_frame, nominal.tip_frame
-        self._chain_from_dh = nominal.urdf.fixed_transform(nominal.base_frame, robot.base_frame)
-        self._dh_from_chain = np.linalg.inv(self._chain_from_dh)
-        self._frame_index = self._link_frame_index()
-        self._verify_nominal_against_urdf()
-
-    def _link_frame_index(self) -> dict[str, int | None]:
-        """Per posed link: the DH frame it moves with (None: fixed to the chain's base, before the robot)."""
-        index: dict[str, int | None] = {self.nominal.base_frame: None}
-        k = 0
-        for joint in self.nominal.chain_joints:
-            if joint.type != "fixed":
-                k += 1
-            index[joint.child] = k if (k or joint.child == self.robot.base_frame) else None
-        frontier = list(index)
-        while frontier:
-            parent = frontier.pop()
-            for joint in self.nominal.urdf.joints.values():
-                if joint.parent == parent and joint.type == "fixed" and joint.child not in index:
-                    index[joint.child] = index[parent]
-                    frontier.append(joint.child)
-        return index
-
-    def _verify_nominal_against_urdf(self) -> None:
-        states = np.random.default_rng(0).uniform(-np.pi, np.pi, (8, 6))
-        nominal = dh_frames(states, self.robot.d_m, self.robot.a_m, self.robot.alpha_rad)
-        flange = self.nominal.link_poses_batch(states, links=[self.robot.flange_frame])[self.robot.flange_frame]
-        if np.abs(self._chain_from_dh @ nominal[:, 6] - flange).max() > 1e-9:
-            raise ConfigError("true kinematics: the DH parameters do not reproduce the URDF's flange frame")
-
-    def frame_corrections(self, q: np.ndarray) -> np.ndarray:
-        """(N, 7, 4, 4): F_true_k F_nom_k^-1 per DH frame k, in the chain's base frame."""
-        r, c = self.robot, self.correction
-        nominal = dh_frames(q, r.d_m, r.a_m, r.alpha_rad)
-        true = dh_frames(
-            q, r.d_m + c.delta_d_m, r.a_m + c.delta_a_m, r.alpha_rad + c.delta_alpha_rad, c.delta_theta_rad
-        )
-        if self.deviation_scale != 1.0:
-            from scipy.spatial.transform import Rotation
-
-            local = np.linalg.inv(nominal) @ true  # (N, 7, 4, 4): each frame's deviation in its own coordinates
-            shape = local.shape[:2]
-            rotvec = Rotation.from_matrix(local[..., :3, :3].reshape(-1, 3, 3)).as_rotvec() * self.deviation_scale
-            local[..., :3, :3] = Rotation.from_rotvec(rotvec).as_matrix().reshape(*shape, 3, 3)
-            local[..., :3, 3] *= self.deviation_scale
-            true = nominal @ local
-        return self._chain_from_dh @ true @ np.linalg.inv(nominal) @ self._dh_from_chain
 
     def link_poses_batch(self, q: np.ndarray, links: list[str] | None = None) -> dict[str, np.ndarray]:
         """True poses (N, 4, 4) of the links :meth:`KinematicModel.link_poses_batch` poses."""
-        q = np.atleast_2d(np.asarray(q, dtype=float))
-        poses = self.nominal.link_poses_batch(q, links)
-        corrections = self.frame_corrections(q)
-        out = {}
-        for link, pose in poses.items():
-            k = self._frame_index.get(link)
-            out[link] = pose if not k else corrections[:, k] @ pose
-        return out
+        return self.model.link_poses_batch(q, links)
 
     def fk(self, q: np.ndarray) -> np.ndarray:
         """True tip pose for one joint state (4x4) or a batch (N, 4, 4)."""

@@ -34,6 +34,7 @@ from agiprobot_measurement.station.scene import (
     chessboard_dark_squares,
     load_scene,
 )
+from agiprobot_measurement.station.ur_kinematics import KinematicsFileError, UrKinematics, load_ur_kinematics
 from agiprobot_measurement.station.urdf_model import build_station_urdf
 
 __all__ = [
@@ -46,12 +47,14 @@ __all__ = [
     "URDF_DIR",
     "ConfigError",
     "JointLimits",
+    "KinematicsFileError",
     "PartPlacement",
     "RobotConfig",
     "ScannerConfig",
     "Scene",
     "SceneObject",
     "Station",
+    "UrKinematics",
     "chessboard_board_size",
     "chessboard_dark_squares",
     "load_joint_limits",
@@ -59,6 +62,7 @@ __all__ = [
     "load_robot_config",
     "load_scanner_config",
     "load_scene",
+    "load_ur_kinematics",
     "pose_matrix",
     "read_yaml",
     "rpy_to_matrix",
@@ -76,6 +80,8 @@ class Station:
     scanner: ScannerConfig
     scene: Scene
     urdf_xml: str
+    #: the arm's kinematics file the URDF's joint origins come from (None: a station built by hand)
+    kinematics: UrKinematics | None = None
 
     @classmethod
     def load(
@@ -85,14 +91,23 @@ class Station:
         named_states: str | Path | None = None,
         scanner: str | Path | None = None,
         scene: str | Path | None = None,
+        kinematics: str | Path | None = None,
     ) -> Station:
-
+        """``kinematics``: the arm's kinematics file (ur_calibration's format); default the robot file's
+        ``kinematics_config``."""
         robot_cfg = load_robot_config(robot)
+        kinematics_path = kinematics if kinematics is not None else robot_cfg.kinematics_config
+        if kinematics_path is None:
+            raise ConfigError(f"robot '{robot_cfg.name}': no kinematics_config in the robot file and none given")
+        arm = load_ur_kinematics(kinematics_path)
         return cls(
             robot=robot_cfg,
             limits=load_joint_limits(joint_limits, robot_cfg.joint_names),
             named_states=load_named_states(named_states, len(robot_cfg.joint_names)),
             scanner=load_scanner_config(scanner),
             scene=load_scene(scene),
-            urdf_xml=build_station_urdf(robot=robot, joint_limits=joint_limits, scanner=scanner, scene=scene),
+            urdf_xml=build_station_urdf(
+                robot=robot, joint_limits=joint_limits, scanner=scanner, scene=scene, kinematics=kinematics_path
+            ),
+            kinematics=arm,
         )

@@ -40,6 +40,9 @@ class RobotConfig:
     flange_frame: str
     planning_frame: str
     default_tip_frame: str
+    #: the arm's kinematics file (ur_calibration's output, ur_description's format), resolved; the URDF's joint
+    #: origins and so every model built from the station come from it
+    kinematics_config: Path | None = None
 
 
 def load_robot_config(path: str | Path | None = None) -> RobotConfig:
@@ -61,7 +64,19 @@ def load_robot_config(path: str | Path | None = None) -> RobotConfig:
         flange_frame=str(data.get("flange_frame", "tool0")),
         planning_frame=str(data.get("planning_frame", "world")),
         default_tip_frame=str(data.get("default_tip_frame", "tool0")),
+        kinematics_config=_kinematics_path(data, path),
     )
+
+
+def _kinematics_path(data: dict, path: Path) -> Path | None:
+    """``kinematics_config`` of a robot file, relative to the file's folder unless absolute; None when absent."""
+    value = data.get("kinematics_config")
+    if value is None:
+        return None
+    if not isinstance(value, str) or not value.strip():
+        raise ConfigError(f"{path}: 'kinematics_config' must be a file name, got {value!r}")
+    kinematics = Path(value)
+    return kinematics if kinematics.is_absolute() else (path.parent / kinematics).resolve()
 
 
 # ------------------------------------------------------------------------------------------ joint limits

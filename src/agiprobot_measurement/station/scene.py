@@ -12,6 +12,7 @@ from agiprobot_measurement.common.config import ConfigError, positive, read_yaml
 from agiprobot_measurement.common.geometry import pose_matrix
 from agiprobot_measurement.common.units import UNIT_SCALES_TO_M
 from agiprobot_measurement.errors import InputError
+from agiprobot_measurement.station.ur_kinematics import BASE_LINK_TO_BASE
 
 __all__ = [
     "CHESSBOARD_MARGIN_SQUARES",
@@ -102,10 +103,16 @@ class PartPlacement:
 @dataclass(frozen=True)
 class Scene:
     frame_id: str
-    robot_base_pose: np.ndarray  # world -> base_link, 4x4, metres
+    robot_base_pose: np.ndarray  # world -> base_link (ur_description's REP-103 base frame), 4x4, metres
     objects: tuple[SceneObject, ...] = field(default_factory=tuple)
     part: PartPlacement | None = None
     source: Path | None = None
+
+    @property
+    def robot_dh_base_pose(self) -> np.ndarray:
+        """world -> base: the robot's DH base frame (the UR controller's Base, ``base_link`` turned by pi about z;
+        the robot base frame of the calibration), 4x4, metres."""
+        return self.robot_base_pose @ BASE_LINK_TO_BASE
 
     def object_names(self) -> list[str]:
         return [o.name for o in self.objects]

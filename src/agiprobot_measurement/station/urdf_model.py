@@ -31,8 +31,10 @@ def build_station_urdf(
     scanner: str | Path | None = None,
     scene: str | Path | None = None,
     xacro_file: str | Path | None = None,
+    kinematics: str | Path | None = None,
 ) -> str:
-    """Expand the station xacro; arguments left ``None`` take the package's config files."""
+    """Expand the station xacro; arguments left ``None`` take the package's config files (``kinematics``: the arm's
+    kinematics file, default the robot file's ``kinematics_config``)."""
     import xacro
 
     mappings = {}
@@ -41,6 +43,7 @@ def build_station_urdf(
         ("joint_limits", joint_limits),
         ("scanner", scanner),
         ("scene", scene),
+        ("kinematics", kinematics),
     ):
         if value is not None:
             mappings[key] = str(Path(value).resolve())
@@ -113,6 +116,21 @@ def _geometry(link: str, element: ET.Element) -> UrdfGeometry | None:
     raise ConfigError(f"URDF: link {link}: unsupported geometry <{shape.tag}>")
 
 
+def _inverted(joint: UrdfJoint) -> UrdfJoint:
+    """A fixed joint walked from child to parent."""
+    return UrdfJoint(
+        f"{joint.name}_inverse",
+        "fixed",
+        joint.child,
+        joint.parent,
+        np.linalg.inv(joint.origin),
+        joint.axis,
+        joint.lower,
+        joint.upper,
+        joint.velocity,
+    )
+
+
 class UrdfModel:
     """The tree of a URDF: joints by child link, collision and visual geometry per link."""
 
@@ -156,20 +174,35 @@ class UrdfModel:
     def from_station(cls, **kwargs) -> UrdfModel:
         return cls(build_station_urdf(**kwargs))
 
+    def _ancestors(self, link: str) -> list[str]:
+        """``link`` and the links above it up to the root."""
+        out = [link]
+        while out[-1] in self.joint_by_child:
+            out.append(self.joint_by_child[out[-1]].parent)
+        return out
+
     def chain(self, base: str, tip: str) -> list[UrdfJoint]:
-        """Joints from ``base`` down to ``tip`` (fixed joints included), in order."""
+        """Joints from ``base`` to ``tip`` (fixed joints included), in order.
+
+        ``base`` need not be above ``tip``: the path may first climb from ``base`` to a common ancestor through
+        fixed joints (e.g. ``base`` -> ``base_link`` -> ... -> ``tool0``); those come back inverted (parent and child
+        swapped, origin inverted). A movable joint on the climb is a ConfigError."""
         for frame in (base, tip):
             if frame not in self.links:
                 raise ConfigError(f"unknown frame '{frame}'; frames of this robot: {', '.join(self.links)}")
-        joints = []
-        link = tip
-        while link != base:
-            joint = self.joint_by_child.get(link)
-            if joint is None:
-                raise ConfigError(f"frame '{tip}' is not below '{base}' in the URDF tree")
-            joints.append(joint)
-            link = joint.parent
-        return joints[::-1]
+        above_tip = self._ancestors(tip)
+        above_base = self._ancestors(base)
+        common = next((link for link in above_base if link in above_tip), None)
+        if common is None:
+            raise ConfigError(f"frames '{base}' and '{tip}' are not connected in the URDF tree")
+        climb = []
+        for link in above_base[: above_base.index(common)]:
+            joint = self.joint_by_child[link]
+            if joint.type != "fixed":
+                raise ConfigError(f"frame '{tip}' is not below '{base}' in the URDF tree (joint '{joint.name}' moves)")
+            climb.append(_inverted(joint))
+        descent = [self.joint_by_child[link] for link in above_tip[: above_tip.index(common)]]
+        return climb + descent[::-1]
 
     def movable_joint_names(self, base: str, tip: str) -> list[str]:
         return [j.name for j in self.chain(base, tip) if j.type != "fixed"]

@@ -43,9 +43,10 @@ def dh_matrix(theta, d, a, alpha):
 
 
 def independent_fk(station, q):
-    """world -> laser_emitter_frame from the DH table, the scene's robot base and the scanner mount."""
+    """world -> laser_emitter_frame from the DH table, the scene's robot base (base_link; the DH base frame is it
+    turned by pi about z, ur_description's base_link -> base) and the scanner mount."""
     robot = station.robot
-    pose = station.scene.robot_base_pose.copy()
+    pose = station.scene.robot_base_pose @ np.diag([-1.0, -1.0, 1.0, 1.0])
     for i in range(6):
         pose = pose @ dh_matrix(q[i], robot.d_m[i], robot.a_m[i], robot.alpha_rad[i])
     return pose @ station.scanner.mount_pose
@@ -244,7 +245,8 @@ def test_factory_uses_closed_form_for_the_ur_chain_and_kdl_otherwise(station, ki
 
 
 def test_dh_parameters_that_disagree_with_the_urdf_are_rejected(station, kinematic_model):
-    wrong = dataclasses.replace(station.robot, d_m=station.robot.d_m + np.array([0, 0, 0, 0.01, 0, 0]))
+    # 3 cm: beyond what a calibrated arm may deviate (CALIBRATION_MAX_DEVIATION_M), so not a calibration
+    wrong = dataclasses.replace(station.robot, d_m=station.robot.d_m + np.array([0, 0, 0, 0.03, 0, 0]))
     with pytest.raises(ConfigError, match="disagree with the URDF"):
         URAnalyticIK(kinematic_model, wrong)
     assert isinstance(make_ik_solver(kinematic_model, wrong), KDLIK)
@@ -274,3 +276,50 @@ def test_bad_input_gives_clear_errors(kinematic_model, make_solver):
 def test_unknown_frame_is_named(station):
     with pytest.raises(ConfigError, match="unknown frame 'scanner_tip'"):
         ik_for_station(station, tip_frame="scanner_tip")
+
+
+# ------------------------------------------------------------------------------ calibrated arm (kinematics file)
+@pytest.fixture(scope="module")
+def calibrated_ik():
+    from agiprobot_measurement.station import CONFIG_DIR
+
+    station = Station.load(kinematics=CONFIG_DIR / "my_robot_calibration.yaml")
+    return ik_for_station(station)
+
+
+def test_calibrated_arm_round_trip_to_sub_micrometre(calibrated_ik):
+    solver = calibrated_ik
+    assert isinstance(solver, URAnalyticIK)
+    assert 1e-3 < solver.calibration_deviation[0] < 8e-3  # millimetres from the DH: not the nominal arm
+    model = solver.model
+    states = np.random.default_rng(21).uniform(model.lower, model.upper, (1000, 6))
+    poses = model.fk_batch(states)
+    q, ok = solver.solve_nearest(poses, states)
+    assert ok.mean() > 0.995  # a few next to singular wrists and joint limits
+    position, angle = pose_errors(model.fk_batch(q[ok]), poses[ok])
+    assert position.max() < 1e-7 and angle.max() < 1e-7  # sub-micrometre on the calibrated chain
+    assert np.median(position) < 1e-11
+    assert model.within_limits(q[ok]).all()
+    assert np.mean(np.abs(q[ok] - states[ok]).max(axis=1) < 1e-5) > 0.99  # the same state (not a self-motion twin)
+    # the closed form alone (the nominal DH) would miss by millimetres: the refinement did the work
+    nominal_position, _ = pose_errors(solver.nominal_fk(q[ok]), poses[ok])
+    assert np.median(nominal_position) > 5e-4
+
+
+def test_calibrated_arm_every_branch_is_exact(calibrated_ik):
+    model = calibrated_ik.model
+    pose = model.fk(np.array([0.4, -1.1, 1.3, -0.7, 0.9, 0.3]))
+    solutions, valid = calibrated_ik.solve_all(pose)
+    assert valid.sum() >= 2
+    position, angle = pose_errors(model.fk_batch(solutions[valid]), pose[None])
+    assert position.max() < 1e-9 and angle.max() < 1e-9
+
+
+def test_calibrated_arm_single_solve_and_unreachable(calibrated_ik):
+    model = calibrated_ik.model
+    q0 = np.array([0.3, -1.0, -1.2, 0.5, 1.0, 0.7])
+    q = calibrated_ik.solve(model.fk(q0), q0 + 0.01)
+    assert q is not None and np.abs(q - q0).max() < 1e-6
+    far = np.eye(4)
+    far[:3, 3] = [5.0, 0.0, 1.0]
+    assert calibrated_ik.solve(far) is None

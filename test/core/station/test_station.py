@@ -60,7 +60,9 @@ def test_joint_limits_equal_the_config(station):
 
 
 def test_fk_from_urdf_equals_independent_dh(station):
-    model = KinematicModel.from_station(station, tip_frame="tool0", base_frame="base_link")
+    # `base` is the DH base frame (ur_description's, base_link turned by pi about z); the default kinematics file
+    # is ur_description's nominal one, equal to config/ur10e.yaml's DH
+    model = KinematicModel.from_station(station, tip_frame="tool0", base_frame="base")
     robot = station.robot
     states = np.vstack([np.zeros(6), np.random.default_rng(7).uniform(-3, 3, size=(20, 6))])
     for q in states:

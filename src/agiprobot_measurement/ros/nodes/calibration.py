@@ -3,7 +3,7 @@
 The robot (bare flange disc, station ``tool:=flange_disc``) is moved to the flag points and the zig-zag path, a
 frame is taken at each pose through the PhoXi driver (``<camera_ns>/get_frame`` with ``in_: -1``, then the next
 ``<camera_ns>/pointcloud``), the flange centre is detected in it and paired with the flange position (tool0 in
-base_link, from the joint state by forward kinematics). The result H (base_link <- camera, metres) is written as
+``base`` = the DH base, from the joint state by forward kinematics). The result H (base <- camera, metres) is written as
 YAML and published on tf as a static transform ``base_frame -> camera_frame``. The procedure itself is ROS-free
 (:func:`~agiprobot_measurement.calibration.procedure.run_collection`, ``run_test_mode``); this node implements its
 robot (:class:`RosJointDriver` under a PlannedFlangeRobot) and camera (:class:`RosCamera`) and maps the messages.
@@ -200,7 +200,7 @@ class CalibrationNode:
                 self.config[key] = param(f"~{key}")
         self.mode = check_mode(self.config.get("mode", "cal_fine"))
         self.use_auto_judge = bool(self.config.get("use_auto_judge", True))
-        self.base_frame = str(self.config.get("base_frame", "base_link"))
+        self.base_frame = str(self.config.get("base_frame", "base"))
         self.camera_frame = str(self.config.get("camera_frame", "PhoXi3Dscanner_sensor"))
         output_dir = str(self.config.get("output_dir", "") or "")
         self.output_dir = Path(output_dir or Path(os.environ.get("ROS_HOME", "~/.ros")) / "calibration").expanduser()

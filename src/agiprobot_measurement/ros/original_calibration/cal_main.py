@@ -6,7 +6,7 @@ motions are IK (nearest to the current joint state) + a collision-checked joint 
 when the straight one is blocked) run by ``/robot_sim/execute_trajectory``; shots are ``/phoxi_camera/get_frame``
 (``in_ = -1``: a new frame) and the next ``/phoxi_camera/pointcloud``, saved as PLY (metres) for
 :func:`~agiprobot_measurement.calibration.original.calibration.circle_fitting`. Poses are ``geometry_msgs/Pose`` of
-tool0 in base_link (the original's MoveIt group pose), metres.
+tool0 in the robot base frame ``base`` (the DH base, in which the flag points are given), metres.
 
 The original's module globals are kept: ``mode`` (cal_fine | cal_coarse | test), ``use_mp`` (circle fitting on
 worker processes), ``use_auto_judge`` (False: every shot waits for the operator's Enter / 'd' / 'q' / 'auto'),
@@ -91,7 +91,7 @@ random_seed = None
 
 @dataclass
 class StationHandles:
-    """The robot (tool0 in base_link) and the camera the functions act on."""
+    """The robot (tool0 in base) and the camera the functions act on."""
 
     robot: PlannedFlangeRobot
     camera: RosCamera
@@ -127,7 +127,7 @@ def configure(
     _ensure_node()
     settings = load_calibration_config(config)
     flange = flange_station(scene or CONFIG_DIR / "calibration_scene.yaml")
-    kinematics = KinematicModel.from_station(flange, tip_frame="tool0", base_frame="base_link")
+    kinematics = KinematicModel.from_station(flange, tip_frame="tool0", base_frame="base")
     limits = load_joint_limits()
     robot = PlannedFlangeRobot(
         RosJointDriver(list(limits.names), controller_action),
@@ -187,7 +187,7 @@ def copy_pose(original_pose: Pose) -> Pose:
 
 
 def get_current_pose() -> Pose:
-    """tool0's pose in base_link now (forward kinematics of /joint_states)."""
+    """tool0's pose in base now (forward kinematics of /joint_states)."""
     robot = station().robot
     return matrix_to_pose(np.asarray(robot.kinematics.fk(robot.current_joints()), dtype=float))
 
@@ -275,7 +275,7 @@ def move_shoot(target: Pose, mode):
     """Move to ``target`` and take a shot named after the current time.
 
     Returns (im_name, index, p_robot): the point cloud's path without '.ply' (``data_path + "im" + index``), the
-    index, and the pose reached [x, y, z, qx, qy, qz, qw] (tool0 in base_link). False when the target cannot be
+    index, and the pose reached [x, y, z, qx, qy, qz, qw] (tool0 in base). False when the target cannot be
     reached or, with ``use_auto_judge`` False, the operator deletes the shot ('d') or quits ('q', sets
     ``killing_flag``); 'auto' switches to automatic judging.
     """
