@@ -44,6 +44,7 @@ YAML_MAX_EXPANDED_NODES = 20_000_000
 def _expanded_node_count(root: yaml.Node, limit: int, where: str) -> int:
     """Nodes of ``root`` counted with every alias expanded, without expanding anything (memoised per node)."""
     sizes: dict[int, int] = {}
+    open_nodes: set[int] = set()  # entered, not yet counted: a child among them is a cycle (`a: &a [*a]`)
     stack: list[tuple[yaml.Node, bool]] = [(root, False)]
     while stack:
         node, children_done = stack.pop()
@@ -56,9 +57,13 @@ def _expanded_node_count(root: yaml.Node, limit: int, where: str) -> int:
             [child for pair in node.value for child in pair] if isinstance(node, yaml.MappingNode) else list(node.value)
         )
         if not children_done:
+            if any(id(child) in open_nodes or child is node for child in children):
+                raise ConfigError(f"{where}: a YAML alias refers to a node that contains it (a cycle); refused")
+            open_nodes.add(id(node))
             stack.append((node, True))
             stack.extend((child, False) for child in children if id(child) not in sizes)
             continue
+        open_nodes.discard(id(node))
         total = 1 + sum(sizes.get(id(child), 1) for child in children)
         if total > limit:
             raise ConfigError(f"{where}: YAML expands to more than {limit:,} nodes (aliases/anchors); refused")

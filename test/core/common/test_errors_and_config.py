@@ -72,6 +72,20 @@ def test_alias_bomb_is_refused_fast_and_small_aliases_load():
         config.load_yaml_text(alias_bomb(3), max_expanded_nodes=2000)
 
 
+@pytest.mark.parametrize(
+    "text",
+    ["a: &a [*a]\n", "a: &a {k: *a}\n", "a: &a [1, [2, *a]]\n", "&r [x, {y: *r}]\n"],
+    ids=["list", "mapping", "nested", "root"],
+)
+def test_a_yaml_alias_that_contains_itself_is_refused(tmp_path, text):
+    # read_yaml of such a file used to run until memory ran out
+    (tmp_path / "cycle.yaml").write_text(text)
+    with pytest.raises(config.ConfigError, match=r"cycle\.yaml: a YAML alias refers to a node that contains it"):
+        config.read_yaml(tmp_path / "cycle.yaml")
+    # the same anchor used twice side by side is not a cycle
+    assert config.load_yaml_text("a: &a [1]\nb: [*a, *a]\n") == {"a": [1], "b": [[1], [1]]}
+
+
 def test_yaml_bounds_size_depth_and_encoding(tmp_path):
     with pytest.raises(config.ConfigError, match="nested deeper than 64"):
         config.load_yaml_text("[" * 100 + "]" * 100)
