@@ -27,6 +27,7 @@ error_string. Times s, joint values rad.
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import ClassVar
@@ -87,6 +88,8 @@ DEFAULT_TOLERANCES = CheckTolerances()
 START_TOLERANCE_RAD = DEFAULT_TOLERANCES.start_rad
 #: the executor kinds and the action each talks to by default
 EXECUTORS = {"follow_joint_trajectory": FJT_ACTION, "moveit": MOVEIT_ACTION}
+#: how long an unasked PREEMPTED waits for the program topic to tell why (s)
+PREEMPT_REASON_WAIT_S = 0.5
 #: how long a cancelled goal may take to end (s): the UR holds within stop_trajectory_duration 0.5 s
 CANCEL_WAIT_S = 2.0
 
@@ -155,7 +158,6 @@ class RobotProgramWatch:
         self._lock = threading.Lock()
         self._running: bool | None = None
         self._safety: int | None = None
-        self._changed = threading.Event()
         self._subscribers = [rospy.Subscriber(program_topic, Bool, self._on_program, queue_size=10)]
         if SafetyMode is not None:
             self._subscribers.append(rospy.Subscriber(safety_topic, SafetyMode, self._on_safety, queue_size=10))
@@ -163,18 +165,26 @@ class RobotProgramWatch:
     def _on_program(self, msg: Bool) -> None:
         with self._lock:
             self._running = bool(msg.data)
-        self._changed.set()
 
     def _on_safety(self, msg) -> None:
         with self._lock:
             self._safety = int(msg.mode)
-        self._changed.set()
 
     @property
     def program_running(self) -> bool | None:
         """The last value of the program topic, None before any."""
         with self._lock:
             return self._running
+
+    def wait_stop_reason(self, timeout_s: float) -> str:
+        """:meth:`stop_reason`, waiting up to ``timeout_s`` (wall time) for one: the controller's PREEMPTED and the
+        latched program topic travel on different connections, the result may come first."""
+        deadline = time.monotonic() + timeout_s
+        reason = self.stop_reason()
+        while not reason and time.monotonic() < deadline:
+            time.sleep(0.01)
+            reason = self.stop_reason()
+        return reason
 
     def stop_reason(self) -> str:
         with self._lock:
@@ -290,13 +300,16 @@ class RobotMotionClient:
             if stopped:  # the controller preempts too; the reason is known here, and at once
                 self._cancel_and_wait()
                 raise RobotStopped(f"{self.action}: stopped during the trajectory: {stopped}")
-        result = self.client.get_result()
+        result, state = self.client.get_result(), self.client.get_state()
+        stopped = self.stop_reason()
+        if not stopped and state == GoalStatus.PREEMPTED and not self._cancel_sent and self.program is not None:
+            stopped = self.program.wait_stop_reason(PREEMPT_REASON_WAIT_S)
         outcome = GoalOutcome(
-            state=self.client.get_state(),
+            state=state,
             error_code=self.result_code(result),
             error_string=self.result_text(result),
             cancel_sent=self._cancel_sent,
-            stop_reason=self.stop_reason(),
+            stop_reason=stopped,
         )
         error = describe_outcome(self.action, outcome, self.success_code, self.names, self.hints)
         if error is not None:

@@ -266,3 +266,26 @@ def test_moveit_goal_carries_the_trajectory_and_maps_its_codes():
     failed = _ScriptedAction(GoalStatus.ABORTED, MoveItResult(error_code=MoveItErrorCodes(val=-4)))
     with pytest.raises(ExecutionError, match="CONTROL_FAILED"):
         _client(MoveItExecuteClient, failed, NAMED["home"]).execute(move)
+
+
+def test_an_unasked_preemption_waits_briefly_for_the_program_topic_to_say_why():
+    # the controller's PREEMPTED can arrive before the latched program topic: the client waits for the reason
+    watch = _watch(True)
+    result = FollowJointTrajectoryResult(error_code=0)
+    action = _ScriptedAction(GoalStatus.PREEMPTED, result, steps=1)
+    client = _client(FollowJointTrajectoryClient, action, NAMED["home"], watch)
+    real_wait = action.wait_for_result
+
+    def finished(timeout=None):
+        done = real_wait(timeout)
+        if done:
+            threading.Timer(0.1, lambda: setattr(watch, "_running", False)).start()
+        return done
+
+    action.wait_for_result = finished
+    with pytest.raises(RobotStopped, match="robot program stopped"):
+        client.execute(_move())
+    # without a watch the preemption is reported as unexplained, at once
+    bare = _client(FollowJointTrajectoryClient, _ScriptedAction(GoalStatus.PREEMPTED, result, steps=1), NAMED["home"])
+    with pytest.raises(RobotStopped, match="not asked by this client"):
+        bare.execute(_move())
