@@ -45,7 +45,10 @@ def main(argv: list[str] | None = None) -> int:
     for speed in ("speed_1.0", "speed_0.3"):
         row = figures.get(speed)
         if row:
-            print(f"  {speed:16s} {row['duration_s']:.2f} s, measured coverage {row['measured_coverage']:.4f}")
+            phases = ", ".join(f"{k} {v:.2f} s" for k, v in (row.get("phases_s") or {}).items())
+            print(
+                f"  {speed:16s} {row['duration_s']:.2f} s ({phases}), measured coverage {row['measured_coverage']:.4f}"
+            )
     return done.returncode
 
 

@@ -112,10 +112,24 @@ class RealCellFaultTest(unittest.TestCase):
         self.assertTrue(self.program and self.program[-1], "the UR program does not run")
 
     def _execute(self, feedback=None, timeout_s=600.0):
+        """The execute_plan result and its wall time; ``self.phases`` gets the wall time per phase (connect,
+        measure: from a segment's feedback to the next one's, the last one to the result)."""
         started = time.monotonic()
-        self.executor.send_goal(ExecutePlanGoal(plan_file=""), feedback_cb=feedback)
+        marks = []
+
+        def on_feedback(fb):
+            if not marks or marks[-1][1] != fb.segment:
+                marks.append((time.monotonic(), fb.segment, fb.phase))
+            if feedback is not None:
+                feedback(fb)
+
+        self.executor.send_goal(ExecutePlanGoal(plan_file=""), feedback_cb=on_feedback)
         self.assertTrue(self.executor.wait_for_result(rospy.Duration(timeout_s)), "execution timed out")
-        return self.executor.get_state(), self.executor.get_result(), time.monotonic() - started
+        ended = time.monotonic()
+        self.phases = {"connect": 0.0, "measure": 0.0}
+        for (t, _, phase), following in zip(marks, [*marks[1:], (ended, None, None)], strict=True):
+            self.phases[phase] = round(self.phases.get(phase, 0.0) + following[0] - t, 2)
+        return self.executor.get_state(), self.executor.get_result(), ended - started
 
     def _plan_source(self) -> str:
         reply = self.report("")
@@ -180,7 +194,11 @@ class RealCellFaultTest(unittest.TestCase):
         state, result, duration = self._execute()
         self.assertEqual(state, GoalStatus.SUCCEEDED, result.error)
         self.assertGreater(result.measured_coverage, 0.5)
-        self.figures["speed_1.0"] = {"duration_s": round(duration, 2), "measured_coverage": result.measured_coverage}
+        self.figures["speed_1.0"] = {
+            "duration_s": round(duration, 2),
+            "phases_s": self.phases,
+            "measured_coverage": result.measured_coverage,
+        }
         print(f"[real cell] 100 %: {duration:.2f} s, measured coverage {result.measured_coverage:.4f}")
 
     def test_3_program_stopped_mid_segment(self):
@@ -213,7 +231,11 @@ class RealCellFaultTest(unittest.TestCase):
         full = self.figures["speed_1.0"]
         print(f"[real cell] 30 %: {duration:.2f} s (100 %: {full['duration_s']:.2f} s), "
               f"measured coverage {result.measured_coverage:.4f} (100 %: {full['measured_coverage']:.4f})")  # fmt: skip
-        self.figures["speed_0.3"] = {"duration_s": round(duration, 2), "measured_coverage": result.measured_coverage}
+        self.figures["speed_0.3"] = {
+            "duration_s": round(duration, 2),
+            "phases_s": self.phases,
+            "measured_coverage": result.measured_coverage,
+        }
         self.assertGreater(duration, 2.0 * full["duration_s"])
         self.assertLess(abs(result.measured_coverage - full["measured_coverage"]), COVERAGE_TOLERANCE)
 
