@@ -92,6 +92,10 @@ EXECUTORS = {"follow_joint_trajectory": FJT_ACTION, "moveit": MOVEIT_ACTION}
 PREEMPT_REASON_WAIT_S = 0.5
 #: how long a cancelled goal may take to end (s): the UR holds within stop_trajectory_duration 0.5 s
 CANCEL_WAIT_S = 2.0
+#: after a cancel or a stop the robot counts as standing once no joint moved more than STILL_RAD (rad) for
+#: STILL_FOR_S (s); the wait ends after CANCEL_WAIT_S anyway (a noisy or silent /joint_states)
+STILL_RAD = 1e-5
+STILL_FOR_S = 0.1
 
 
 class TrajectoryRefused(ExecutionError):
@@ -313,13 +317,32 @@ class RobotMotionClient:
         )
         error = describe_outcome(self.action, outcome, self.success_code, self.names, self.hints)
         if error is not None:
+            self.wait_until_still(CANCEL_WAIT_S)  # the controller brakes after ending a goal early
             raise error
         with self._progress_lock:
             self._progress = 1.0
 
     def _cancel_and_wait(self) -> None:
+        """Cancel, wait for the goal's end and for the robot to stand: a joint trajectory controller ends a
+        cancelled goal at once and then brakes along its stop trajectory (0.5 s on a UR)."""
+        started = time.monotonic()
         self.cancel()
         self.client.wait_for_result(rospy.Duration(CANCEL_WAIT_S))
+        self.wait_until_still(max(0.0, CANCEL_WAIT_S - (time.monotonic() - started)))
+
+    def wait_until_still(self, timeout_s: float) -> bool:
+        """Wait (wall time, at most ``timeout_s``) until the joints stay within STILL_RAD for STILL_FOR_S; whether
+        they did."""
+        deadline = time.monotonic() + timeout_s
+        reference, since = self.current_state(), time.monotonic()
+        while time.monotonic() < deadline:
+            time.sleep(0.01)
+            now, state = time.monotonic(), self.current_state()
+            if reference is None or state is None or np.abs(state - reference).max() > STILL_RAD:
+                reference, since = state, now
+            elif now - since >= STILL_FOR_S:
+                return True
+        return False
 
     # ---------------------------------------------------------------------------- per action type
     def goal(self, trajectory: JointTrajectory):

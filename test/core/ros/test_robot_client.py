@@ -289,3 +289,33 @@ def test_an_unasked_preemption_waits_briefly_for_the_program_topic_to_say_why():
     bare = _client(FollowJointTrajectoryClient, _ScriptedAction(GoalStatus.PREEMPTED, result, steps=1), NAMED["home"])
     with pytest.raises(RobotStopped, match="not asked by this client"):
         bare.execute(_move())
+
+
+def test_a_cancel_returns_once_the_robot_stands():
+    # a joint trajectory controller ends a cancelled goal at once and brakes for 0.5 s afterwards
+    import time
+
+    cancelled_at = {}
+    start = np.asarray(NAMED["home"], dtype=float)
+
+    def braking():
+        if "t" not in cancelled_at:
+            return start
+        left = max(0.0, 0.3 - (time.monotonic() - cancelled_at["t"]))
+        return start + left  # moving until 0.3 s after the cancel
+
+    action = _ScriptedAction(GoalStatus.ACTIVE, None, steps=10**6)
+    client = _client(FollowJointTrajectoryClient, action, NAMED["home"])
+    client.current_state = braking
+    real_cancel = action.cancel_goal
+
+    def cancel_goal():
+        cancelled_at["t"] = time.monotonic()
+        real_cancel()
+
+    action.cancel_goal = cancel_goal
+    client.check = lambda trajectory: None
+    with pytest.raises(ExecutionCancelled):
+        client.execute(_move(), cancel_requested=lambda: action.polls >= 2)
+    assert time.monotonic() - cancelled_at["t"] >= 0.3
+    assert np.allclose(braking(), start)
