@@ -42,6 +42,8 @@ from agiprobot_measurement.station.config import JointLimits
 
 __all__ = ["MotionCancelled", "RosNBVCamera", "RosNBVRobot"]
 
+#: the longest wait (s) for the arm to stand after a motion before the next frame
+STAND_TIMEOUT_S = 2.0
 #: the PhoXi coordinate space whose clouds are in the sensor frame (the driver's coordinate_space 1)
 CAMERA_SPACE = 1
 
@@ -107,6 +109,9 @@ class RosNBVRobot:
                 raise MotionError(f"robot controller lost: {jump}; the motion failed: {exc}") from exc
             raise MotionError(f"robot motion failed: {exc}") from exc
         self.last_end = np.asarray(trajectory.end, dtype=float)
+        # the controller reports success within its goal tolerance; the arm still converges (a UR's servo lag):
+        # the next frame is taken from where it stands
+        self.client.wait_until_still(STAND_TIMEOUT_S)
         self._settle()
 
     def _settle(self) -> None:

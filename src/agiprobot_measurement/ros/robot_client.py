@@ -285,6 +285,10 @@ class RobotMotionClient:
         ``cancel_requested()`` turned true (the goal is cancelled); ControllerLost when ``controller_problem()``
         names one (the goal is cancelled); RobotStopped when the program stops; ExecutionError on failure."""
         self.check(trajectory)
+        if len(trajectory) < 2:
+            # one point, at the robot already (checked): nothing to move, and a joint trajectory controller refuses
+            # a goal whose only point lies at time 0 ("Dropping all 1 trajectory point(s) ...")
+            return
         stopped = self.stop_reason()
         if stopped:
             raise RobotStopped(f"{self.action}: not sent: {stopped}")
@@ -366,9 +370,6 @@ class FollowJointTrajectoryClient(RobotMotionClient):
     action_spec = FollowJointTrajectoryAction
     success_code = FollowJointTrajectoryResult.SUCCESSFUL
     names: ClassVar[dict[int, str]] = code_names(FollowJointTrajectoryResult)
-    hints: ClassVar[dict[int, str]] = {
-        FollowJointTrajectoryResult.INVALID_GOAL: "a UR refuses every goal while its program is not running",
-    }
 
     def goal(self, trajectory: JointTrajectory):
         return FollowJointTrajectoryGoal(trajectory=joint_trajectory_to_msg(trajectory))

@@ -65,7 +65,7 @@ def test_code_names_are_the_messages_constants():
         (
             GoalOutcome(GoalStatus.REJECTED, -1, stop_reason="the robot program stopped"),
             ExecutionError,
-            ["INVALID_GOAL (-1)", "program is not running", "the robot program stopped"],
+            ["INVALID_GOAL (-1)", "the robot program stopped"],
         ),
     ],
 )
@@ -319,3 +319,14 @@ def test_a_cancel_returns_once_the_robot_stands():
         client.execute(_move(), cancel_requested=lambda: action.polls >= 2)
     assert time.monotonic() - cancelled_at["t"] >= 0.3
     assert np.allclose(braking(), start)
+
+
+def test_a_one_point_trajectory_at_the_robot_is_not_sent():
+    # a joint trajectory controller refuses a goal whose only point lies at time 0
+    action = _ScriptedAction(GoalStatus.REJECTED, FollowJointTrajectoryResult(error_code=-1))
+    here = point_to_point(np.asarray(NAMED["home"]), np.asarray(NAMED["home"]), LIMITS)
+    assert len(here) == 1
+    _client(FollowJointTrajectoryClient, action, NAMED["home"]).execute(here)
+    assert action.goals == []
+    with pytest.raises(TrajectoryRefused):  # still checked: one point away from the robot is refused
+        _client(FollowJointTrajectoryClient, action, np.asarray(NAMED["home"]) + 0.1).execute(here)
