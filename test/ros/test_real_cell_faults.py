@@ -38,6 +38,8 @@ NODE = "/trajectory_manager"
 SIM = "/ur_driver_sim"
 #: joint motion below this (rad, any joint, between two /joint_states) counts as standing
 STILL_RAD = 1e-5
+#: /joint_states kept for the stop latency: 240 s at the driver's 500 Hz (a loaded machine answers late)
+KEEP_SAMPLES = 120000
 #: the robot must stand within this after the fault (s)
 STOP_WITHIN_S = 1.0
 #: measured coverage at 30 % vs 100 % speed (share of the sample points)
@@ -56,11 +58,13 @@ class _JointRecorder:
         positions = dict(zip(msg.name, msg.position, strict=True))
         with self.lock:
             self.samples.append((time.monotonic(), np.array([positions[n] for n in sorted(positions)])))
-            del self.samples[:-5000]
+            del self.samples[:-KEEP_SAMPLES]
 
     def stood_still_at(self, since: float, hold_s: float = 0.3) -> float | None:
         """The first receive time after ``since`` from which the joints stay within STILL_RAD for ``hold_s``."""
         with self.lock:
+            if not self.samples or self.samples[0][0] > since:
+                raise AssertionError("the /joint_states around the fault are no longer kept")
             samples = [s for s in self.samples if s[0] >= since]
         for i in range(1, len(samples)):
             start_t, start_q = samples[i - 1]
@@ -104,6 +108,7 @@ class RealCellFaultTest(unittest.TestCase):
     def _program_running(self, timeout_s: float = 5.0) -> None:
         """Make sure the UR program runs (start it when it does not)."""
         if not (self.program and self.program[-1]):
+            self.unlock()  # a protective stop left by a failed test ("no protective stop to unlock" otherwise)
             reply = self.set_program_running(True)
             self.assertTrue(reply.success, reply.message)
         deadline = time.monotonic() + timeout_s
