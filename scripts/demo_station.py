@@ -19,6 +19,9 @@ from pathlib import Path
 from agiprobot_measurement.errors import InternalError
 from agiprobot_measurement.station import PACKAGE_ROOT
 
+#: the robot's trajectory action (the UR driver's name, which the simulated controller serves)
+ACTION = "/scaled_pos_joint_traj_controller/follow_joint_trajectory"
+
 
 def free_port() -> int:
     with socket.socket() as sock:
@@ -31,14 +34,14 @@ def run(cmd, env, timeout_s=120):
     return subprocess.run(cmd, env=env, timeout=timeout_s, check=True)
 
 
-def wait_for_action_server(env, timeout_s=30.0):
+def wait_for_action_server(env, action=ACTION, timeout_s=30.0):
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         topics = subprocess.run(["rostopic", "list"], env=env, capture_output=True, text=True).stdout
-        if "/robot_sim/execute_trajectory/status" in topics:
+        if f"{action}/status" in topics.split():
             return
         time.sleep(0.5)
-    raise InternalError("the station did not come up (no /robot_sim/execute_trajectory action server)")
+    raise InternalError(f"the station did not come up (no {action} action server)")
 
 
 def bag_summary(bag_path: Path) -> str:

@@ -1,10 +1,11 @@
 #!/usr/bin/env python3
 """Drive the (simulated) robot through named states with direct joint moves.
 
-  rosrun agiprobot_measurement move_to_named_state.py home up home [--velocity-scaling 0.5]
+  rosrun agiprobot_measurement move_to_named_state.py home up home [--velocity-scaling 0.5] [--executor moveit]
 
 Each move is a synchronised point-to-point joint motion within the joint limits, sent to the controller's
-ExecuteJointTrajectory action. Moves are straight lines in joint space: use them between states known to be
+control_msgs/FollowJointTrajectory action (a UR driver's or the simulator's; --executor moveit: move_group's
+ExecuteTrajectory). The start and the limits are checked before each move is sent. Moves are straight lines in joint space: use them between states known to be
 collision-free (the named states of config/named_states.yaml are).
 """
 
@@ -13,20 +14,20 @@ import sys
 
 import numpy as np
 import rospy
-from sensor_msgs.msg import JointState
 
 from agiprobot_measurement.common.cli import run_main
 from agiprobot_measurement.motion.point_to_point import point_to_point
-from agiprobot_measurement.msg import ExecuteJointTrajectoryAction, ExecuteJointTrajectoryGoal
-from agiprobot_measurement.ros.action_client import ActionClient
-from agiprobot_measurement.ros.conversions import joint_trajectory_to_msg
+from agiprobot_measurement.planning.plan.execution import ExecutionError
+from agiprobot_measurement.ros.joint_states import JointStateCache
+from agiprobot_measurement.ros.robot_client import EXECUTORS, MotionSettings, make_motion_client
 from agiprobot_measurement.station import load_joint_limits, load_named_states
 
 
-def current_state(joint_names, timeout_s=5.0):
-    msg = rospy.wait_for_message("/joint_states", JointState, timeout=timeout_s)
-    by_name = dict(zip(msg.name, msg.position, strict=True))
-    return np.array([by_name[name] for name in joint_names])
+def current_state(joint_states: JointStateCache, timeout_s=5.0):
+    state = joint_states.wait(timeout_s)
+    if state is None:
+        raise ExecutionError(f"no {joint_states.topic} for {timeout_s:.0f} s: is the robot running?")
+    return state
 
 
 def main() -> int:
@@ -34,7 +35,12 @@ def main() -> int:
     parser.add_argument("states", nargs="+", help="named states to visit in order")
     parser.add_argument("--velocity-scaling", type=float, default=0.5, help="fraction of the velocity limits")
     parser.add_argument("--acceleration-scaling", type=float, default=0.5, help="fraction of the acceleration limits")
-    parser.add_argument("--action", default="/robot_sim/execute_trajectory", help="controller action name")
+    parser.add_argument("--executor", choices=list(EXECUTORS), default="follow_joint_trajectory", help="motion client")
+    parser.add_argument(
+        "--action",
+        default="",
+        help=f"the action's name (default: {EXECUTORS['follow_joint_trajectory']}, for moveit {EXECUTORS['moveit']})",
+    )
     args = parser.parse_args(rospy.myargv()[1:])
     rospy.init_node("move_to_named_state", anonymous=True)
     limits = load_joint_limits()
@@ -43,21 +49,22 @@ def main() -> int:
     if unknown:
         print(f"error: unknown named state(s) {unknown}; known: {', '.join(named)}", file=sys.stderr)
         return 2
-    client = ActionClient(args.action, ExecuteJointTrajectoryAction)
-    if not client.wait_for_server(rospy.Duration(10.0)):
-        print(f"error: no controller action server at {args.action}", file=sys.stderr)
+    joint_states = JointStateCache(list(limits.names))
+    client = make_motion_client(MotionSettings(args.executor, args.action), limits, joint_states.latest)
+    if not client.wait_for_server(10.0):
+        print(f"error: no controller action server at {client.action}", file=sys.stderr)
         return 1
     for name in args.states:
-        start = current_state(list(limits.names))
+        start = current_state(joint_states)
         trajectory = point_to_point(start, named[name], limits, args.velocity_scaling, args.acceleration_scaling)
         rospy.loginfo("moving to '%s' (%.2f s)", name, trajectory.duration)
-        client.send_goal(ExecuteJointTrajectoryGoal(trajectory=joint_trajectory_to_msg(trajectory)))
-        client.wait_for_result(rospy.Duration(trajectory.duration + 10.0))
-        result = client.get_result()
-        if result is None or not result.success:
-            print(f"error: move to '{name}' failed: {result.error if result else 'no result'}", file=sys.stderr)
+        try:
+            client.execute(trajectory)
+        except ExecutionError as exc:
+            print(f"error: move to '{name}' failed: {exc}", file=sys.stderr)
             return 1
-        reached = current_state(list(limits.names))
+        rospy.sleep(0.05)  # a /joint_states after the end
+        reached = current_state(joint_states)
         print(f"reached '{name}': max joint error {np.abs(reached - named[name]).max():.2e} rad")
     return 0
 

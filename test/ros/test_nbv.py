@@ -18,6 +18,7 @@ import rosnode
 import rospy
 import rostest
 from actionlib_msgs.msg import GoalStatus
+from control_msgs.msg import FollowJointTrajectoryAction, FollowJointTrajectoryGoal
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Point, Vector3
 from nav_msgs.msg import Path as PathMsg
@@ -25,14 +26,15 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from station_test_utils import JOINTS, LIMITS, action_client, current_positions, make_trajectory
+from station_test_utils import JOINTS, LIMITS, current_positions
 
 from agiprobot_measurement.motion.point_to_point import point_to_point
 from agiprobot_measurement.msg import ReconstructObjectAction, ReconstructObjectGoal
 from agiprobot_measurement.nbv.simulation.station3d import SimulatedNBVStation
 from agiprobot_measurement.ros.action_client import ActionClient
-from agiprobot_measurement.ros.conversions import pose_to_matrix
+from agiprobot_measurement.ros.conversions import joint_trajectory_to_msg, pose_to_matrix
 from agiprobot_measurement.ros.nbv_interfaces import RosNBVCamera
+from agiprobot_measurement.ros.robot_client import FJT_ACTION
 from agiprobot_measurement.srv import SetJointState
 
 ACTION = "/nbv_reconstruction/reconstruct_object"
@@ -131,12 +133,9 @@ class NBVNodeTest(unittest.TestCase):
         camera.capture()  # the first frame waits for tf history; the one in motion must come at once
         # shoulder pan 0.3 rad: the sensor sweeps over the cube at up to ~0.2 m/s
         trajectory = point_to_point(q, q + np.array([0.3, 0, 0, 0, 0, 0]), LIMITS, velocity_scaling=0.3)
-        client = action_client()
-        client.send_goal(
-            make_trajectory(
-                trajectory.positions, trajectory.time_from_start, trajectory.velocities, trajectory.accelerations
-            )
-        )
+        client = ActionClient(FJT_ACTION, FollowJointTrajectoryAction)
+        self.assertTrue(client.wait_for_server(rospy.Duration(20.0)), f"no action server at {FJT_ACTION}")
+        client.send_goal(FollowJointTrajectoryGoal(trajectory=joint_trajectory_to_msg(trajectory)))
         rospy.sleep(0.4 * trajectory.duration)  # mid-motion: the fastest part
         view = camera.capture()
         moved_after = current_positions()

@@ -1,8 +1,8 @@
-"""Executing a plan in ROS: the robot controller's action and the scanner (:mod:`.scanner_client`) behind the core's
-executor interface (:class:`~agiprobot_measurement.planning.plan.execution.SegmentExecutor`).
+"""Executing a plan in ROS: the robot's motion client (:mod:`.robot_client`) and the scanner (:mod:`.scanner_client`)
+behind the core's executor interface (:class:`~agiprobot_measurement.planning.plan.execution.SegmentExecutor`).
 
-:class:`RosSegmentExecutor` runs one segment through the controller's
-ExecuteJointTrajectory action, switches stitching on for measurement segments only and cancels the robot when
+:class:`RosSegmentExecutor` runs one segment through the motion client (control_msgs/FollowJointTrajectory or
+MoveIt's ExecuteTrajectory), switches stitching on for measurement segments only and cancels the robot when
 the caller asks. :class:`ControllerWatch` tells whether the controller is alive (its ``/joint_states``
 heartbeat and its action server's status connection); a segment whose controller dies ends within
 ``heartbeat_timeout_s`` + a poll with :class:`~agiprobot_measurement.planning.plan.execution.ControllerLost`.
@@ -16,13 +16,11 @@ from collections.abc import Callable
 
 import numpy as np
 import rospy
-from actionlib_msgs.msg import GoalStatus
 
 from agiprobot_measurement.motion.trajectory import JointTrajectory
-from agiprobot_measurement.msg import ExecuteJointTrajectoryGoal
-from agiprobot_measurement.planning.plan.execution import ControllerLost, ExecutionCancelled, ExecutionError
-from agiprobot_measurement.ros.conversions import joint_trajectory_to_msg
+from agiprobot_measurement.planning.plan.execution import ControllerLost
 from agiprobot_measurement.ros.joint_states import JointStateCache
+from agiprobot_measurement.ros.robot_client import RobotMotionClient
 from agiprobot_measurement.ros.scanner_client import ScannerClient, ScannerError
 
 __all__ = ["ControllerWatch", "RosSegmentExecutor"]
@@ -31,9 +29,10 @@ __all__ = ["ControllerWatch", "RosSegmentExecutor"]
 class ControllerWatch:
     """Whether the robot controller is alive: a ``/joint_states`` message (``joint_states``) younger than
     ``heartbeat_timeout_s`` (ROS time) and a live connection to the status topic of its action server
-    (``robot``: an actionlib SimpleActionClient), which drops as soon as the controller's process dies."""
+    (``robot``: a :class:`~agiprobot_measurement.ros.robot_client.RobotMotionClient`), which drops as soon as the
+    controller's process dies."""
 
-    def __init__(self, joint_states: JointStateCache, robot, heartbeat_timeout_s: float = 1.0):
+    def __init__(self, joint_states: JointStateCache, robot: RobotMotionClient, heartbeat_timeout_s: float = 1.0):
         self.joint_states = joint_states
         self.robot = robot
         self.heartbeat_timeout_s = float(heartbeat_timeout_s)
@@ -46,26 +45,25 @@ class ControllerWatch:
         age_s = (rospy.Time.now() - stamp).to_sec()
         if age_s > self.heartbeat_timeout_s:
             return f"no {self.joint_states.topic} for {age_s:.1f} s"
-        status = getattr(getattr(self.robot, "action_client", None), "status_sub", None)
-        if status is not None and status.get_num_connections() == 0:
+        if not self.robot.server_connected():
             return "its action server's status topic has no publisher (the controller's process is gone)"
         return ""
 
 
 class RosSegmentExecutor:
-    """Runs plan segments through the controller's action (``robot``: an ActionClient of
-    ExecuteJointTrajectory). ``current_state()`` gives the robot's joint state (rad); ``cancel_requested()`` is
+    """Runs plan segments through the robot's motion client (``robot``: a
+    :class:`~agiprobot_measurement.ros.robot_client.RobotMotionClient`, which checks each segment's start and limits
+    before sending it). ``current_state()`` gives the robot's joint state (rad); ``cancel_requested()`` is
     polled while a segment runs; ``on_measure(view or None, active)`` hears of each measurement segment's start
     and end (the node shows the points it measures)."""
 
     def __init__(
         self,
-        robot,
+        robot: RobotMotionClient,
         scanner: ScannerClient,
         current_state: Callable[[], np.ndarray],
         cancel_requested: Callable[[], bool],
         on_measure: Callable[[object, bool], None] | None = None,
-        poll_s: float = 0.05,
         controller_problem: Callable[[], str] | None = None,
     ):
         self.robot = robot
@@ -73,7 +71,6 @@ class RosSegmentExecutor:
         self._current_state = current_state
         self.cancel_requested = cancel_requested
         self.on_measure = on_measure
-        self.poll_s = poll_s
         self.controller_problem = controller_problem or (lambda: "")
 
     def _stitching(self, on: bool) -> None:
@@ -116,16 +113,4 @@ class RosSegmentExecutor:
             rospy.logwarn("trajectory_manager: %s", exc)
 
     def _run(self, trajectory: JointTrajectory) -> None:
-        self.robot.send_goal(ExecuteJointTrajectoryGoal(trajectory=joint_trajectory_to_msg(trajectory)))
-        while not self.robot.wait_for_result(rospy.Duration(self.poll_s)):
-            if self.cancel_requested() or rospy.is_shutdown():
-                self.robot.cancel_goal()
-                self.robot.wait_for_result(rospy.Duration(2.0))
-                raise ExecutionCancelled("cancelled; robot stopped")
-            problem = self.controller_problem()
-            if problem:
-                self.robot.cancel_goal()  # a controller that only stalled must not go on moving
-                raise ControllerLost(problem)
-        state, result = self.robot.get_state(), self.robot.get_result()
-        if state != GoalStatus.SUCCEEDED or result is None or not result.success:
-            raise ExecutionError(result.error if result is not None and result.error else f"controller state {state}")
+        self.robot.execute(trajectory, self.cancel_requested, self.controller_problem)

@@ -3,9 +3,10 @@
 The original ``TrajectoryManager.execute(execution_list, surface_points)`` drove the robot through MoveIt, switched
 the scanner's stitching on for measurement segments only, and, when executing views with ``surface_points``
 given, published the points each view measures as a latched ``sensor_msgs/PointCloud`` (frame ``world``, m) on
-``/currently_measured_points``. :func:`station_executor` gives the same through this project's station: the
-simulated controller's ExecuteJointTrajectory action (``/robot_sim/execute_trajectory``) and the laser scanner's
-services (``/laser_scanner``). :mod:`agiprobot_measurement.ros.plugins` registers it with the core's executor
+``/currently_measured_points``. :func:`station_executor` gives the same through this project's station: the robot's
+motion client (:mod:`.robot_client`: control_msgs/FollowJointTrajectory on
+``/scaled_pos_joint_traj_controller/follow_joint_trajectory``, a UR driver's or the simulator's, or MoveIt's
+``/execute_trajectory``) and the laser scanner's services (``/laser_scanner``). :mod:`agiprobot_measurement.ros.plugins` registers it with the core's executor
 registry; the core asks for it only in a process where ``rospy`` is initialised.
 """
 
@@ -18,17 +19,20 @@ import rospy
 from sensor_msgs.msg import PointCloud
 from std_msgs.msg import Header
 
-from agiprobot_measurement.msg import ExecuteJointTrajectoryAction
 from agiprobot_measurement.planning.plan.execution import ExecutionError, PlanPart
-from agiprobot_measurement.ros.action_client import ActionClient
 from agiprobot_measurement.ros.conversions import xyz_point_cloud
 from agiprobot_measurement.ros.executor import ControllerWatch, RosSegmentExecutor
 from agiprobot_measurement.ros.joint_states import JointStateCache
+from agiprobot_measurement.ros.params import file_param
+from agiprobot_measurement.ros.robot_client import MotionSettings, make_motion_client, read_motion_settings
 from agiprobot_measurement.ros.scanner_client import ScannerClient
+from agiprobot_measurement.station import load_joint_limits
 
 __all__ = ["MEASURED_POINTS_TOPIC", "station_executor"]
 
 MEASURED_POINTS_TOPIC = "/currently_measured_points"
+#: the trajectory_manager node's namespace, whose parameters a script's executor shares
+MANAGER = "/trajectory_manager/"
 
 
 class _NoScanner:
@@ -60,24 +64,28 @@ def station_executor(
     controller_action: str | None = None,
     scanner_namespace: str | None = None,
     wait_s: float = 2.0,
+    executor: str | None = None,
 ) -> RosSegmentExecutor | None:
     """An executor on the running station, or None when no controller answers within ``wait_s`` (s).
 
     ``surface_points_mm``: the sampled surface points ((N, 3) or a list of 3-vectors, mm); when given, each
     view's measurable points are published while it is measured. ``part``: put into the simulated scanner's
-    scene first (the real scanner sees the real part). ``controller_action`` / ``scanner_namespace`` default to
-    the ROS parameters ``/trajectory_manager/controller_action`` / ``scanner_namespace`` or the station's names.
+    scene first (the real scanner sees the real part). ``executor`` ('follow_joint_trajectory' or 'moveit'),
+    ``controller_action`` ('' = the executor's action) and ``scanner_namespace`` default to the trajectory_manager
+    node's parameters (``/trajectory_manager/executor``, ``controller_action``, ``scanner_namespace``) or the
+    defaults; the joint limits the client checks against are ``/trajectory_manager/joint_limits`` or the package's.
     """
-    controller_action = controller_action or rospy.get_param(
-        "/trajectory_manager/controller_action", "/robot_sim/execute_trajectory"
-    )
-    scanner_namespace = scanner_namespace or rospy.get_param("/trajectory_manager/scanner_namespace", "/laser_scanner")
-    robot = ActionClient(controller_action, ExecuteJointTrajectoryAction)
-    if not robot.wait_for_server(rospy.Duration(wait_s)):
-        return None
+    shared = read_motion_settings(MANAGER)
+    settings = MotionSettings(executor or shared.executor, controller_action or shared.controller_action)
+    scanner_namespace = scanner_namespace or rospy.get_param(f"{MANAGER}scanner_namespace", "/laser_scanner")
+    limits = load_joint_limits(file_param(f"{MANAGER}joint_limits"), tuple(joint_names))
     joint_states = JointStateCache(list(joint_names))
+    robot = make_motion_client(settings, limits, joint_states.latest)
+    if not robot.wait_for_server(wait_s):
+        joint_states.unregister()
+        return None
     if joint_states.wait(wait_s) is None:
-        raise ExecutionError(f"the controller {controller_action} answers, but no {joint_states.topic} arrive")
+        raise ExecutionError(f"the controller {robot.action} answers, but no {joint_states.topic} arrive")
     scanner = ScannerClient(scanner_namespace, service_timeout_s=wait_s)
     try:
         rospy.wait_for_service(f"{scanner.namespace}/set_stitching", timeout=wait_s)

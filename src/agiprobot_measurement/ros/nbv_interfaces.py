@@ -1,7 +1,8 @@
 """The 3D next-best-view loop's robot and camera (``nbv.interfaces``) over ROS.
 
-:class:`RosNBVRobot` is the station's controller: ``/joint_states`` and its ExecuteJointTrajectory action (robot_sim,
-or a real controller with that action), as the other nodes drive it. :class:`RosNBVCamera` is the PhoXi driver
+:class:`RosNBVRobot` is the station's controller: ``/joint_states`` and its trajectory action through the motion
+client (:mod:`.robot_client`: FollowJointTrajectory of a UR driver or the simulator, or MoveIt's ExecuteTrajectory),
+as the other nodes drive it. :class:`RosNBVCamera` is the PhoXi driver
 (the simulated phoxi_camera node or the real one): ``trigger_image`` answers the new frame's id, ``get_frame(id)``
 publishes it, and the frame's ``pointcloud`` (organised, camera space), ``confidence_map`` and ``camera_info``
 messages are matched by their header's seq (the frame id, as the driver numbers them). The sensor's pose is the
@@ -20,23 +21,29 @@ from collections import OrderedDict
 import numpy as np
 import rospy
 import tf2_ros
-from actionlib_msgs.msg import GoalStatus
 from phoxi_camera.srv import GetFrame, TriggerImage
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
 from agiprobot_measurement.motion.trajectory import JointTrajectory
-from agiprobot_measurement.msg import ExecuteJointTrajectoryAction, ExecuteJointTrajectoryGoal
 from agiprobot_measurement.nbv.volumetric.interfaces import CapturedView, CaptureError, MotionError
-from agiprobot_measurement.planning.plan.execution import state_jump
-from agiprobot_measurement.ros.action_client import ActionClient
-from agiprobot_measurement.ros.conversions import joint_trajectory_to_msg, transform_to_matrix
+from agiprobot_measurement.planning.plan.execution import (
+    ControllerLost,
+    ExecutionCancelled,
+    ExecutionError,
+    state_jump,
+)
+from agiprobot_measurement.ros.conversions import transform_to_matrix
 from agiprobot_measurement.ros.executor import ControllerWatch
 from agiprobot_measurement.ros.joint_states import JointStateCache
 from agiprobot_measurement.ros.nbv_messages import captured_view
 from agiprobot_measurement.ros.params import param, text
+from agiprobot_measurement.ros.robot_client import DEFAULT_MOTION, MotionSettings, make_motion_client
+from agiprobot_measurement.station.config import JointLimits
 
 __all__ = ["MotionCancelled", "RosNBVCamera", "RosNBVRobot"]
 
+#: the longest wait (s) for the arm to stand after a motion before the next frame
+STAND_TIMEOUT_S = 2.0
 #: the PhoXi coordinate space whose clouds are in the sensor frame (the driver's coordinate_space 1)
 CAMERA_SPACE = 1
 
@@ -46,7 +53,8 @@ class MotionCancelled(MotionError):
 
 
 class RosNBVRobot:
-    """The robot over ``/joint_states`` and the controller's ExecuteJointTrajectory action ``controller_action``.
+    """The robot over ``/joint_states`` and the motion client ``settings`` name (the station's ``limits`` fix the
+    joint order and are checked before each motion is sent, with its start against ``/joint_states``).
 
     ``execute`` blocks until the controller reports the trajectory done, then waits ``settle_s`` (ROS time) for a
     joint state stamped after that, so that tf (robot_state_publisher) shows the final pose before the next frame.
@@ -57,22 +65,22 @@ class RosNBVRobot:
 
     def __init__(
         self,
-        joint_names,
-        controller_action: str = "/robot_sim/execute_trajectory",
+        limits: JointLimits,
+        settings: MotionSettings = DEFAULT_MOTION,
         state_timeout_s: float = 5.0,
         settle_s: float = 0.1,
         cancel_requested=None,
         heartbeat_timeout_s: float = 1.0,
         poll_s: float = 0.05,
     ):
-        self.joint_names = list(joint_names)
+        self.joint_names = list(limits.names)
         self.joints = JointStateCache(self.joint_names)
-        self.controller_action = controller_action
         self.state_timeout_s = float(state_timeout_s)
         self.settle_s = float(settle_s)
         self.cancel_requested = cancel_requested or (lambda: False)
         self.poll_s = float(poll_s)
-        self.client = ActionClient(controller_action, ExecuteJointTrajectoryAction)
+        self.client = make_motion_client(settings, limits, self.joints.latest)
+        self.controller_action = self.client.action
         self.watch = ControllerWatch(self.joints, self.client, heartbeat_timeout_s)
         self.last_end: np.ndarray | None = None  # where the last motion ended (rad)
 
@@ -85,28 +93,25 @@ class RosNBVRobot:
         return joints
 
     def execute(self, trajectory: JointTrajectory) -> None:
-        if not self.client.wait_for_server(rospy.Duration(10.0)):
+        if not self.client.wait_for_server(10.0):
             raise MotionError(f"the robot controller's action {self.controller_action} is not available")
         expected, self.last_end = self.last_end, None  # known again only once this motion succeeded
-        self.client.send_goal(ExecuteJointTrajectoryGoal(trajectory=joint_trajectory_to_msg(trajectory)))
-        while not self.client.wait_for_result(rospy.Duration(self.poll_s)):
-            if self.cancel_requested() or rospy.is_shutdown():
-                self.client.cancel_goal()
-                self.client.wait_for_result(rospy.Duration(2.0))
-                raise MotionCancelled("cancelled; robot stopped")
-            problem = self.watch.problem()
-            if problem:
-                self.client.cancel_goal()  # a controller that only stalled must not go on moving
-                raise MotionError(f"robot controller lost: {problem}")
-        state, result = self.client.get_state(), self.client.get_result()
-        if state != GoalStatus.SUCCEEDED or result is None or not result.success:
-            reason = result.error if result is not None and result.error else GoalStatus.to_string(state)
-            # a controller restarted between moves refuses the next one as not starting at its state
+        try:
+            self.client.execute(trajectory, self.cancel_requested, self.watch.problem)
+        except ExecutionCancelled as exc:
+            raise MotionCancelled("cancelled; robot stopped") from exc
+        except ControllerLost as exc:
+            raise MotionError(f"robot controller lost: {exc}") from exc
+        except ExecutionError as exc:
+            # a controller restarted between moves stands elsewhere: the client refuses the next start
             jump = state_jump(self.joints.latest(), expected, "the last motion")
             if jump:
-                raise MotionError(f"robot controller lost: {jump}; the motion failed: {reason}")
-            raise MotionError(f"robot motion failed: {reason}")
+                raise MotionError(f"robot controller lost: {jump}; the motion failed: {exc}") from exc
+            raise MotionError(f"robot motion failed: {exc}") from exc
         self.last_end = np.asarray(trajectory.end, dtype=float)
+        # the controller reports success within its goal tolerance; the arm still converges (a UR's servo lag):
+        # the next frame is taken from where it stands
+        self.client.wait_until_still(STAND_TIMEOUT_S)
         self._settle()
 
     def _settle(self) -> None:

@@ -22,7 +22,7 @@ class _Handle:
 class _FastServer:
     """Answers within send_goal, as a server on another thread can: ACTIVE, then at once DONE (a refused goal)."""
 
-    ns = "/robot_sim/execute_trajectory"
+    ns = "/scaled_pos_joint_traj_controller/follow_joint_trajectory"
 
     def __init__(self, final_state):
         self.final_state = final_state

@@ -84,3 +84,15 @@ def test_wait_sees_a_state_arriving_while_waiting(cache, monkeypatch):
     monkeypatch.setattr(joint_states.rospy, "sleep", sleep)
     np.testing.assert_array_equal(cache.wait(3.0), [4.0, 5.0, 6.0])
     assert clock["t"] < 0.3
+
+
+def test_the_ur_drivers_alphabetical_order_maps_to_the_stations_order():
+    # ur_robot_driver's joint_state_controller names the joints alphabetically (ros_control's std::map)
+    from agiprobot_measurement.station import load_joint_limits
+
+    station = list(load_joint_limits().names)
+    alphabetical = sorted(station)
+    assert alphabetical != station  # the two orders differ: the mapping matters
+    by_name = {name: 0.1 * (i + 1) for i, name in enumerate(station)}
+    mapped = positions_by_name(alphabetical, [by_name[n] for n in alphabetical], station)
+    assert np.allclose(mapped, [by_name[n] for n in station])

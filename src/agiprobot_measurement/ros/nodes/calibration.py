@@ -28,8 +28,8 @@ Parameters: ~config (config/calibration.yaml; its keys can be overridden as priv
 (cal_fine | cal_coarse | test), ~use_mp, ~use_auto_judge, ~flag_points_file, ~zigzag, ~output_dir,
 ~result_file, ~data_file, ~base_frame, ~camera_frame; ~mode, ~flag_points_file and ~zigzag are read again at
 every run and checked before the robot moves; a flag point file named at run time must lie in the output folder
-or the folder of the flag point file the node started with, and its lines are never quoted), ~camera_ns (/phoxi_camera), ~controller_action
-(/robot_sim/execute_trajectory), ~velocity_scaling (0.3), ~check_collisions (true: every motion is checked along
+or the folder of the flag point file the node started with, and its lines are never quoted), ~camera_ns (/phoxi_camera), ~executor
+(follow_joint_trajectory | moveit), ~controller_action ("" = the executor's action), ~velocity_scaling (0.3), ~check_collisions (true: every motion is checked along
 its whole path and planned around obstacles with OMPL when the straight joint move is blocked), ~scene (the
 station's scene file, config/scene.yaml; its obstacles for the collision checks, its chessboard for test mode),
 ~frame_timeout_s (60), ~judge_timeout_s (600: how long a run waits for the operator).
@@ -46,7 +46,6 @@ from pathlib import Path
 import numpy as np
 import rospy
 import tf2_ros
-from actionlib_msgs.msg import GoalStatus
 from geometry_msgs.msg import PointStamped
 from phoxi_camera.srv import GetFrame
 from sensor_msgs.msg import Image, PointCloud2
@@ -71,14 +70,19 @@ from agiprobot_measurement.errors import AgiprobotError, InputError
 from agiprobot_measurement.motion.ik import make_ik_solver
 from agiprobot_measurement.motion.kinematics import KinematicModel
 from agiprobot_measurement.motion.trajectory import JointTrajectory
-from agiprobot_measurement.msg import ExecuteJointTrajectoryAction, ExecuteJointTrajectoryGoal
-from agiprobot_measurement.ros.action_client import ActionClient
-from agiprobot_measurement.ros.conversions import cloud_xyz, joint_trajectory_to_msg, transform_stamped
+from agiprobot_measurement.planning.plan.execution import ExecutionCancelled, ExecutionError
+from agiprobot_measurement.ros.conversions import cloud_xyz, transform_stamped
 from agiprobot_measurement.ros.joint_states import JointStateCache
 from agiprobot_measurement.ros.node import run_node
 from agiprobot_measurement.ros.params import flag, has_param, param, text
 from agiprobot_measurement.ros.phoxi_messages import image_array, pointcloud2_arrays
-from agiprobot_measurement.station import load_joint_limits
+from agiprobot_measurement.ros.robot_client import (
+    DEFAULT_MOTION,
+    MotionSettings,
+    make_motion_client,
+    read_motion_settings,
+)
+from agiprobot_measurement.station import JointLimits, load_joint_limits
 
 __all__ = ["CalibrationNode", "RosCamera", "RosJointDriver", "main"]
 
@@ -97,12 +101,13 @@ OVERRIDES = (
 
 
 class RosJointDriver:
-    """The robot: ``/joint_states`` and the controller's ExecuteJointTrajectory action."""
+    """The robot: ``/joint_states`` and the motion client ``settings`` name (FollowJointTrajectory or MoveIt's
+    ExecuteTrajectory; each motion's start and ``limits`` are checked before it is sent)."""
 
-    def __init__(self, joint_names, controller_action: str, state_timeout_s: float = 5.0):
-        self.joints = JointStateCache(joint_names)
+    def __init__(self, limits: JointLimits, settings: MotionSettings = DEFAULT_MOTION, state_timeout_s: float = 5.0):
+        self.joints = JointStateCache(list(limits.names))
         self.state_timeout_s = state_timeout_s
-        self.client = ActionClient(controller_action, ExecuteJointTrajectoryAction)
+        self.client = make_motion_client(settings, limits, self.joints.latest)
 
     def current_joints(self) -> np.ndarray:
         joints = self.joints.wait(self.state_timeout_s)
@@ -111,13 +116,12 @@ class RosJointDriver:
         return joints
 
     def execute(self, trajectory: JointTrajectory, settle_s: float) -> None:
-        if not self.client.wait_for_server(rospy.Duration(10.0)):
-            raise StepError("robot controller action not available")
-        self.client.send_goal(ExecuteJointTrajectoryGoal(trajectory=joint_trajectory_to_msg(trajectory)))
-        self.client.wait_for_result()
-        result = self.client.get_result()
-        if self.client.get_state() != GoalStatus.SUCCEEDED or result is None or not result.success:
-            raise StepError(f"robot motion failed: {getattr(result, 'error', '') or self.client.get_state()}")
+        if not self.client.wait_for_server(10.0):
+            raise StepError(f"robot controller action {self.client.action} not available")
+        try:
+            self.client.execute(trajectory)
+        except (ExecutionError, ExecutionCancelled) as exc:
+            raise StepError(f"robot motion failed: {exc}") from exc
         if settle_s > 0.0:
             rospy.sleep(settle_s)
 
@@ -224,7 +228,7 @@ class CalibrationNode:
         limits = load_joint_limits()
         collision = flange_collision_checker(self.station) if param("~check_collisions", True) else None
         self.robot = PlannedFlangeRobot(
-            RosJointDriver(list(limits.names), param("~controller_action", "/robot_sim/execute_trajectory")),
+            RosJointDriver(limits, read_motion_settings("~")),
             kinematics,
             make_ik_solver(kinematics, self.station.robot),
             limits,

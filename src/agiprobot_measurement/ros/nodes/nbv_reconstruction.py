@@ -2,7 +2,7 @@
 station, the ROS layer over :class:`agiprobot_measurement.nbv.volumetric.reconstruction.Reconstructor`.
 
 The loop is ROS-free; this node gives it the station's robot (:class:`~agiprobot_measurement.ros.nbv_interfaces.
-RosNBVRobot`: robot_sim's ExecuteJointTrajectory action and /joint_states) and the PhoXi on the flange
+RosNBVRobot`: the robot's trajectory action through the motion client and /joint_states) and the PhoXi on the flange
 (:class:`~agiprobot_measurement.ros.nbv_interfaces.RosNBVCamera`: phoxi_camera's trigger_image / get_frame, the
 frame's cloud and the sensor's pose from tf at its stamp), and maps the messages.
 
@@ -29,8 +29,8 @@ TRIANGLE_LIST of the run's TSDF mesh, at its end), ``~sensor_path`` (nav_msgs/Pa
 bag script).
 
 Parameters: ``~config`` (config/nbv.yaml), ``~scene`` (config/scene.yaml: the station the loop knows and, in
-simulation, the part), ``~model`` (PhoXi model, "" = config's), ``~camera_ns`` (/phoxi_camera), ``~controller_action``
-(/robot_sim/execute_trajectory), ``~world_frame`` (world), ``~output_dir`` ("" = $ROS_HOME/nbv: where results go;
+simulation, the part), ``~model`` (PhoXi model, "" = config's), ``~camera_ns`` (/phoxi_camera), ``~executor``
+(follow_joint_trajectory | moveit), ``~controller_action`` ("" = the executor's action), ``~world_frame`` (world), ``~output_dir`` ("" = $ROS_HOME/nbv: where results go;
 a goal's relative output_dir resolves under it), ``~allowed_output_dirs`` (where absolute ones may also point;
 default /tmp), ``~ground_truth`` (true: the coverage of the scene's part's observable surface, simulation only),
 ``~max_voxels`` (2e7: the largest fine grid a goal may ask for), ``~start_at_home`` (false; true
@@ -79,6 +79,7 @@ from agiprobot_measurement.ros.nbv_messages import candidate_arrays, request_map
 from agiprobot_measurement.ros.nbv_setup import nbv_station
 from agiprobot_measurement.ros.node import run_node
 from agiprobot_measurement.ros.params import Param, file_param, flag, read_params, text
+from agiprobot_measurement.ros.robot_client import MotionSettings, motion_parameters
 from agiprobot_measurement.srv import SetJointState
 
 __all__ = ["NBVReconstructionNode", "main"]
@@ -114,7 +115,7 @@ PARAMETERS = (
     Param("~max_voxels", 2e7, number),
     Param("~cloud_voxel_m", 0.002, number),
     Param("~marker_max_cubes", markers.MAX_CUBES, whole),
-    Param("~controller_action", "/robot_sim/execute_trajectory"),
+    *motion_parameters("~"),
     Param("~settle_s", 0.1, number),
     Param("~camera_ns", "/phoxi_camera"),
     Param("~frame_timeout_s", 30.0, number),
@@ -155,8 +156,8 @@ class NBVReconstructionNode:
             "~reconstruct_object", ReconstructObjectAction, execute_cb=self.on_goal, auto_start=False
         )
         self.robot = RosNBVRobot(
-            list(self.station.limits.names),
-            settings.controller_action,
+            self.station.limits,
+            MotionSettings(settings.executor, settings.controller_action),
             settle_s=settings.settle_s,
             cancel_requested=self._cancel_requested,
         )

@@ -19,7 +19,9 @@ machine), ~budget/* (the most
 work one planning run may cause: max_samples, max_candidates, max_memory_gb), ~plan_directory (the root of plan
 files and figures), ~allowed_plan_dirs (where absolute plan and figure names may also point; default ROS_HOME and /tmp),
 ~controller_heartbeat_timeout_s (1.0: an execution aborts when /joint_states is older), ~measured_radius_mm, ~scene / ~scanner / ~robot_config / ~joint_limits / ~named_states (station files),
-~controller_action (/robot_sim/execute_trajectory), ~scanner_namespace (/laser_scanner). The sensor model's
+~executor (follow_joint_trajectory: control_msgs/FollowJointTrajectory, as a UR driver serves it; moveit: move_group's
+moveit_msgs/ExecuteTrajectory), ~controller_action ("" = the executor's action:
+/scaled_pos_joint_traj_controller/follow_joint_trajectory or /execute_trajectory), ~scanner_namespace (/laser_scanner). The sensor model's
 parameters are put on the parameter server under ~sensor_model as the original did.
 
 Files follow the package's one file policy (:class:`~agiprobot_measurement.common.files.FileRoot`): plan and
@@ -46,7 +48,6 @@ from visualization_msgs.msg import Marker, MarkerArray
 from agiprobot_measurement.common.config import number
 from agiprobot_measurement.errors import AgiprobotError
 from agiprobot_measurement.msg import (
-    ExecuteJointTrajectoryAction,
     ExecutePlanAction,
     ExecutePlanFeedback,
     ExecutePlanResult,
@@ -59,13 +60,13 @@ from agiprobot_measurement.planning.report.coverage import measured_colors, unce
 from agiprobot_measurement.planning.report.progress import overall_progress
 from agiprobot_measurement.planning.request import PlanRequest, PlanRequestError, WorkBudget
 from agiprobot_measurement.planning.trajectory_manager import PlanningCancelled
-from agiprobot_measurement.ros.action_client import ActionClient
 from agiprobot_measurement.ros.conversions import pose_to_matrix, xyz_cloud, xyz_point_cloud
 from agiprobot_measurement.ros.executor import ControllerWatch, RosSegmentExecutor
 from agiprobot_measurement.ros.joint_states import JointStateCache
 from agiprobot_measurement.ros.markers import part_markers, path_marker, scan_line_markers
 from agiprobot_measurement.ros.node import run_node
 from agiprobot_measurement.ros.params import Param, file_param, read_params
+from agiprobot_measurement.ros.robot_client import MotionSettings, make_motion_client, motion_parameters
 from agiprobot_measurement.ros.scanner_client import ScannerClient
 from agiprobot_measurement.srv import (
     GetCoverageReport,
@@ -140,7 +141,7 @@ PARAMETERS = (
     Param("~measured_radius_mm", 1.0, number),
     Param("~budget", {}),
     Param("~scanner_namespace", "/laser_scanner"),
-    Param("~controller_action", "/robot_sim/execute_trajectory"),
+    *motion_parameters("~"),
     Param("~controller_heartbeat_timeout_s", 1.0, number),
 )
 
@@ -178,7 +179,9 @@ class TrajectoryManagerNode:
         # sensor_msgs/PointCloud, as the original published it: scripts and rviz configs for it subscribe so
         self.current_pub = rospy.Publisher("/currently_measured_points", PointCloud, **latched)
         self.scanner = ScannerClient(settings.scanner_namespace)
-        self.robot = ActionClient(settings.controller_action, ExecuteJointTrajectoryAction)
+        self.robot = make_motion_client(
+            MotionSettings(settings.executor, settings.controller_action), station.limits, self.joint_states.latest
+        )
         self.controller = ControllerWatch(self.joint_states, self.robot, settings.controller_heartbeat_timeout_s)
         self.plan_server = actionlib.SimpleActionServer(
             "~plan_measurement", PlanMeasurementAction, execute_cb=self.on_plan, auto_start=False
@@ -375,11 +378,14 @@ class TrajectoryManagerNode:
             candidate = session.read(goal.plan_file) if goal.plan_file else None
             if candidate is None and session.plan is None:
                 raise GoalError("no plan: plan one, load one, or give plan_file")
-            if not self.robot.wait_for_server(rospy.Duration(5.0)):
-                raise GoalError("the robot controller's action server is not available")
+            if not self.robot.wait_for_server(5.0):
+                raise GoalError(f"the robot controller's action server {self.robot.action} is not available")
             problem = self.controller.problem()
             if problem:
                 raise GoalError(f"the robot controller is not running: {problem}")
+            stopped = self.robot.stop_reason()
+            if stopped:
+                raise GoalError(f"the robot cannot move: {stopped}")
             plan = session.prepared_plan(self._current_state(), candidate)
             part = candidate.part if candidate is not None else session.part
             if part is not None:

@@ -3,7 +3,8 @@
 Same names, inputs and outputs as documented, against the running station (``calibration.launch``, or
 ``station.launch tool:=flange_disc`` + ``phoxi_camera.launch``) through the calls the calibration node makes:
 motions are IK (nearest to the current joint state) + a collision-checked joint motion (planned around obstacles
-when the straight one is blocked) run by ``/robot_sim/execute_trajectory``; shots are ``/phoxi_camera/get_frame``
+when the straight one is blocked) run through the motion client (FollowJointTrajectory on
+``/scaled_pos_joint_traj_controller/follow_joint_trajectory``, or MoveIt's ``/execute_trajectory``); shots are ``/phoxi_camera/get_frame``
 (``in_ = -1``: a new frame) and the next ``/phoxi_camera/pointcloud``, saved as PLY (metres) for
 :func:`~agiprobot_measurement.calibration.original.calibration.circle_fitting`. Poses are ``geometry_msgs/Pose`` of
 tool0 in the robot base frame ``base`` (the DH base, in which the flag points are given), metres.
@@ -50,6 +51,7 @@ from agiprobot_measurement.motion.ik import make_ik_solver
 from agiprobot_measurement.motion.kinematics import KinematicModel
 from agiprobot_measurement.ros.conversions import matrix_to_pose, pose_to_matrix
 from agiprobot_measurement.ros.nodes.calibration import RosCamera, RosJointDriver
+from agiprobot_measurement.ros.robot_client import MotionSettings
 from agiprobot_measurement.sensors.phoxi.point_cloud_io import write_ply
 from agiprobot_measurement.station import load_joint_limits
 
@@ -111,16 +113,18 @@ def _ensure_node() -> None:
 def configure(
     scene: str | Path | None = None,
     camera_ns: str = "/phoxi_camera",
-    controller_action: str = "/robot_sim/execute_trajectory",
+    controller_action: str = "",
     velocity_scaling: float = 0.5,
     check_collisions: bool = True,
     settle_s: float = 0.3,
     frame_timeout_s: float = 60.0,
     config: str | Path | None = None,
+    executor: str = "follow_joint_trajectory",
 ) -> StationHandles:
     """Connect to the station (replaces an earlier connection): ``scene`` the station's scene file for the
     collision checks (default config/calibration_scene.yaml, calibration.launch's), ``camera_ns`` the PhoXi driver,
-    ``controller_action`` the robot's ExecuteJointTrajectory action, ``velocity_scaling`` of the joint limits,
+    ``executor`` follow_joint_trajectory (the UR driver's or the simulator's action) or moveit (move_group's
+    ExecuteTrajectory), ``controller_action`` its action name ('' = the executor's), ``velocity_scaling`` of the joint limits,
     ``settle_s`` the wait after a motion before a shot, ``config`` the calibration config (tool orientation,
     chessboard)."""
     global _station
@@ -130,7 +134,7 @@ def configure(
     kinematics = KinematicModel.from_station(flange, tip_frame="tool0", base_frame="base")
     limits = load_joint_limits()
     robot = PlannedFlangeRobot(
-        RosJointDriver(list(limits.names), controller_action),
+        RosJointDriver(limits, MotionSettings(executor, controller_action)),
         kinematics,
         make_ik_solver(kinematics, flange.robot),
         limits,
