@@ -5,8 +5,8 @@ the scanner's stitching on for measurement segments only, and, when executing vi
 given, published the points each view measures as a latched ``sensor_msgs/PointCloud`` (frame ``world``, m) on
 ``/currently_measured_points``. :func:`station_executor` gives the same through this project's station: the
 simulated controller's ExecuteJointTrajectory action (``/robot_sim/execute_trajectory``) and the laser scanner's
-services (``/laser_scanner``). :mod:`agiprobot_measurement.ros.plugins` registers it with the core's executor
-registry; the core asks for it only in a process where ``rospy`` is initialised.
+stitcher (``/switch_stitch_mode``; extras under ``/laser_scanner``). :mod:`agiprobot_measurement.ros.plugins`
+registers it with the core's executor registry; the core asks for it only in a process where ``rospy`` is initialised.
 """
 
 from __future__ import annotations
@@ -80,7 +80,7 @@ def station_executor(
         raise ExecutionError(f"the controller {controller_action} answers, but no {joint_states.topic} arrive")
     scanner = ScannerClient(scanner_namespace, service_timeout_s=wait_s)
     try:
-        rospy.wait_for_service(f"{scanner.namespace}/set_stitching", timeout=wait_s)
+        scanner.wait_for_stitcher(wait_s)
         if part is not None:
             scanner.set_target(part)
     except rospy.ROSException:
