@@ -171,7 +171,6 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     out = Path(args.output_dir or tempfile.mkdtemp(prefix="scanner_bench_")).resolve()
     out.mkdir(parents=True, exist_ok=True)
-    plan_file = out / "scanner_bench_plan.yaml"
     rows = []
     print(f"part {args.part}; plan and logs in {out}", flush=True)
     print(
@@ -180,7 +179,6 @@ def main(argv=None) -> int:
         flush=True,
     )
     for condition in args.conditions:
-        latency_s, compensation_s = (float(v) for v in condition.split(":"))
         # each condition in a fresh process: rospy allows one node per process
         completed = subprocess.run(
             [sys.executable, "-m", "benchmarks.scanner", "--_one", condition, *sys_args(args, out)],
