@@ -36,9 +36,9 @@ class PointCloudStitcherTest(unittest.TestCase):
         cls.measured = None
         cls.stitched = None
         cls.stitching = []
-        rospy.Subscriber("/scancontrol_pointcloud", PointCloud2, cls._on_profile, queue_size=1000)
-        rospy.Subscriber("/laser_scanner/measured_cloud", PointCloud2, cls._on_measured, queue_size=1)
-        rospy.Subscriber("/stitched_point_cloud", PointCloud, cls._on_stitched, queue_size=1)
+        rospy.Subscriber("/scancontrol_pointcloud", PointCloud2, cls._on_profile, queue_size=1000, buff_size=2**24)
+        rospy.Subscriber("/laser_scanner/measured_cloud", PointCloud2, cls._on_measured, queue_size=1, buff_size=2**26)
+        rospy.Subscriber("/stitched_point_cloud", PointCloud, cls._on_stitched, queue_size=1, buff_size=2**26)
         rospy.Subscriber("/laser_scanner/stitching", Bool, lambda m: cls.stitching.append(m.data), queue_size=10)
         for name in ("/switch_stitch_mode", "/clear_stitched_point_cloud", "/laser_scanner/publish_measured_cloud"):
             rospy.wait_for_service(name, timeout=60.0)

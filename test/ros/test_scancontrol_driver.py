@@ -54,7 +54,7 @@ class ScanControlDriverTest(unittest.TestCase):
         rospy.init_node("scancontrol_client")
         cls.lock = threading.Lock()
         cls.messages = []
-        rospy.Subscriber(TOPIC, PointCloud2, cls._on_profile, queue_size=1000)
+        rospy.Subscriber(TOPIC, PointCloud2, cls._on_profile, queue_size=1000, buff_size=2**24)
         for name in [*SERVICES, "invert_x", "invert_z", "set_target"]:
             rospy.wait_for_service(f"{NODE}/{name}", timeout=60.0)
 
@@ -149,4 +149,4 @@ class ScanControlDriverTest(unittest.TestCase):
 
 
 if __name__ == "__main__":
-    rostest.rosrun("agiprobot_measurement", "scancontrol_driver", ScanControlDriverTest)
+    rostest.rosrun("agiprobot_measurement", "scancontrol_driver_interface", ScanControlDriverTest)
