@@ -63,7 +63,7 @@ class PointCloudStitcherTest(unittest.TestCase):
 
     def measured_cloud(self) -> tuple[np.ndarray, str]:
         with self.lock:
-            self.measured = None
+            type(self).measured = None  # the callback sets the class attribute
         reply = rospy.ServiceProxy("/laser_scanner/publish_measured_cloud", Trigger)()
         deadline = time.monotonic() + 10.0
         while self.measured is None and time.monotonic() < deadline:
