@@ -82,6 +82,7 @@ class PointCloudStitcher:
         self.latest_arrival = rospy.Time(0)
         self.queue: collections.deque = collections.deque()
         self.queued = threading.Condition()
+        self.publish_request = threading.Event()
         self.profile_pub = rospy.Publisher("~profile", PointCloud2, queue_size=PROFILE_QUEUE)
         self.cloud_pub = rospy.Publisher("~measured_cloud", PointCloud2, queue_size=1, latch=True)
         self.display_pub = rospy.Publisher("~measured_cloud_display", PointCloud2, queue_size=1, latch=True)
@@ -93,8 +94,9 @@ class PointCloudStitcher:
         rospy.Service("clear_stitched_point_cloud", Trigger, self.clear)
         rospy.Service("~publish_measured_cloud", Trigger, self.publish_full_cloud)
         threading.Thread(target=self._work, name="stitcher", daemon=True).start()
+        threading.Thread(target=self._publish_loop, name="thinned clouds", daemon=True).start()
         rospy.Subscriber(settings.cloud_topic, PointCloud2, self._on_profile, queue_size=PROFILE_QUEUE, buff_size=2**26)
-        rospy.Timer(rospy.Duration(1.0), lambda _e: self.publish_clouds() if self.windows.active else None)
+        rospy.Timer(rospy.Duration(1.0), lambda _e: self._publish_clouds_later() if self.windows.active else None)
         rospy.loginfo(
             "point_cloud_stitcher: profiles of %s into %s (latency compensation %.4f s)",
             settings.cloud_topic,
@@ -164,7 +166,7 @@ class PointCloudStitcher:
         if was_on:
             self._wait_for_profiles_until(now)
         self.state_pub.publish(Bool(False))
-        self.publish_clouds()
+        self._publish_clouds_later()
         return SetBoolResponse(True, "deactivated stitching")
 
     def _wait_for_profiles_until(self, t_off: rospy.Time) -> None:
@@ -191,13 +193,24 @@ class PointCloudStitcher:
             self.chunks = []
             self.profiles = 0
             self.dropped = 0
-        self.publish_clouds()
+        self._publish_clouds_later()
         return TriggerResponse(True, "cleared the stitched point cloud")
 
     def _accumulated(self) -> tuple[np.ndarray, int]:
         with self.lock:
             points = np.vstack(self.chunks) if self.chunks else np.zeros((0, 3))
             return points, self.profiles
+
+    def _publish_clouds_later(self) -> None:
+        """Have the publishing thread publish the thinned clouds: thinning a large cloud takes a while, and the
+        service replies must not wait for it."""
+        self.publish_request.set()
+
+    def _publish_loop(self) -> None:
+        while not rospy.is_shutdown():
+            if self.publish_request.wait(0.5):
+                self.publish_request.clear()
+                self.publish_clouds()
 
     def publish_clouds(self) -> None:
         """The thinned clouds: stitched_point_cloud (PointCloud) and ~measured_cloud_display (PointCloud2)."""
