@@ -47,7 +47,13 @@ except ImportError:  # run from a checkout without the catkin environment
 
 import numpy as np  # noqa: E402
 
-from agiprobot_measurement.common.cli import EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE  # noqa: E402
+from agiprobot_measurement.common.cli import (  # noqa: E402
+    EXIT_INTERNAL,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    EXIT_USAGE,
+    process_started_s,
+)
 from agiprobot_measurement.common.files import output_path, write_output  # noqa: E402
 from agiprobot_measurement.common.geometry import pose_matrix  # noqa: E402
 from agiprobot_measurement.common.units import UNIT_SCALES_TO_M  # noqa: E402
@@ -519,7 +525,7 @@ def run(args: argparse.Namespace, request: PlanRequest, progress: StageProgress)
     station = Station.load(scene=args.scene)
     manager = TrajectoryManager.for_request(request, station, progress=progress, work_budget=args.work_budget)
     try:
-        ordered = manager.plan_request(request)
+        ordered = manager.plan_request(request, started_s=process_started_s())
     finally:
         manager.close()  # a local Dask cluster ends with the evaluation's last use
     total_s = time.perf_counter() - t0

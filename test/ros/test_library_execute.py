@@ -13,7 +13,7 @@ from sensor_msgs.msg import JointState, PointCloud, PointCloud2
 
 from agiprobot_measurement.planning.trajectory_manager import TrajectoryManager
 from agiprobot_measurement.ros.plugins import in_ros_process  # registers the station executor
-from agiprobot_measurement.station import PACKAGE_ROOT
+from agiprobot_measurement.station import PACKAGE_ROOT, load_robot_config
 
 CUBE = str(PACKAGE_ROOT / "parts" / "objectA_wuerfel.stl")
 
@@ -43,7 +43,8 @@ class LibraryExecuteTest(unittest.TestCase):
     @classmethod
     def _on_joint_state(cls, msg):
         with cls.lock:
-            cls.joint_state = np.array(msg.position)
+            by_name = dict(zip(msg.name, msg.position, strict=True))  # the driver's order is alphabetical
+            cls.joint_state = np.array([by_name[n] for n in load_robot_config().joint_names])
 
     @classmethod
     def _on_measured(cls, msg):

@@ -22,7 +22,7 @@ from geometry_msgs.msg import Pose
 from sensor_msgs.msg import JointState, PointCloud, PointCloud2
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from station_test_utils import quick_goal
+from station_test_utils import JOINTS, quick_goal
 
 from agiprobot_measurement.msg import ExecutePlanAction, ExecutePlanGoal, PlanMeasurementAction
 from agiprobot_measurement.planning.plan.plan_io import load_execution_plan
@@ -88,7 +88,13 @@ class MeasurementNodeTest(unittest.TestCase):
         plan = STATE["plan"]
         joint_states, profiles, current, phases = [], [], [], []
         subs = [
-            rospy.Subscriber("/joint_states", JointState, lambda m: joint_states.append(np.array(m.position))),
+            rospy.Subscriber(  # by name: the driver publishes the joints in alphabetical order
+                "/joint_states",
+                JointState,
+                lambda m: joint_states.append(
+                    np.array([dict(zip(m.name, m.position, strict=True))[n] for n in JOINTS])
+                ),
+            ),
             rospy.Subscriber("/laser_scanner/profile", PointCloud2, lambda m: profiles.append(time.monotonic())),
             rospy.Subscriber(
                 "/currently_measured_points",

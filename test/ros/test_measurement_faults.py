@@ -247,7 +247,7 @@ class MeasurementFaultTest(unittest.TestCase):
     # ------------------------------------------------------------------------------------- row 8
     def test_7_a_killed_controller_aborts_the_execution_and_a_restart_works(self):
         source = self._plan_source()
-        pid = node_pid("/robot_sim")
+        pid = node_pid("/ur_hardware_interface")
         killed = {}
 
         def feedback(fb):
@@ -278,13 +278,13 @@ class MeasurementFaultTest(unittest.TestCase):
         new_pid = None
         while time.monotonic() < deadline:
             try:
-                new_pid = node_pid("/robot_sim")
+                new_pid = node_pid("/ur_hardware_interface")
                 if new_pid != pid:
                     break
             except Exception:
                 pass
             time.sleep(0.5)
-        self.assertNotEqual(new_pid, pid, "robot_sim was not respawned")
+        self.assertNotEqual(new_pid, pid, "the controller ur_hardware_interface was not respawned")
         rospy.wait_for_message("/joint_states", JointState, timeout=30)
         time.sleep(2.0)
         state, result = self._execute("")
@@ -292,7 +292,7 @@ class MeasurementFaultTest(unittest.TestCase):
 
     def test_7b_a_stalled_controller_is_noticed_by_its_heartbeat(self):
         source = self._plan_source()
-        pid = node_pid("/robot_sim")
+        pid = node_pid("/ur_hardware_interface")
         stopped = {}
 
         def feedback(fb):

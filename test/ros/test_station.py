@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""rostest: the station launch file and the simulated controller robot_sim."""
+"""rostest: the station launch file and the simulated UR10e controller (deprecated alias robot_sim/...)."""
 
 import sys
 import time

@@ -9,12 +9,15 @@ written, a full disk) prints ``error: <message>`` and exits with :data:`EXIT_USA
 
 from __future__ import annotations
 
+import os
 import sys
+import time
 from collections.abc import Callable
+from pathlib import Path
 
 from agiprobot_measurement.errors import AgiprobotError, is_input_error
 
-__all__ = ["EXIT_INTERNAL", "EXIT_INTERRUPTED", "EXIT_OK", "EXIT_USAGE", "run_main"]
+__all__ = ["EXIT_INTERNAL", "EXIT_INTERRUPTED", "EXIT_OK", "EXIT_USAGE", "process_started_s", "run_main"]
 
 EXIT_OK = 0
 #: a failure that is not the user's input (a solver, a device)
@@ -23,6 +26,21 @@ EXIT_INTERNAL = 1
 EXIT_USAGE = 2
 #: interrupted with Ctrl-C
 EXIT_INTERRUPTED = 130
+
+
+def process_started_s() -> float:
+    """When this process started, as a ``time.perf_counter()`` value (the interpreter's start-up and the imports
+    included), so that a command's time limit counts from when the user started it. Linux's ``/proc`` gives the
+    start; elsewhere it is the moment of this call."""
+    try:
+        stat = Path("/proc/self/stat").read_text()
+        uptime_s = float(Path("/proc/uptime").read_text().split()[0])
+        # the fields after the command name (which may hold spaces) in brackets; starttime is field 22
+        start_ticks = int(stat.rsplit(")", 1)[1].split()[19])
+        age_s = uptime_s - start_ticks / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError):
+        return time.perf_counter()
+    return time.perf_counter() - max(age_s, 0.0)
 
 
 def run_main(main: Callable[[], int | None], prog: str = "") -> int:

@@ -1,14 +1,21 @@
-"""The planning time limit, counted from the request (the part's loading included) and checked between the chunks
-of the stages before the set cover; the set cover and the connection end in time by themselves."""
+"""The planning time limit, counted from the request (the part's loading included; a command-line run counts it
+from the command's start) and checked between the chunks of the stages before the set cover; a single long step
+that cannot check it itself (reading and merging a huge mesh) runs under :meth:`StageClock.call`, which gives up
+on it when the limit runs out. The set cover and the connection end in time by themselves."""
 
 from __future__ import annotations
 
+import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TypeVar
 
 from agiprobot_measurement.planning.errors import PlanningTimeLimit
 
 __all__ = ["TIME_CHECKED_STAGES", "StageClock"]
+
+T = TypeVar("T")
 
 #: the stages that check the time limit at their progress reports
 TIME_CHECKED_STAGES = ("sampling", "metrology")
@@ -21,14 +28,44 @@ class StageClock:
     started_s: float
     limit_s: float
 
+    def elapsed_s(self) -> float:
+        return time.perf_counter() - self.started_s
+
     def check(self, stage: str) -> None:
         """Raise :class:`PlanningTimeLimit` when the limit ran out and ``stage`` is one that checks it."""
         if stage not in TIME_CHECKED_STAGES:
             return
-        elapsed = time.perf_counter() - self.started_s
+        elapsed = self.elapsed_s()
         if elapsed > self.limit_s:
-            raise PlanningTimeLimit(
-                f"the time limit of {self.limit_s:g} s ran out during {stage} ({elapsed:.1f} s, before the set "
-                "cover): no plan; allow more time, or lower the sampling density or the orientations (a finely "
-                "meshed or large part takes long to load and sample)"
-            )
+            raise self._expired(stage, elapsed)
+
+    def call(self, stage: str, work: Callable[[], T]) -> T:
+        """``work()``'s result, or :class:`PlanningTimeLimit` as soon as the limit runs out while it runs.
+
+        For one long step that cannot check the time itself: it runs in a daemon thread, and when the limit runs
+        out first, that thread is left to finish on its own (its result is dropped) and the caller goes on with
+        the error. ``work`` must therefore change no shared state (it returns what it made); its own errors are
+        raised here."""
+        outcome: dict[str, object] = {}
+
+        def run() -> None:
+            try:
+                outcome["result"] = work()
+            except BaseException as exc:  # handed to the caller below, whatever it is
+                outcome["error"] = exc
+
+        worker = threading.Thread(target=run, name=f"planning {stage}", daemon=True)
+        worker.start()
+        worker.join(max(self.limit_s - self.elapsed_s(), 0.0))
+        if worker.is_alive():
+            raise self._expired(stage, self.elapsed_s())
+        if "error" in outcome:
+            raise outcome["error"]
+        return outcome["result"]
+
+    def _expired(self, stage: str, elapsed_s: float) -> PlanningTimeLimit:
+        return PlanningTimeLimit(
+            f"the time limit of {self.limit_s:g} s ran out during {stage} ({elapsed_s:.1f} s, before the set "
+            "cover): no plan; allow more time, or lower the sampling density or the orientations (a finely "
+            "meshed or large part takes long to load and sample)"
+        )

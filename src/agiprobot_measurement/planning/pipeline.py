@@ -20,7 +20,7 @@ from agiprobot_measurement.planning.connection import ConnectionPlanner
 from agiprobot_measurement.planning.cover.solve import SOLVER_TYPES
 from agiprobot_measurement.planning.deadline import StageClock
 from agiprobot_measurement.planning.errors import PlanningError, PlanningTimeLimit
-from agiprobot_measurement.planning.part_loading import part_parameters, place_part
+from agiprobot_measurement.planning.part_loading import LoadedPart, part_parameters, place_part
 from agiprobot_measurement.planning.report.report import CoverageReport, point_uncertainties
 from agiprobot_measurement.planning.request import REQUEST_TILT_MODES, check_choice, check_positive
 from agiprobot_measurement.planning.selection.loop import cover_points_with_verified
@@ -180,16 +180,29 @@ def load_target(
     check its placement and start a new connection planner in that world. Returns True."""
     scene = manager._base_scene if add_wbk_mirrors else manager._base_scene.without_group("wbk_mirrors")
     args = (units, remove_downside, remove_threshold_angle_deg, tessellation_tolerance_mm)
-    part = place_part(file_name, scene, transform, placement, *args, checkpoint=lambda: manager.check_time("sampling"))
+
+    def prepare() -> tuple[LoadedPart, CollisionChecker, float | None]:
+        # builds new objects only: under a time limit it may be left running when the limit ends the wait
+        part = place_part(
+            file_name, scene, transform, placement, *args, checkpoint=lambda: manager.check_time("sampling")
+        )
+        collision = CollisionChecker(manager.kinematics, scene, manager.collision.config, load_part=False)
+        collision.set_part(part.mesh, pose=np.eye(4), name="part", scale_to_m=1e-3)
+        manager.check_time("sampling")
+        if not check_scene_overlap:
+            return part, collision, None
+        started = time.perf_counter()
+        check_placement(part.mesh, scene, collision, manager.current_state)
+        return part, collision, time.perf_counter() - started
+
+    # reading, merging and putting a huge mesh into the collision world are long steps that cannot check the
+    # time themselves: under a time limit, the limit ends the wait for them
+    clock = manager.run.clock
+    part, manager.collision, placement_check_s = prepare() if clock is None else clock.call("loading", prepare)
     for message in part.warnings:
         LOG.warning("%s", message)
-    manager.collision = CollisionChecker(manager.kinematics, scene, manager.collision.config, load_part=False)
-    manager.collision.set_part(part.mesh, pose=np.eye(4), name="part", scale_to_m=1e-3)
-    manager.check_time("sampling")
-    if check_scene_overlap:
-        started = time.perf_counter()
-        check_placement(part.mesh, scene, manager.collision, manager.current_state)
-        manager.timings_s["placement_check"] = time.perf_counter() - started
+    if placement_check_s is not None:
+        manager.timings_s["placement_check"] = placement_check_s
     manager.warnings = list(part.warnings)
     manager.connection = ConnectionPlanner(manager.collision, manager.limits, manager.planner_name, manager.seed)
     manager.part, manager.target_mesh, manager.samples = part, part.mesh, None

@@ -391,10 +391,12 @@ class TrajectoryManager:
         settings = request.manager_settings()
         return cls(station, progress=progress, start_state=start_state, work_budget=work_budget, **settings)
 
-    def plan_request(self, request: PlanRequest) -> list[ViewPoint]:
+    def plan_request(self, request: PlanRequest, started_s: float | None = None) -> list[ViewPoint]:
         """Load the request's part and run the whole pipeline with its settings (``request`` validated with
-        :meth:`PlanRequest.validate`; the manager made by :meth:`for_request`). Returns the ordered views."""
-        started = time.perf_counter()
+        :meth:`PlanRequest.validate`; the manager made by :meth:`for_request`). Returns the ordered views.
+        ``started_s``: the ``time.perf_counter()`` value the time limit counts from (default: now; a command
+        passes its own start, so that its start-up counts too)."""
+        started = time.perf_counter() if started_s is None else float(started_s)
         self._report("sampling", 0.0, f"loading {request.part_file}")
         self.run.clock = StageClock(started, float(request.time_limit_s))
         try:

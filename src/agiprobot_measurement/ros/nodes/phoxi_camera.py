@@ -42,7 +42,10 @@ stamp is the time of the trigger.
 Behaviour as the driver's (RosInterface.cpp, PhoXiInterface.cpp of release 1.8.0): trigger_image triggers and answers
 the id, publishing nothing; get_frame(id) publishes (id < 0: triggers first); triggering switches to the software
 trigger and starts acquisition; reconfiguring without a scanner is refused (values put back); free run takes frames
-that only get_frame(id) publishes. The simulated scanner's settings start as the parameters, so ``init_from_config``
+that only get_frame(id) publishes. A frame's parts are published when the scanner sends them (``send_<part>``) and
+the frame holds them: a file camera listed in ``~devices`` with ``frame_outputs`` (PhoXi Control's example the
+driver's tests use has no confidence map) lacks the others, and the driver's warning ("Empty confidence map!") is
+logged instead. The simulated scanner's settings start as the parameters, so ``init_from_config``
 matters only for trigger_mode and start_acquisition (true: the parameters' go to the scanner at connect; false: the
 software trigger that connecting sets stays). ``timeout`` is accepted and has no effect (a frame is rendered while
 the service waits).
@@ -50,7 +53,7 @@ the service waits).
 Files: save_frame and V2/save_last_frame follow the package's file policy (common.files.FileRoot): a leading ``~`` is
 $HOME (as the driver); ``..`` and paths outside the allowed folders are refused with a message naming them; an
 existing file is replaced atomically (the driver overwrites and its services have no flag for it); ``.praw``/
-``.prawf`` are refused (not supported by the simulator). The file is written outside the device lock, so a long
+``.prawf`` are refused ("Unsuccessful save: ... not supported by the simulator", docs/phoxi.md "Raw formats"). The file is written outside the device lock, so a long
 export does not hold up the other services.
 """
 
@@ -412,31 +415,38 @@ class PhoxiCameraNode:
     def publish_frame(self, frame):
         with self.lock:
             header = Header(stamp=self.frame_stamps.get(frame.index) or rospy.Time.now(), frame_id=self.frame_id)
-            cfg = self.config
             points, normals = frame_output(frame)
             outputs = [("camera_info", lambda: phoxi_messages.camera_info(frame.intrinsics, header))]
-            if cfg["send_point_cloud"]:
-                organized = cfg["organized_cloud"]
+            if self._delivered(frame, "point_cloud", "Empty point cloud!"):
+                organized = self.config["organized_cloud"]
                 outputs.append(
                     (
                         "pointcloud",
                         lambda: phoxi_messages.pointcloud2(points, normals, frame.valid, header, organized),
                     )
                 )
-            if cfg["send_depth_map"]:
+            if self._delivered(frame, "depth_map", "Empty depth map!"):
                 outputs.append(("depth_map", lambda: phoxi_messages.image(frame.depth_mm, "32FC1", header)))
-            if cfg["send_normal_map"]:
-                outputs.append(("normal_map", lambda: phoxi_messages.image(normals, "32FC3", header)))
-            if cfg["send_confidence_map"]:
-                outputs.append(("confidence_map", lambda: phoxi_messages.image(frame.confidence, "32FC1", header)))
-            if cfg["send_texture"]:
+            if self._delivered(frame, "texture", "Empty texture!"):
                 outputs.append(("texture", lambda: phoxi_messages.image(frame.texture, "32FC1", header)))
                 outputs.append(("rgb_texture", lambda: phoxi_messages.image(frame.rgb_texture(), "rgb8", header)))
+            if self._delivered(frame, "confidence_map", "Empty confidence map!"):
+                outputs.append(("confidence_map", lambda: phoxi_messages.image(frame.confidence, "32FC1", header)))
+            if self._delivered(frame, "normal_map", "Empty normal map!"):
+                outputs.append(("normal_map", lambda: phoxi_messages.image(normals, "32FC3", header)))
             for name, build in outputs:
                 publisher = self.publishers[name]
                 # a message nobody receives is not worth building, unless it is latched for later subscribers
                 if self.latch or publisher.get_num_connections() > 0:
                     self._publish(publisher, build(), frame.index)
+
+    def _delivered(self, frame, part, warning) -> bool:
+        """Whether the frame holds ``part``: the scanner sends it (``send_<part>``) and, for a file camera, the
+        recording has it; else the driver's warning, as its publishFrame logs for an empty part."""
+        if self.config[f"send_{part}"] and part in frame.outputs:
+            return True
+        rospy.logwarn("phoxi_camera: %s", warning)
+        return False
 
     @staticmethod
     def _publish(publisher, msg, seq):

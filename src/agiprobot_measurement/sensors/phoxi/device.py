@@ -465,6 +465,7 @@ class PhoxiDevice:
         frame = optics.capture(geometry, camera_pose, self.settings, index, RayCaster(geometry))
         frame.coordinate_space = self.coordinate_space
         frame.output_transform = self.output_transform().copy()
+        frame.outputs = self.current.frame_outputs
         self.next_index += 1
         self.frames[index] = frame
         while len(self.frames) > self.frame_buffer_size:
@@ -633,10 +634,12 @@ class PhoxiDevice:
 
     @staticmethod
     def _raw_refusal(extension: str) -> str:
+        """The refusal of a raw format, worded as the driver's failed save ("Unsuccessful save.") so that a script's
+        handling of a failed save applies; the simulator writes no stand-in that PhoXi Control could not open."""
         written = ", ".join("." + e for e in WRITTEN_EXTENSIONS)
         return (
-            f"Extension .{extension} (PhoXi Control's raw format) is not supported by the simulator: "
-            f"it writes {written}"
+            f"Unsuccessful save: extension .{extension} (PhoXi Control's raw format) is not supported by the "
+            f"simulator, which has no raw pattern images to write; it writes {written}"
         )
 
     def save_frame(self, frame: Frame, requested: str, organized: bool = True) -> Path:
@@ -674,7 +677,8 @@ class PhoxiDevice:
 
     def _write_ply(self, frame: Frame, path: Path, organized: bool) -> Path:
         points, normals = frame_output(frame)
-        scalars = {"intensity": frame.texture, "confidence": frame.confidence}
+        parts = {"intensity": ("texture", frame.texture), "confidence": ("confidence_map", frame.confidence)}
+        scalars = {name: values for name, (part, values) in parts.items() if part in frame.outputs}
         comments = [
             f"PhoXi 3D scanner {frame.model} (simulated), frame {frame.index}",
             "units: metres",

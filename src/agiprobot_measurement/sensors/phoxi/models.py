@@ -20,6 +20,7 @@ from agiprobot_measurement.common.config import ConfigError, positive, read_yaml
 from agiprobot_measurement.errors import InputError
 
 __all__ = [
+    "FRAME_OUTPUTS",
     "PHOXI_MODELS_FILE",
     "RESOLUTION_HIGH",
     "RESOLUTION_LOW",
@@ -40,6 +41,10 @@ RESOLUTION_LOW = 0
 RESOLUTION_HIGH = 1
 #: the hardware identification of the one scanner listed when the configuration lists none
 SIMULATED_SCANNER_ID = "PhoXi3DScanner-sim"
+#: the parts a PhoXi frame can hold (pho::api::Frame: PointCloud, DepthMap, NormalMap, ConfidenceMap, Texture), named
+#: as the driver's send_<part> parameters; a scanner's frames hold every part it is told to send, a file camera's
+#: only what its recording holds
+FRAME_OUTPUTS = ("point_cloud", "depth_map", "normal_map", "confidence_map", "texture")
 
 
 @dataclass(frozen=True)
@@ -193,7 +198,12 @@ def load_scanner_model(name: str, path: str | Path | None = None) -> ScannerMode
 @dataclass(frozen=True)
 class SimulatedScanner:
     """One scanner the simulated PhoXi Control lists (get_device_list) and connects to: its hardware identification
-    (what a real scanner reports, e.g. ``2019-04-011-LC3``), its model and the device information it reports."""
+    (what a real scanner reports, e.g. ``2019-04-011-LC3``), its model and the device information it reports.
+
+    ``frame_outputs``: the parts its frames can hold (:data:`FRAME_OUTPUTS`; default all). A scanner computes every
+    part; PhoXi Control's file cameras (e.g. its installed example ``InstalledExamples-basic-example``, which the
+    driver's own tests connect to) replay a recording and hold only what was recorded: the driver then publishes no
+    message for a missing part (RosInterface.cpp ``publishFrame``: "Empty confidence map!")."""
 
     hw_identification: str
     model: ScannerModel
@@ -202,17 +212,33 @@ class SimulatedScanner:
     variant: str = ""
     ip_address: str = "127.0.0.1"
     is_alpha: bool = False
+    frame_outputs: tuple[str, ...] = FRAME_OUTPUTS
 
     def __post_init__(self):
         if not self.hw_identification.strip():
             raise ConfigError("a simulated scanner needs a non-empty hw_identification")
+        unknown = [part for part in self.frame_outputs if part not in FRAME_OUTPUTS]
+        if unknown:
+            raise ConfigError(
+                f"scanner {self.hw_identification}: unknown frame output(s) {unknown} (known: {', '.join(FRAME_OUTPUTS)})"
+            )
+        object.__setattr__(self, "frame_outputs", tuple(self.frame_outputs))
         if not self.name:
             object.__setattr__(self, "name", f"PhoXi3DScanner {self.model.name} (simulated)")
         if not self.variant:
             object.__setattr__(self, "variant", self.model.name)
 
 
-_SCANNER_KEYS = {"hw_identification", "model", "name", "firmware_version", "variant", "ip_address", "is_alpha"}
+_SCANNER_KEYS = {
+    "hw_identification",
+    "model",
+    "name",
+    "firmware_version",
+    "variant",
+    "ip_address",
+    "is_alpha",
+    "frame_outputs",
+}
 
 
 def simulated_scanners_from_entries(
@@ -244,6 +270,11 @@ def simulated_scanners_from_entries(
         is_alpha = entry.get("is_alpha", False)
         if not isinstance(is_alpha, bool):
             raise ConfigError(f"{here}: is_alpha must be true or false")
+        outputs = entry.get("frame_outputs", list(FRAME_OUTPUTS))
+        if not isinstance(outputs, list) or not all(
+            isinstance(part, str) and part in FRAME_OUTPUTS for part in outputs
+        ):
+            raise ConfigError(f"{here}: frame_outputs must be a list of {', '.join(FRAME_OUTPUTS)}, got {outputs!r}")
         scanners.append(
             SimulatedScanner(
                 hw_identification=hw_id,
@@ -253,6 +284,7 @@ def simulated_scanners_from_entries(
                 variant=str(entry.get("variant") or ""),
                 ip_address=str(entry.get("ip_address", "127.0.0.1")),
                 is_alpha=is_alpha,
+                frame_outputs=tuple(outputs),
             )
         )
     return scanners

@@ -50,6 +50,7 @@ from agiprobot_measurement.errors import InputError
 # Scanner models and scene geometry live in their own modules; the names the calibration simulation, its tests and
 # tools import from here stay importable (re-exported in __all__).
 from agiprobot_measurement.sensors.phoxi.models import (
+    FRAME_OUTPUTS,
     RESOLUTION_HIGH,
     CameraIntrinsics,
     ScannerModel,
@@ -187,6 +188,8 @@ class Frame:
     #: the PhoXi coordinate space the frame was captured in, and its transform of camera-frame points (p' = T p)
     coordinate_space: int = 1
     output_transform: np.ndarray = field(default_factory=lambda: np.eye(4))
+    #: the parts the scanner delivered (models.FRAME_OUTPUTS; a file camera's recording may lack some)
+    outputs: tuple[str, ...] = FRAME_OUTPUTS
 
     @property
     def width(self) -> int:

@@ -29,6 +29,7 @@ from agiprobot_measurement.sensors.phoxi.device import (
     transform_from_quaternion,
 )
 from agiprobot_measurement.sensors.phoxi.models import (
+    FRAME_OUTPUTS,
     RESOLUTION_HIGH,
     RESOLUTION_LOW,
     SIMULATED_SCANNER_ID,
@@ -417,9 +418,31 @@ def test_raw_formats_are_not_supported_by_the_simulator(tmp_path):
     for requested in ("frame.praw", "frame.PRAWF"):
         with pytest.raises(PhoxiError, match="not supported by the simulator"):
             device.save_frame(frame, requested)
-        with pytest.raises(PhoxiError, match="not supported by the simulator"):
+        # worded as the driver's failed save, so a script's handling of "Unsuccessful save." applies
+        with pytest.raises(PhoxiError, match=r"^Unsuccessful save: .*not supported by the simulator"):
             device.save_last_frame(requested)
     assert _files(tmp_path / "cwd") == []
+
+
+def test_a_file_camera_delivers_only_the_recorded_parts(tmp_path):
+    """PhoXi Control's file camera (the driver's tests use its installed example) replays a recording: a part the
+    recording lacks (here the confidence map) is missing from every frame and from its saved PLY."""
+    model = replace(load_scanner_model("M"), resolutions={RESOLUTION_HIGH: (40, 30), RESOLUTION_LOW: (20, 15)})
+    recorded = ("point_cloud", "depth_map", "normal_map", "texture")
+    scanners = [
+        SimulatedScanner(SIMULATED_SCANNER_ID, model),
+        SimulatedScanner("InstalledExamples-basic-example", model, frame_outputs=recorded),
+    ]
+    device = PhoxiDevice(model, _wall(), tmp_path, scanners=scanners)
+    device.connect(SIMULATED_SCANNER_ID)
+    assert device.trigger(CAMERA).outputs == FRAME_OUTPUTS
+    assert "confidence" in read_ply(device.save_last_frame("scanner.ply"))
+    device.connect("InstalledExamples-basic-example")
+    assert device.trigger(CAMERA).outputs == recorded
+    ply = read_ply(device.save_last_frame("file_camera.ply"))
+    assert "confidence" not in ply and "intensity" in ply
+    with pytest.raises(InputError, match="unknown frame output"):
+        SimulatedScanner("x", model, frame_outputs=("colour",))
 
 
 def test_writers_check_everything_before_they_run(tmp_path):
@@ -714,6 +737,7 @@ def test_the_bundled_device_list_and_its_checks():
     ]
     real = load_simulated_scanners("L", entries=[{"hw_identification": "2019-04-011-LC3", "model": "M"}])
     assert real[0].hw_identification == "2019-04-011-LC3" and real[0].model.name == "M"
+    assert real[0].frame_outputs == FRAME_OUTPUTS and bundled[0].frame_outputs == FRAME_OUTPUTS
     assert load_simulated_scanners("S", entries=[])[0].hw_identification == SIMULATED_SCANNER_ID
     for entries, words in (
         ([{"hw_identification": "a"}, {"hw_identification": "a"}], "listed twice"),
@@ -721,6 +745,8 @@ def test_the_bundled_device_list_and_its_checks():
         ([{"hw_identification": "a", "model": "XXL"}], "unknown PhoXi model 'XXL'"),
         ([{"hw_identification": "a", "colour": "red"}], "unknown key(s) ['colour']"),
         ([{"hw_identification": "a", "is_alpha": "yes"}], "is_alpha must be true or false"),
+        ([{"hw_identification": "a", "frame_outputs": ["colour"]}], "frame_outputs must be a list of point_cloud"),
+        ([{"hw_identification": "a", "frame_outputs": "texture"}], "frame_outputs must be a list"),
         ({"hw_identification": "a"}, "must be a list"),
     ):
         with pytest.raises(ConfigError) as info:
