@@ -4,7 +4,7 @@ each profile ``latency`` after its exposure (as a real driver stamping on receip
 the part's mesh surface (mm).
 
     python -m benchmarks.scanner                        # 0 ms; 5 ms uncompensated; 5 ms compensated by 5 ms
-    python -m benchmarks.scanner --conditions 0:0 0.010:0 --part parts/objectB_zylinder.stl --json out.json
+    python -m benchmarks.scanner --conditions 0:0 0.010:0 --part parts/objectB_zylinder.stl --placement fixture
 
 Each condition runs the whole measurement stack (``measurement.launch scanner_latency_s:=... latency_compensation_s:=...``)
 on a private master and executes the same plan (planned once, in the first condition) through the trajectory_manager;
@@ -119,6 +119,7 @@ def _measure(latency_s, compensation_s, args, plan_file: Path, launch) -> dict:
                 solver_type="IP_basic",
                 plan_file=str(plan_file),
                 overwrite=True,
+                placement=args.placement,
             )
         )
         planner.wait_for_result()
@@ -165,6 +166,7 @@ def main(argv=None) -> int:
     parser.add_argument("--conditions", nargs="+", default=list(DEFAULT_CONDITIONS), help="latency_s:compensation_s")
     parser.add_argument("--part", default="parts/objectA_wuerfel.stl")
     parser.add_argument("--units", default="mm")
+    parser.add_argument("--placement", default="scene", help="scene (the scene's part pose) or fixture (on top of it)")
     parser.add_argument("--density", type=float, default=0.03, help="sampling density (points per mm^2)")
     parser.add_argument("--orientations", type=int, default=12)
     parser.add_argument("--sample-points", type=int, default=200000, help="stitched points compared with the mesh")
@@ -219,6 +221,8 @@ def sys_args(args, out: Path) -> list[str]:
         args.part,
         "--units",
         args.units,
+        "--placement",
+        args.placement,
         "--density",
         str(args.density),
         "--orientations",
@@ -240,6 +244,7 @@ def one(argv) -> int:
     parser.add_argument("--_one", dest="condition")
     parser.add_argument("--part")
     parser.add_argument("--units")
+    parser.add_argument("--placement")
     parser.add_argument("--density", type=float)
     parser.add_argument("--orientations", type=int)
     parser.add_argument("--sample-points", type=int)
