@@ -8,8 +8,8 @@ lies in a window in which stitching was on, transformed into ``~world_frame`` wi
 
 Services (the original's names, in the node's namespace): switch_stitch_mode (std_srvs/SetBool: true opens a
 stitching window at the call's instant, reply "activated stitching"; false closes it at the call's instant t_off and
-replies "deactivated stitching" once every profile stamped up to t_off is stitched, or after ``~switch_off_timeout_s``
-when the profiles stop), clear_stitched_point_cloud (std_srvs/Trigger: forget the stitched cloud).
+replies "deactivated stitching" once every profile stamped up to t_off is stitched, when the profiles stop for
+1 s, or after ``~switch_off_timeout_s``; a profile stamped up to t_off that comes later is still stitched), clear_stitched_point_cloud (std_srvs/Trigger: forget the stitched cloud).
 Extras: ~publish_measured_cloud (std_srvs/Trigger: publish the whole stitched cloud once on ~measured_cloud).
 Topics: stitched_point_cloud (sensor_msgs/PointCloud, world, latched, the original's type: the stitched cloud
 thinned to ``~stitched_cloud_voxel_mm``, at 1 Hz while stitching, at switch-off and on clear), ~profile
@@ -18,7 +18,7 @@ every stitched point, on request), ~measured_cloud_display (PointCloud2, the clo
 ``~measured_cloud_voxel_mm``, 1 Hz while stitching, latched), ~stitching (std_msgs/Bool, latched).
 Parameters: ~cloud_topic (/scancontrol_pointcloud), ~world_frame (world), ~latency_compensation_s (0.0: subtracted
 from each profile's stamp before the tf lookup), ~tf_timeout_s (1.0), ~tf_cache_s (120: the tf history kept, longer
-than a scan line), ~switch_off_timeout_s (5.0), ~stitched_cloud_voxel_mm (1.0), ~measured_cloud_voxel_mm (1.0).
+than a scan line), ~switch_off_timeout_s (30.0), ~stitched_cloud_voxel_mm (1.0), ~measured_cloud_voxel_mm (1.0).
 """
 
 from __future__ import annotations
@@ -60,7 +60,7 @@ class PointCloudStitcher:
                 Param("~latency_compensation_s", 0.0, number),
                 Param("~tf_timeout_s", 1.0, positive),
                 Param("~tf_cache_s", 120.0, positive),
-                Param("~switch_off_timeout_s", 5.0, positive),
+                Param("~switch_off_timeout_s", 30.0, positive),
                 Param("~stitched_cloud_voxel_mm", 1.0, number),
                 Param("~measured_cloud_voxel_mm", 1.0, number),
             )
