@@ -9,7 +9,8 @@ lies in a window in which stitching was on, transformed into ``~world_frame`` wi
 Services (the original's names, in the node's namespace): switch_stitch_mode (std_srvs/SetBool: true opens a
 stitching window at the call's instant, reply "activated stitching"; false closes it at the call's instant t_off and
 replies "deactivated stitching" once every profile stamped up to t_off is stitched, when the profiles stop for
-1 s, or after ``~switch_off_timeout_s``; a profile stamped up to t_off that comes later is still stitched), clear_stitched_point_cloud (std_srvs/Trigger: forget the stitched cloud).
+1 s, or after ``~switch_off_timeout_s``; a profile stamped up to t_off that comes later is still stitched),
+clear_stitched_point_cloud (std_srvs/Trigger: forget the stitched cloud).
 Extras: ~publish_measured_cloud (std_srvs/Trigger: publish the whole stitched cloud once on ~measured_cloud).
 Topics: stitched_point_cloud (sensor_msgs/PointCloud, world, latched, the original's type: the stitched cloud
 thinned to ``~stitched_cloud_voxel_mm``, at 1 Hz while stitching, at switch-off and on clear), ~profile
