@@ -6,8 +6,9 @@ given, published the points each view measures as a latched ``sensor_msgs/PointC
 ``/currently_measured_points``. :func:`station_executor` gives the same through this project's station: the robot's
 motion client (:mod:`.robot_client`: control_msgs/FollowJointTrajectory on
 ``/scaled_pos_joint_traj_controller/follow_joint_trajectory``, a UR driver's or the simulator's, or MoveIt's
-``/execute_trajectory``) and the laser scanner's services (``/laser_scanner``). :mod:`agiprobot_measurement.ros.plugins` registers it with the core's executor
-registry; the core asks for it only in a process where ``rospy`` is initialised.
+``/execute_trajectory``) and the laser scanner's stitcher (``/switch_stitch_mode``; extras under ``/laser_scanner``).
+:mod:`agiprobot_measurement.ros.plugins` registers it with the core's executor registry; the core asks for it only in
+a process where ``rospy`` is initialised.
 """
 
 from __future__ import annotations
@@ -88,7 +89,7 @@ def station_executor(
         raise ExecutionError(f"the controller {robot.action} answers, but no {joint_states.topic} arrive")
     scanner = ScannerClient(scanner_namespace, service_timeout_s=wait_s)
     try:
-        rospy.wait_for_service(f"{scanner.namespace}/set_stitching", timeout=wait_s)
+        scanner.wait_for_stitcher(wait_s)
         if part is not None:
             scanner.set_target(part)
     except rospy.ROSException:

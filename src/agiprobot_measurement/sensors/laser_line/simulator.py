@@ -33,11 +33,14 @@ __all__ = [
 
 @dataclass(frozen=True)
 class Profile:
-    """Measured points of one profile (mm, world), their uncertainties (mm) and the true surface points."""
+    """Measured points of one profile (mm, world), their uncertainties (mm) and the true surface points;
+    ``ray_indices``: which fan ray (0 .. points_per_profile - 1, from the fan's -y edge to its +y edge) measured
+    each point (None when unknown)."""
 
     points_mm: np.ndarray
     uncertainties_mm: np.ndarray
     true_points_mm: np.ndarray
+    ray_indices: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.points_mm.shape[0])
@@ -54,21 +57,27 @@ class LaserLineScannerSimulator:
         noise_scale: float = 1.0,
         occlusion_tolerance_mm: float = 0.05,
     ):
-        if int(points_per_profile) < 2:
-            raise SensorInputError(f"points_per_profile must be >= 2, got {points_per_profile}")
         if not (np.isfinite(noise_scale) and noise_scale >= 0):
             raise SensorInputError(f"noise_scale must be >= 0, got {noise_scale}")
         self.sensor = sensor_model
-        self.points_per_profile = int(points_per_profile)
         self.noise_scale = float(noise_scale)
         self.occlusion_tolerance_mm = float(occlusion_tolerance_mm)
         self.rng = np.random.default_rng(seed)
-        half = 0.5 * sensor_model.fan_angle
-        angles = np.linspace(-half, half, self.points_per_profile)
-        # fan directions in the emitter frame: in its y-z plane, around the boresight z
-        self._fan = np.stack([np.zeros_like(angles), np.sin(angles), np.cos(angles)], axis=1)
+        self.set_points_per_profile(points_per_profile)
         self.detector_offset_mm = np.tan(sensor_model.alpha) * sensor_model.optimal_standoff
         self.mesh: trimesh.Trimesh | None = None
+
+    def set_points_per_profile(self, points_per_profile: int) -> None:
+        """The number of fan rays (the profile's resolution), spread evenly over the fan angle."""
+        if int(points_per_profile) < 2:
+            raise SensorInputError(f"points_per_profile must be >= 2, got {points_per_profile}")
+        self.points_per_profile = int(points_per_profile)
+        half = 0.5 * self.sensor.fan_angle
+        #: the fan rays' angles from the boresight towards +y of the emitter frame (rad)
+        self.fan_angles_rad = np.linspace(-half, half, self.points_per_profile)
+        # fan directions in the emitter frame: in its y-z plane, around the boresight z
+        angles = self.fan_angles_rad
+        self._fan = np.stack([np.zeros_like(angles), np.sin(angles), np.cos(angles)], axis=1)
 
     def set_target(self, mesh_mm: trimesh.Trimesh) -> None:
         """The surface to scan (mm, world). Normals must point outwards (as loaded parts' do)."""
@@ -143,6 +152,7 @@ class LaserLineScannerSimulator:
             if len(rays_d):
                 first[rays_d] = np.linalg.norm(hits_d - detector[rays_d], axis=1)
             visible = (first >= distance - self.occlusion_tolerance_mm) & (np.einsum("ij,ij->i", det_dirs, normals) < 0)
+        ray_in_profile = (rays % n)[ok][visible]
         hits, psi, z, s_dot_n, ray_dirs, which = (a[visible] for a in (hits, psi, z, s_dot_n, ray_dirs, which))
         uncertainty = sensor.evaluate_uncertainty(z, psi) * np.abs(s_dot_n) if len(hits) else np.zeros(0)
         noise = self.rng.normal(0.0, 1.0, len(hits)) * uncertainty * self.noise_scale
@@ -150,7 +160,7 @@ class LaserLineScannerSimulator:
         order = np.argsort(which, kind="stable")
         bounds = np.searchsorted(which[order], np.arange(k + 1))
         return [
-            Profile(measured[order[a:b]], uncertainty[order[a:b]], hits[order[a:b]])
+            Profile(measured[order[a:b]], uncertainty[order[a:b]], hits[order[a:b]], ray_in_profile[order[a:b]])
             for a, b in itertools.pairwise(bounds)
         ]
 

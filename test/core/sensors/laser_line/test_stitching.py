@@ -1,4 +1,4 @@
-"""The scanner simulator's stitched cloud and its display thinning (moved out of the laser_scanner_sim node)."""
+"""The scanner simulator's stitched cloud and its display thinning (the stitcher node keeps its own cloud; benchmarks use this one)."""
 
 import numpy as np
 
