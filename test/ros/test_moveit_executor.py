@@ -111,6 +111,7 @@ class MoveItExecutorTest(unittest.TestCase):
         type(self).cancel = False
         self.fake.outcome = "success"
         self.fake.goals.clear()
+        time.sleep(0.1)  # a /joint_states after the last test's motion (the fake publishes at 100 Hz)
 
     def _move(self, goal_name: str) -> JointTrajectory:
         return point_to_point(self.joint_states.latest(), np.asarray(NAMED[goal_name]), LIMITS, 0.5, 0.5)
