@@ -7,7 +7,7 @@ GUI ?= 0
 
 BENCH_OUT ?= $(ROOT)/bench_results
 BENCH_ARGS ?=
-BENCHES := planning parts scale set-cover metrology motion collision nbv3d nbv-map nbv2d mild calibration phoxi
+BENCHES := planning parts scale set-cover metrology motion kinematics collision nbv3d nbv-map nbv2d mild calibration phoxi scanner real-cell
 
 .PHONY: setup demo demo-station test lint format pytest rostest bench $(addprefix bench-,$(BENCHES)) fuzz clean
 
@@ -85,6 +85,15 @@ bench-calibration: setup
 
 bench-phoxi: setup
 	$(call run_bench,phoxi,benchmarks.phoxi,)
+
+bench-kinematics: setup
+	$(call run_bench,kinematics,benchmarks.motion.kinematics,)
+
+bench-scanner: setup
+	$(call run_bench,scanner,benchmarks.scanner,)
+
+bench-real-cell: setup
+	$(call run_bench,real-cell,benchmarks.reliability.real_cell,)
 
 # The reliability probe replayed (minutes; not part of `make test`): hostile inputs to every command-line tool and
 # node, one row each, holds / DEFECT; the table goes to bench_results/fuzz.txt, the rows to fuzz.json.
