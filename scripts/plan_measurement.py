@@ -513,7 +513,7 @@ def format_table(rows: list[tuple[str, str]]) -> str:
     return "\n".join([rule, *(f"{label:<{width}}  {value}" for label, value in rows), rule])
 
 
-def run(args: argparse.Namespace, request: PlanRequest, progress: StageProgress) -> int:
+def run(args: argparse.Namespace, request: PlanRequest, progress: StageProgress, started_s: float) -> int:
     from agiprobot_measurement.planning.part_loading import PartWarning
     from agiprobot_measurement.planning.trajectory_manager import PlanningError, TrajectoryManager
     from agiprobot_measurement.station import Station
@@ -525,7 +525,7 @@ def run(args: argparse.Namespace, request: PlanRequest, progress: StageProgress)
     station = Station.load(scene=args.scene)
     manager = TrajectoryManager.for_request(request, station, progress=progress, work_budget=args.work_budget)
     try:
-        ordered = manager.plan_request(request, started_s=process_started_s())
+        ordered = manager.plan_request(request, started_s=started_s)
     finally:
         manager.close()  # a local Dask cluster ends with the evaluation's last use
     total_s = time.perf_counter() - t0
@@ -583,7 +583,9 @@ def run(args: argparse.Namespace, request: PlanRequest, progress: StageProgress)
     return EXIT_OK
 
 
-def main(argv=None) -> int:
+def main(argv=None, started_s: float | None = None) -> int:
+    """The command; ``started_s`` (``time.perf_counter()``): what the time limit counts from (default: this call)."""
+    started_s = time.perf_counter() if started_s is None else started_s
     progress = None
     debug = False
     WRITTEN.clear()
@@ -597,7 +599,7 @@ def main(argv=None) -> int:
         progress = StageProgress(enabled=not args.quiet, terminal=terminal)
         logging.getLogger("agiprobot_measurement").addHandler(_ProgressLogHandler(progress))
         logging.getLogger("agiprobot_measurement").propagate = False
-        return run(args, request, progress)
+        return run(args, request, progress, started_s)
     except UsageError as exc:
         _fail(progress, f"error: {exc}")
         return EXIT_USAGE
@@ -647,7 +649,7 @@ def _internal(progress, exc: BaseException, debug: bool) -> int:
 
 
 if __name__ == "__main__":
-    code = main()
+    code = main(started_s=process_started_s())  # the time limit counts from the command's start
     sys.stdout.flush()
     sys.stderr.flush()
     # The OMPL bindings (nanobind) report 'leaked instances' at interpreter shutdown; that noise would bury

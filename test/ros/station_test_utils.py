@@ -40,8 +40,8 @@ def current_positions(timeout_s=5.0):
 
 
 def place_robot(named_state="home"):
-    rospy.wait_for_service("/robot_sim/set_joint_state", timeout=20)
-    reply = rospy.ServiceProxy("/robot_sim/set_joint_state", SetJointState)(positions=[], named_state=named_state)
+    rospy.wait_for_service("/ur_driver_sim/set_joint_state", timeout=20)
+    reply = rospy.ServiceProxy("/ur_driver_sim/set_joint_state", SetJointState)(positions=[], named_state=named_state)
     assert reply.success, reply.message
     rospy.sleep(0.1)
 

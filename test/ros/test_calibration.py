@@ -128,7 +128,7 @@ class CalibrationNodeTest(unittest.TestCase):
         np.testing.assert_allclose(published, estimate, atol=1e-6)
 
     def test_3_no_flange_in_view_is_rejected_and_collection_goes_on(self):
-        set_state = rospy.ServiceProxy("/robot_sim/set_joint_state", SetJointState)
+        set_state = rospy.ServiceProxy("/ur_driver_sim/set_joint_state", SetJointState)
         before = self.list_samples().message.count("path")
         placed = set_state(positions=[], named_state="up")
         self.assertTrue(placed.success, placed.message)
@@ -175,7 +175,7 @@ class CalibrationNodeTest(unittest.TestCase):
         np.testing.assert_allclose(_positions(state), OUT_OF_VIEW, atol=1e-3)
 
     def _place(self, positions):
-        set_state = rospy.ServiceProxy("/robot_sim/set_joint_state", SetJointState)
+        set_state = rospy.ServiceProxy("/ur_driver_sim/set_joint_state", SetJointState)
         placed = set_state(positions=list(positions), named_state="")
         self.assertTrue(placed.success, placed.message)
         deadline = rospy.Time.now() + rospy.Duration(10.0)

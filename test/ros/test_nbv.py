@@ -60,7 +60,7 @@ class NBVNodeTest(unittest.TestCase):
         cls.client = ActionClient(ACTION, ReconstructObjectAction)
         assert cls.client.wait_for_server(rospy.Duration(60.0)), f"no action server at {ACTION}"
         cls.station = SimulatedNBVStation(pixel_step=4)
-        cls.set_joint_state = rospy.ServiceProxy("/robot_sim/set_joint_state", SetJointState)
+        cls.set_joint_state = rospy.ServiceProxy("/ur_driver_sim/set_joint_state", SetJointState)
         cls.markers = {}
         for name in ("occupied_voxels", "frontier_voxels", "candidate_views"):
             rospy.Subscriber(f"{NODE}/{name}", MarkerArray, cls._keep, callback_args=name)

@@ -81,7 +81,7 @@ class PhoxiStationTest(unittest.TestCase):
         self.assertLess(np.percentile(np.abs(heights), 99), 0.002)
 
     def test_moving_the_robot_changes_the_cloud_where_its_links_are(self):
-        set_joint_state = rospy.ServiceProxy("/robot_sim/set_joint_state", SetJointState)
+        set_joint_state = rospy.ServiceProxy("/ur_driver_sim/set_joint_state", SetJointState)
         clouds = []
         for q in (np.zeros(6), MOVED):
             reply = set_joint_state(positions=list(q), named_state="")

@@ -35,7 +35,7 @@ a goal's relative output_dir resolves under it), ``~allowed_output_dirs`` (where
 default /tmp), ``~ground_truth`` (true: the coverage of the scene's part's observable surface, simulation only),
 ``~max_voxels`` (2e7: the largest fine grid a goal may ask for), ``~start_at_home`` (false; true
 in simulation: the robot is placed at config motion.home_rad at start through ``~set_joint_state_service``,
-/robot_sim/set_joint_state), ``~frame_timeout_s`` (30), ``~settle_s`` (0.1: after
+/ur_driver_sim/set_joint_state), ``~frame_timeout_s`` (30), ``~settle_s`` (0.1: after
 a motion, for tf to show the final pose), ``~cloud_voxel_m`` (0.002), ``~marker_max_cubes`` (200000).
 """
 
@@ -120,7 +120,7 @@ PARAMETERS = (
     Param("~camera_ns", "/phoxi_camera"),
     Param("~frame_timeout_s", 30.0, number),
     Param("~start_at_home", False),
-    Param("~set_joint_state_service", "/robot_sim/set_joint_state"),
+    Param("~set_joint_state_service", "/ur_driver_sim/set_joint_state"),
 )
 
 
