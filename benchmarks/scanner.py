@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import signal
 import socket
 import subprocess
 import sys
@@ -29,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from agiprobot_measurement.common.cli import stop_process_group
 from agiprobot_measurement.planning.part_loading import load_part
 from agiprobot_measurement.planning.plan.execution import plan_part
 from agiprobot_measurement.planning.plan.plan_io import load_execution_plan
@@ -75,12 +75,7 @@ def run_condition(latency_s: float, compensation_s: float, args, plan_file: Path
         try:
             return _measure(latency_s, compensation_s, args, plan_file, launch)
         finally:
-            if launch.poll() is None:
-                os.killpg(launch.pid, signal.SIGINT)
-                try:
-                    launch.wait(timeout=30)
-                except subprocess.TimeoutExpired:
-                    os.killpg(launch.pid, signal.SIGKILL)
+            stop_process_group(launch)
 
 
 def _measure(latency_s, compensation_s, args, plan_file: Path, launch) -> dict:

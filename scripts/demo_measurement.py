@@ -20,6 +20,7 @@ import threading
 import time
 from pathlib import Path
 
+from agiprobot_measurement.common.cli import stop_process_group
 from agiprobot_measurement.station import PACKAGE_ROOT
 
 
@@ -68,12 +69,7 @@ def main() -> int:
         try:
             return run_demo(args, launch, out, bag, plan_file, snapshot, figure, summary, started)
         finally:
-            if launch.poll() is None:
-                os.killpg(launch.pid, signal.SIGINT)
-                try:
-                    launch.wait(timeout=30)
-                except subprocess.TimeoutExpired:
-                    os.killpg(launch.pid, signal.SIGKILL)
+            stop_process_group(launch)
 
 
 def run_demo(args, launch, out, bag, plan_file, snapshot, figure, summary, started) -> int:

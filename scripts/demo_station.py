@@ -9,13 +9,13 @@ action while recording a rosbag, take an rviz snapshot, and print where everythi
 
 import argparse
 import os
-import signal
 import socket
 import subprocess
 import sys
 import time
 from pathlib import Path
 
+from agiprobot_measurement.common.cli import stop_process_group
 from agiprobot_measurement.errors import InternalError
 from agiprobot_measurement.station import PACKAGE_ROOT
 
@@ -87,11 +87,7 @@ def main() -> int:
         print(f"demo failed: {exc} (launch log: {out / 'station_demo.launch.log'})", file=sys.stderr)
         return 1
     finally:
-        os.killpg(launch.pid, signal.SIGINT)
-        try:
-            launch.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            os.killpg(launch.pid, signal.SIGKILL)
+        stop_process_group(launch)
         log.close()
     for _ in range(50):  # rosbag renames .bag.active to .bag once it has written its index
         if bag.exists():

@@ -10,6 +10,8 @@ written, a full disk) prints ``error: <message>`` and exits with :data:`EXIT_USA
 from __future__ import annotations
 
 import os
+import signal
+import subprocess
 import sys
 import time
 from collections.abc import Callable
@@ -17,7 +19,15 @@ from pathlib import Path
 
 from agiprobot_measurement.errors import AgiprobotError, is_input_error
 
-__all__ = ["EXIT_INTERNAL", "EXIT_INTERRUPTED", "EXIT_OK", "EXIT_USAGE", "process_started_s", "run_main"]
+__all__ = [
+    "EXIT_INTERNAL",
+    "EXIT_INTERRUPTED",
+    "EXIT_OK",
+    "EXIT_USAGE",
+    "process_started_s",
+    "run_main",
+    "stop_process_group",
+]
 
 EXIT_OK = 0
 #: a failure that is not the user's input (a solver, a device)
@@ -41,6 +51,19 @@ def process_started_s() -> float:
     except (OSError, ValueError, IndexError):
         return time.perf_counter()
     return time.perf_counter() - max(age_s, 0.0)
+
+
+def stop_process_group(process: subprocess.Popen, timeout_s: float = 30.0) -> None:
+    """End a child started with ``start_new_session=True`` (roslaunch, rviz) as Ctrl-C would: SIGINT to its whole
+    process group, and SIGKILL when it has not ended after ``timeout_s`` (s). Nothing when it has ended already."""
+    if process.poll() is not None:
+        return
+    os.killpg(process.pid, signal.SIGINT)
+    try:
+        process.wait(timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        os.killpg(process.pid, signal.SIGKILL)
+        process.wait()
 
 
 def run_main(main: Callable[[], int | None], prog: str = "") -> int:

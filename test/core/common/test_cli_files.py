@@ -141,3 +141,24 @@ def test_nbv2d_and_reconstruct_refuse_an_existing_summary_before_any_work(tmp_pa
     recon = _script("reconstruct.py", "cup", "--out", "out", "--summary", "../summary.json", cwd=cwd)
     assert recon.returncode == 2 and "exists" in recon.stderr and "--overwrite" in recon.stderr, recon.stderr
     assert summary.read_text() == "keep" and not any(cwd.iterdir())
+
+
+def test_stop_process_group_interrupts_then_kills_the_whole_group():
+    import subprocess
+    import sys as _sys
+    import time as _time
+
+    from agiprobot_measurement.common.cli import stop_process_group
+
+    polite = subprocess.Popen([_sys.executable, "-c", "import time; time.sleep(60)"], start_new_session=True)
+    stop_process_group(polite, timeout_s=10.0)
+    assert polite.returncode is not None and polite.returncode != 0  # ended by the interrupt
+    stubborn_code = (
+        "import signal, time; signal.signal(signal.SIGINT, signal.SIG_IGN); print('ready', flush=True); time.sleep(60)"
+    )
+    stubborn = subprocess.Popen([_sys.executable, "-c", stubborn_code], start_new_session=True, stdout=subprocess.PIPE)
+    assert stubborn.stdout.readline().strip() == b"ready"
+    started = _time.monotonic()
+    stop_process_group(stubborn, timeout_s=0.5)
+    assert stubborn.returncode == -9 and _time.monotonic() - started < 10.0
+    stop_process_group(stubborn)  # ended already: nothing happens
