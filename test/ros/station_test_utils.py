@@ -33,7 +33,7 @@ def quick_goal(solver_type: str = "IP_basic", **overrides) -> PlanMeasurementGoa
     return goal
 
 
-def current_positions(timeout_s=5.0):
+def current_positions(timeout_s=20.0):  # a new subscriber may need seconds to connect on a loaded machine
     msg = rospy.wait_for_message("/joint_states", JointState, timeout=timeout_s)
     by_name = dict(zip(msg.name, msg.position, strict=True))
     return np.array([by_name[n] for n in JOINTS])
