@@ -50,6 +50,10 @@ __all__ = [
 
 _EPS = 1e-12
 _CHUNK = 4096  # states posed at once: bounds the broad phase's temporary arrays to a few tens of MB
+#: faces per bounding-volume tree of a mesh obstacle: FCL builds a tree in one native call that holds the
+#: interpreter (about 3 us per face), so a finely meshed part is built as several spatially compact trees, and a
+#: time limit waiting on the build (``StageClock.call``) gets its turn between them (about 0.2 s)
+BVH_PIECE_FACES = 65_536
 
 
 # --------------------------------------------------------------------------------------------- geometry
@@ -63,6 +67,27 @@ def _bvh(vertices: np.ndarray, faces: np.ndarray) -> fcl.BVHModel:
     model.addSubModel(np.asarray(vertices, dtype=float), np.asarray(faces, dtype=np.int64))
     model.endModel()
     return model
+
+
+def _bvh_pieces(vertices: np.ndarray, faces: np.ndarray) -> list[fcl.BVHModel]:
+    """The mesh as trees of at most :data:`BVH_PIECE_FACES` faces each, the faces grouped along a Morton curve
+    of their centroids so that each piece is spatially compact (its root volume small)."""
+    if len(faces) <= BVH_PIECE_FACES:
+        return [_bvh(vertices, faces)]
+    centroids = vertices[faces].mean(axis=1)
+    lo = centroids.min(axis=0)
+    span = np.maximum(centroids.max(axis=0) - lo, 1e-12)
+    cells = np.minimum((centroids - lo) / span * 1024, 1023).astype(np.uint64)
+    code = np.zeros(len(faces), dtype=np.uint64)
+    for bit in range(10):
+        for axis in range(3):
+            code |= ((cells[:, axis] >> np.uint64(bit)) & np.uint64(1)) << np.uint64(3 * bit + axis)
+    order = np.argsort(code, kind="stable")
+    pieces = []
+    for start in range(0, len(order), BVH_PIECE_FACES):
+        used, local = np.unique(faces[order[start : start + BVH_PIECE_FACES]], return_inverse=True)
+        pieces.append(_bvh(vertices[used], local.reshape(-1, 3)))
+    return pieces
 
 
 @dataclass
@@ -114,7 +139,7 @@ class _WorldObject:
     name: str
     kind: str
     pose: np.ndarray
-    obj: fcl.CollisionObject
+    pieces: tuple[fcl.CollisionObject, ...]  # one, or a finely meshed obstacle's trees (``_bvh_pieces``)
     box_center: np.ndarray  # oriented bounding box: centre (world), rotation, half extents (m)
     box_rotation: np.ndarray
     box_half: np.ndarray
@@ -327,7 +352,7 @@ class CollisionChecker:
         mesh = trimesh.Trimesh(vertices, faces, process=False)
         closed = mesh if mesh.is_watertight else None
         half = np.maximum((hi - lo) / 2.0, 1e-9)  # a flat mesh has a flat bounding box
-        self._add(name, "mesh", pose, _bvh(vertices, faces), (lo + hi) / 2.0, half, False, closed)
+        self._add(name, "mesh", pose, _bvh_pieces(vertices, faces), (lo + hi) / 2.0, half, False, closed)
 
     def add_trimesh(self, name: str, mesh, pose: np.ndarray, scale_to_m: float = 1.0) -> None:
         """Add a ``trimesh.Trimesh`` obstacle; ``scale_to_m`` converts its units to metres."""
@@ -389,6 +414,7 @@ class CollisionChecker:
         return list(self._objects)
 
     def _add(self, name, kind, pose, geometry, local_center, half, solid_box, mesh=None) -> None:
+        """``geometry``: one FCL geometry, or a list of them that together make the object."""
         pose = np.asarray(pose, dtype=float)
         if pose.shape != (4, 4) or not np.all(np.isfinite(pose)):
             raise MotionInputError(f"object '{name}': pose must be a finite 4x4 matrix")
@@ -396,9 +422,10 @@ class CollisionChecker:
             raise MotionInputError(f"object '{name}': dimensions must be positive")
         if name in self.robot_links:
             raise MotionInputError(f"object '{name}': the name of a robot link")
-        obj = fcl.CollisionObject(geometry, _fcl_transform(pose))
+        geometries = geometry if isinstance(geometry, list) else [geometry]
+        pieces = tuple(fcl.CollisionObject(piece, _fcl_transform(pose)) for piece in geometries)
         self._objects[name] = _WorldObject(
-            name, kind, pose, obj, pose[:3, :3] @ local_center + pose[:3, 3], pose[:3, :3].copy(),
+            name, kind, pose, pieces, pose[:3, :3] @ local_center + pose[:3, 3], pose[:3, :3].copy(),
             np.asarray(half, dtype=float), solid_box, mesh,
         )  # fmt: skip
         self._rebuild()
@@ -571,7 +598,8 @@ class CollisionChecker:
                     self._pose_shapes(state_poses[s], shapes[s].world)
                     posed_world.add(s)
                 obj = objects[o]
-                if collide(shapes[s].world.obj, obj.obj, request, result()) or (
+                mine = shapes[s].world.obj
+                if any(collide(mine, piece, request, result()) for piece in obj.pieces) or (
                     obj.mesh is not None and self._inside_mesh(state_poses[s], obj)
                 ):
                     hit = True
@@ -604,16 +632,17 @@ class CollisionChecker:
         return bool(obj.mesh.contains(center_local[None])[0])
 
     def _all_pairs(self, include_allowed: bool):
-        """(shape index, padded shape, padded other, other, names) of every pair for the diagnostic queries."""
+        """(shape index, padded shape, the other's FCL objects, other, names) of every pair for the diagnostic
+        queries."""
         for i in range(len(self.shapes)):
             for j in range(i + 1, len(self.shapes)):
                 a, b = self.shapes[i], self.shapes[j]
                 if a.link != b.link and (include_allowed or not self._allowed(a, b)):
-                    yield i, a.own, b.own, b, (a.link, b.link)
+                    yield i, a.own, (b.own.obj,), b, (a.link, b.link)
         for i, shape in enumerate(self.shapes):
             for obj in self._object_list:
                 if include_allowed or not self._allowed(shape, obj):
-                    yield i, shape.world, obj, obj, (shape.link, obj.name)
+                    yield i, shape.world, obj.pieces, obj, (shape.link, obj.name)
 
     def _pose_all(self, q: np.ndarray) -> np.ndarray:
         q = np.asarray(q, dtype=float)
@@ -631,8 +660,8 @@ class CollisionChecker:
         """
         poses = self._pose_all(q)
         found = []
-        for i, mine, other, owner, names in self._all_pairs(include_allowed):
-            hit = fcl.collide(mine.obj, other.obj, self._request, fcl.CollisionResult()) > 0
+        for i, mine, others, owner, names in self._all_pairs(include_allowed):
+            hit = any(fcl.collide(mine.obj, other, self._request, fcl.CollisionResult()) > 0 for other in others)
             if not hit and isinstance(owner, _WorldObject) and owner.mesh is not None:
                 hit = self._inside_mesh(poses[i], owner)
             if hit and names not in found:
@@ -647,12 +676,16 @@ class CollisionChecker:
         """
         poses = self._pose_all(q)
         best = Clearance(math.inf, ("", ""))
-        for i, mine, other, owner, names in self._all_pairs(False):
-            distance = fcl.distance(mine.obj, other.obj, self._distance_request, fcl.DistanceResult())
-            if fcl.collide(mine.obj, other.obj, self._request, fcl.CollisionResult()):
-                # FCL returns -1 instead of a depth for meshes
-                distance = 0.0 if distance == -1.0 else min(distance, 0.0)
-            elif isinstance(owner, _WorldObject) and owner.mesh is not None and self._inside_mesh(poses[i], owner):
+        for i, mine, others, owner, names in self._all_pairs(False):
+            distance, touching = math.inf, False
+            for other in others:
+                gap = fcl.distance(mine.obj, other, self._distance_request, fcl.DistanceResult())
+                if fcl.collide(mine.obj, other, self._request, fcl.CollisionResult()):
+                    # FCL returns -1 instead of a depth for meshes
+                    gap, touching = 0.0 if gap == -1.0 else min(gap, 0.0), True
+                distance = min(distance, gap)
+            inside = isinstance(owner, _WorldObject) and owner.mesh is not None
+            if not touching and inside and self._inside_mesh(poses[i], owner):
                 distance = -abs(distance)
             if distance < best.distance_m:
                 best = Clearance(float(distance), names)

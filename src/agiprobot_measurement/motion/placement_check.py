@@ -19,7 +19,7 @@ import fcl
 import numpy as np
 
 from agiprobot_measurement.errors import InputError
-from agiprobot_measurement.motion.collision import _bvh, _fcl_transform, _load_mesh
+from agiprobot_measurement.motion.collision import _bvh, _bvh_pieces, _fcl_transform, _load_mesh
 
 __all__ = ["Overlap", "PlacementError", "check_placement", "clearing_shift_mm", "find_overlaps"]
 
@@ -50,8 +50,9 @@ class Overlap:
     lift_mm: float
 
 
-def _part_object(mesh_mm) -> fcl.CollisionObject:
-    return fcl.CollisionObject(_bvh(np.asarray(mesh_mm.vertices, dtype=float) * 1e-3, mesh_mm.faces), fcl.Transform())
+def _part_objects(mesh_mm) -> list[fcl.CollisionObject]:
+    vertices_m = np.asarray(mesh_mm.vertices, dtype=float) * 1e-3
+    return [fcl.CollisionObject(tree, fcl.Transform()) for tree in _bvh_pieces(vertices_m, np.asarray(mesh_mm.faces))]
 
 
 def _scene_object(obstacle) -> fcl.CollisionObject | None:
@@ -72,13 +73,16 @@ def _scene_object(obstacle) -> fcl.CollisionObject | None:
     return fcl.CollisionObject(geometry, _fcl_transform(pose))
 
 
-def _collides(part: fcl.CollisionObject, other: fcl.CollisionObject, shift_mm: np.ndarray) -> bool:
-    part.setTransform(fcl.Transform(np.eye(3), np.asarray(shift_mm, dtype=float) * 1e-3))
-    return fcl.collide(part, other, fcl.CollisionRequest(), fcl.CollisionResult()) > 0
+def _collides(part: list[fcl.CollisionObject], other: fcl.CollisionObject, shift_mm: np.ndarray) -> bool:
+    """Whether the part (its pieces, world m) shifted by ``shift_mm`` touches ``other``."""
+    shift = fcl.Transform(np.eye(3), np.asarray(shift_mm, dtype=float) * 1e-3)
+    for piece in part:
+        piece.setTransform(shift)
+    return any(fcl.collide(piece, other, fcl.CollisionRequest(), fcl.CollisionResult()) > 0 for piece in part)
 
 
 def clearing_shift_mm(
-    part: fcl.CollisionObject, others: list[fcl.CollisionObject], direction, resolution_mm: float = 0.1
+    part: list[fcl.CollisionObject], others: list[fcl.CollisionObject], direction, resolution_mm: float = 0.1
 ) -> float:
     """The smallest shift (mm) along the unit ``direction`` after which the part touches none of ``others``
     (searched by doubling, then bisection to ``resolution_mm``; the returned shift is free); inf when none
@@ -111,7 +115,7 @@ _AXES = ((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, -1.0, 0.0), (
 def find_overlaps(mesh_mm, scene, skip: tuple[str, ...] = ()) -> tuple[list[Overlap], float | None]:
     """The scene objects the part (mesh in world mm) overlaps by more than contact, and the lift along world
     +z (mm) that clears all of them together (None when nothing overlaps)."""
-    part = _part_object(mesh_mm)
+    part = _part_objects(mesh_mm)
     overlaps = []
     for obstacle in scene.objects:
         if obstacle.name in skip:

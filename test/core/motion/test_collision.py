@@ -264,3 +264,34 @@ def test_set_part_replaces_the_part_and_rejects_bad_meshes(fresh_checker):
     plate = trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])  # flat: a zero-height box
     fresh_checker.set_part(plate, pose=np.eye(4))
     assert fresh_checker.object_names().count("part") == 1 and "other_part" not in fresh_checker.object_names()
+
+
+def test_a_finely_meshed_part_split_into_trees_answers_as_one(station, kinematic_model, monkeypatch):
+    # a large mesh is built as several bounding-volume trees (so that a time limit can end the build); the
+    # answers must not change: the same part as one tree and as many small ones, near the scanner's window
+    from agiprobot_measurement.motion import collision as collision_module
+
+    up = station.named_states["up"]
+    emitter = kinematic_model.link_poses_batch(up[None], ["laser_emitter_frame"])["laser_emitter_frame"][0]
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=0.1)  # 1,280 faces
+    pose = np.eye(4)
+    pose[:3, 3] = emitter[:3, 3] + emitter[:3, 2] * 0.11
+    states = up + np.random.default_rng(3).normal(0.0, 0.05, size=(300, kinematic_model.dof))
+    whole = CollisionChecker.from_station(station, model=kinematic_model)
+    whole.set_part(sphere, pose=pose)
+    monkeypatch.setattr(collision_module, "BVH_PIECE_FACES", 100)
+    split = CollisionChecker.from_station(station, model=kinematic_model)
+    split.set_part(sphere, pose=pose)
+    assert len(split._objects["part"].pieces) == 13 and len(whole._objects["part"].pieces) == 1
+    valid = whole.check_states(states)
+    np.testing.assert_array_equal(split.check_states(states), valid)
+    part_hits = 0
+    for q in states[:60]:
+        pairs = whole.colliding_pairs(q)
+        part_hits += any("part" in pair for pair in pairs)
+        assert split.colliding_pairs(q) == pairs
+        split_gap, whole_gap = split.min_distance(q), whole.min_distance(q)
+        assert split_gap.pair == whole_gap.pair and split_gap.distance_m == pytest.approx(
+            whole_gap.distance_m, abs=1e-9
+        )
+    assert 5 < part_hits < 55
