@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import json
 import os
-import signal
 import socket
 import subprocess
 import sys
@@ -26,6 +25,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import psutil
+
+from agiprobot_measurement.common.cli import stop_process_group
 
 from . import inputs
 from .judge import Expectation, Verdict, judge, run_watched
@@ -130,7 +131,7 @@ class NodeProbe:
         try:
             verdict, seconds, growth, exit_code = self._probe(launch.pid, env, expect, timeout_s, conditions)
         finally:
-            _stop(launch)
+            stop_process_group(launch, timeout_s=20.0)
             log.close()
         return {
             "id": self.id, "entry": self.tool, "input": self.what,
@@ -188,25 +189,6 @@ class NodeProbe:
         else:
             verdict = Verdict(True, reply["message"][:90])
         return verdict, seconds, growth, {None: "-", True: "success", False: "failure"}[reply["success"]]
-
-
-def _stop(launch: subprocess.Popen) -> None:
-    """SIGINT to the launch's process group, SIGKILL after 20 s."""
-    for sig, wait_s in ((signal.SIGINT, 20.0), (signal.SIGKILL, 5.0)):
-        try:
-            os.killpg(launch.pid, sig)
-        except ProcessLookupError:
-            return
-        try:
-            launch.wait(wait_s)
-        except subprocess.TimeoutExpired:
-            continue
-        if sig == signal.SIGINT:
-            try:
-                os.killpg(launch.pid, signal.SIGKILL)  # children that outlived roslaunch
-            except ProcessLookupError:
-                pass
-            return
 
 
 def _calibration_nul_file(out: Path) -> list[str]:

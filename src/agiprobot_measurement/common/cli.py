@@ -55,15 +55,22 @@ def process_started_s() -> float:
 
 def stop_process_group(process: subprocess.Popen, timeout_s: float = 30.0) -> None:
     """End a child started with ``start_new_session=True`` (roslaunch, rviz) as Ctrl-C would: SIGINT to its whole
-    process group, and SIGKILL when it has not ended after ``timeout_s`` (s). Nothing when it has ended already."""
+    process group, and SIGKILL when it has not ended after ``timeout_s`` (s); children that outlived it are killed
+    too. Nothing when it has ended already."""
     if process.poll() is not None:
         return
-    os.killpg(process.pid, signal.SIGINT)
     try:
+        os.killpg(process.pid, signal.SIGINT)
         process.wait(timeout=timeout_s)
     except subprocess.TimeoutExpired:
-        os.killpg(process.pid, signal.SIGKILL)
-        process.wait()
+        pass
+    except ProcessLookupError:  # ended between the poll and the signal
+        pass
+    try:
+        os.killpg(process.pid, signal.SIGKILL)  # the leader if it is still there, and any child that outlived it
+    except ProcessLookupError:
+        pass
+    process.wait()
 
 
 def run_main(main: Callable[[], int | None], prog: str = "") -> int:
