@@ -162,3 +162,31 @@ def test_stop_process_group_interrupts_then_kills_the_whole_group():
     stop_process_group(stubborn, timeout_s=0.5)
     assert stubborn.returncode == -9 and _time.monotonic() - started < 10.0
     stop_process_group(stubborn)  # ended already: nothing happens
+
+
+def test_stop_process_group_kills_children_that_outlive_the_leader():
+    import os
+    import subprocess
+    import sys as _sys
+    import time as _time
+
+    from agiprobot_measurement.common.cli import stop_process_group
+
+    # the leader ends at the interrupt; its child ignores it and would run on in the group
+    child_code = "import signal, time; signal.signal(signal.SIGINT, signal.SIG_IGN); time.sleep(60)"
+    leader_code = (
+        f"import subprocess, sys, time; c = subprocess.Popen([sys.executable, '-c', {child_code!r}]); "
+        "print(c.pid, flush=True); time.sleep(60)"
+    )
+    leader = subprocess.Popen([_sys.executable, "-c", leader_code], start_new_session=True, stdout=subprocess.PIPE)
+    child_pid = int(leader.stdout.readline())
+    stop_process_group(leader, timeout_s=10.0)
+    deadline = _time.monotonic() + 5.0
+    while _time.monotonic() < deadline:
+        try:
+            os.kill(child_pid, 0)
+        except ProcessLookupError:
+            break
+        _time.sleep(0.05)
+    else:
+        raise AssertionError("the child outlived stop_process_group")
