@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from agiprobot_measurement.common.cli import stop_process_group
+from agiprobot_measurement.common.cli import start_process_group, stop_process_group
 from agiprobot_measurement.planning.part_loading import load_part
 from agiprobot_measurement.planning.plan.execution import plan_part
 from agiprobot_measurement.planning.plan.plan_io import load_execution_plan
@@ -71,7 +71,7 @@ def run_condition(latency_s: float, compensation_s: float, args, plan_file: Path
         f"scanner_noise_scale:={args.noise_scale}",
     ]
     with log_path.open("w") as log:
-        launch = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+        launch = start_process_group(command, stdout=log, stderr=subprocess.STDOUT)
         try:
             return _measure(latency_s, compensation_s, args, plan_file, launch)
         finally:

@@ -20,7 +20,7 @@ import threading
 import time
 from pathlib import Path
 
-from agiprobot_measurement.common.cli import stop_process_group
+from agiprobot_measurement.common.cli import start_process_group, stop_process_group
 from agiprobot_measurement.station import PACKAGE_ROOT
 
 
@@ -65,7 +65,7 @@ def main() -> int:
     started = time.monotonic()
     print("== starting the station, the scanner and the trajectory_manager ==", flush=True)
     with log_path.open("w") as log:
-        launch = subprocess.Popen(launch_cmd, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+        launch = start_process_group(launch_cmd, stdout=log, stderr=subprocess.STDOUT)
         try:
             return run_demo(args, launch, out, bag, plan_file, snapshot, figure, summary, started)
         finally:

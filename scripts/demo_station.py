@@ -15,7 +15,7 @@ import sys
 import time
 from pathlib import Path
 
-from agiprobot_measurement.common.cli import stop_process_group
+from agiprobot_measurement.common.cli import start_process_group, stop_process_group
 from agiprobot_measurement.errors import InternalError
 from agiprobot_measurement.station import PACKAGE_ROOT
 
@@ -71,7 +71,7 @@ def main() -> int:
         launch_cmd.append("rviz:=true")
     print("== starting the station ==", flush=True)
     log = (out / "station_demo.launch.log").open("w")
-    launch = subprocess.Popen(launch_cmd, env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+    launch = start_process_group(launch_cmd, env=env, stdout=log, stderr=subprocess.STDOUT)
     started = time.monotonic()
     try:
         wait_for_action_server(env)

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import psutil
 
-from agiprobot_measurement.common.cli import stop_process_group
+from agiprobot_measurement.common.cli import start_process_group, stop_process_group
 
 from . import inputs
 from .judge import Expectation, Verdict, judge, run_watched
@@ -124,9 +124,9 @@ class NodeProbe:
         port = _free_port()
         env = dict(os.environ, ROS_MASTER_URI=f"http://127.0.0.1:{port}", ROS_HOME=str(folder / "roshome"))
         log = open(out / "roslaunch.log", "wb")
-        launch = subprocess.Popen(
+        launch = start_process_group(
             ["roslaunch", "-p", str(port), "agiprobot_measurement", self.launch, *self.prepare(out)],
-            stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env, start_new_session=True,
+            stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env,
         )  # fmt: skip
         try:
             verdict, seconds, growth, exit_code = self._probe(launch.pid, env, expect, timeout_s, conditions)

@@ -26,6 +26,7 @@ __all__ = [
     "EXIT_USAGE",
     "process_started_s",
     "run_main",
+    "start_process_group",
     "stop_process_group",
 ]
 
@@ -53,8 +54,20 @@ def process_started_s() -> float:
     return time.perf_counter() - max(age_s, 0.0)
 
 
+def _interruptible() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def start_process_group(command: list[str], **popen_kwargs) -> subprocess.Popen:
+    """Start ``command`` (roslaunch, rviz) in a process group of its own, so that :func:`stop_process_group` ends it
+    and everything it started. Ctrl-C is restored in the child: a command started as a background job of a
+    non-interactive shell (as CI and ``nohup ... &`` do) inherits an ignored SIGINT, and roslaunch would then only
+    end with SIGKILL, leaving its nodes unshut."""
+    return subprocess.Popen(command, start_new_session=True, preexec_fn=_interruptible, **popen_kwargs)
+
+
 def stop_process_group(process: subprocess.Popen, timeout_s: float = 30.0) -> None:
-    """End a child started with ``start_new_session=True`` (roslaunch, rviz) as Ctrl-C would: SIGINT to its whole
+    """End a child started with :func:`start_process_group` (roslaunch, rviz) as Ctrl-C would: SIGINT to its whole
     process group, and SIGKILL when it has not ended after ``timeout_s`` (s); children that outlived it are killed
     too. Nothing when it has ended already."""
     if process.poll() is not None:

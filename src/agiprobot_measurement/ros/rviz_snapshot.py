@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import signal
 import subprocess
 import tempfile
 import time
@@ -17,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from agiprobot_measurement.common.cli import start_process_group, stop_process_group
 from agiprobot_measurement.common.files import FileReadError, atomic_write
 from agiprobot_measurement.ros.errors import RvizSnapshotError
 
@@ -116,13 +116,12 @@ class OffscreenRviz:
             raise RvizSnapshotError(f"Xvfb did not start (see {self.log_dir / 'xvfb.log'})")
         self.display = f":{number}"
         env = dict(os.environ, DISPLAY=self.display)
-        self.rviz = subprocess.Popen(
+        self.rviz = start_process_group(
             # niced: software rendering must not starve the nodes it is taking a picture of
             ["nice", "-n", "15", "rviz", "-d", str(self.config), f"__name:=rviz_snapshot_{os.getpid()}"],
             env=env,
             stdout=(self.log_dir / "rviz.log").open("w"),
             stderr=subprocess.STDOUT,
-            start_new_session=True,
         )
 
     def grab(self, output: str | Path, settle_s: float = 30.0, stable_frames: int = 2) -> SnapshotStats:
@@ -157,13 +156,8 @@ class OffscreenRviz:
         subprocess.run([CONVERT, "xwd:-", f"png:{output}"], input=xwd.stdout, check=True, timeout=20)
 
     def stop(self) -> None:
-        if self.rviz is not None and self.rviz.poll() is None:
-            os.killpg(self.rviz.pid, signal.SIGINT)
-            try:
-                self.rviz.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                os.killpg(self.rviz.pid, signal.SIGKILL)
-                self.rviz.wait()
+        if self.rviz is not None:
+            stop_process_group(self.rviz, timeout_s=5.0)
         if self.xvfb is not None and self.xvfb.poll() is None:
             self.xvfb.terminate()
             self.xvfb.wait(timeout=5)
