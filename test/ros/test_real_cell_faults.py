@@ -222,7 +222,7 @@ class RealCellFaultTest(unittest.TestCase):
             reply = self.unlock()
             self.assertTrue(reply.success, reply.message)
 
-        self._fault_during_measurement("protective_stop", stop, recover, ["robot program stopped"])
+        self._fault_during_measurement("protective_stop", stop, recover, ["PROTECTIVE_STOP", "robot program stopped"])
 
     def test_5_speed_slider_at_30_percent(self):
         self._program_running()

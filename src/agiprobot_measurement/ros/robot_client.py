@@ -90,6 +90,8 @@ START_TOLERANCE_RAD = DEFAULT_TOLERANCES.start_rad
 EXECUTORS = {"follow_joint_trajectory": FJT_ACTION, "moveit": MOVEIT_ACTION}
 #: how long an unasked PREEMPTED waits for the program topic to tell why (s)
 PREEMPT_REASON_WAIT_S = 0.5
+#: once one of the driver's state topics tells why, how long to wait for the other (s)
+SECOND_TOPIC_WAIT_S = 0.1
 #: how long a cancelled goal may take to end (s): the UR holds within stop_trajectory_duration 0.5 s
 CANCEL_WAIT_S = 2.0
 #: after a cancel or a stop the robot counts as standing once no joint moved more than STILL_RAD (rad) for
@@ -187,6 +189,10 @@ class RobotProgramWatch:
         reason = self.stop_reason()
         while not reason and time.monotonic() < deadline:
             time.sleep(0.01)
+            reason = self.stop_reason()
+        if reason:
+            # the program and the safety topic travel on different connections too: the other one may follow
+            time.sleep(min(SECOND_TOPIC_WAIT_S, max(deadline - time.monotonic(), 0.0)))
             reason = self.stop_reason()
         return reason
 

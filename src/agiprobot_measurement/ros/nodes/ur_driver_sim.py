@@ -9,8 +9,18 @@ Started as node ``ur_hardware_interface`` by ``roslaunch ur_robot_driver ur10e_b
   publishes them) and ``speed_scaling_factor`` (std_msgs/Float64) at the loop rate
   (``/hardware_control_loop/loop_hz``, 500 Hz), ``scaled_pos_joint_traj_controller/state``
   (control_msgs/JointTrajectoryControllerState) at the controller's ``state_publish_rate``;
-* ``~robot_program_running`` (std_msgs/Bool, latched), ``~set_speed_slider`` (ur_msgs/SetSpeedSliderFraction) and
-  the dashboard's Trigger services ``~dashboard/play``, ``~dashboard/stop``, ``~dashboard/unlock_protective_stop``.
+* ``~robot_program_running`` (std_msgs/Bool), ``~robot_mode`` (ur_dashboard_msgs/RobotMode: POWER_OFF, IDLE or
+  RUNNING, the robot powered with its brakes released, at the start) and ``~safety_mode`` (ur_dashboard_msgs/SafetyMode: NORMAL, PROTECTIVE_STOP),
+  latched, published on change; ``~set_speed_slider`` (ur_msgs/SetSpeedSliderFraction);
+* ``~hand_back_control`` and, with ``~headless_mode``, ``~resend_robot_program`` (std_srvs/Trigger: the External
+  Control program ends / starts again, as after a power cycle);
+* ``~set_mode`` (ur_dashboard_msgs/SetMode; the real driver's ``ur_robot_state_helper``): power off, power on,
+  unlock a protective stop, release the brakes until the target robot mode, then play the program if asked;
+* the dashboard client's Trigger services ``~dashboard/power_on``, ``~dashboard/power_off``,
+  ``~dashboard/brake_release``, ``~dashboard/play``, ``~dashboard/stop``,
+  ``~dashboard/unlock_protective_stop`` and its queries ``~dashboard/program_running`` (IsProgramRunning),
+  ``~dashboard/program_state`` (GetProgramState), ``~dashboard/get_robot_mode`` (GetRobotMode),
+  ``~dashboard/get_safety_mode`` (GetSafetyMode), answering with the dashboard server's texts.
 
 The controller's tolerances, stop trajectory duration and rates come from the controller configuration the bringup
 loads (``scaled_pos_joint_traj_controller/constraints`` ...), as on the real driver.
@@ -50,6 +60,24 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64
 from std_srvs.srv import SetBool, SetBoolResponse, Trigger, TriggerResponse
 from trajectory_msgs.msg import JointTrajectoryPoint
+from ur_dashboard_msgs.msg import (
+    ProgramState,
+    RobotMode,
+    SafetyMode,
+    SetModeAction,
+    SetModeFeedback,
+    SetModeResult,
+)
+from ur_dashboard_msgs.srv import (
+    GetProgramState,
+    GetProgramStateResponse,
+    GetRobotMode,
+    GetRobotModeResponse,
+    GetSafetyMode,
+    GetSafetyModeResponse,
+    IsProgramRunning,
+    IsProgramRunningResponse,
+)
 from ur_msgs.srv import SetSpeedSliderFraction, SetSpeedSliderFractionResponse
 
 from agiprobot_measurement.common.config import ConfigError, number, positive
@@ -71,13 +99,14 @@ from agiprobot_measurement.motion.jtc import (
     resolve_initial_state,
 )
 from agiprobot_measurement.motion.trajectory import CheckTolerances, JointTrajectory, TrajectoryError, check_trajectory
+from agiprobot_measurement.motion.ur_modes import MAX_SET_MODE_STEPS, UrModes, set_mode_step
 from agiprobot_measurement.msg import (
     ExecuteJointTrajectoryAction,
     ExecuteJointTrajectoryFeedback,
     ExecuteJointTrajectoryResult,
 )
 from agiprobot_measurement.ros.node import run_node
-from agiprobot_measurement.ros.params import Param, param, read_params
+from agiprobot_measurement.ros.params import Param, flag, param, read_params
 from agiprobot_measurement.srv import SetJointState, SetJointStateResponse
 from agiprobot_measurement.station import load_joint_limits, load_named_states, load_robot_config
 
@@ -87,6 +116,8 @@ __all__ = ["CONTROLLER", "UrDriverSimNode", "main"]
 CONTROLLER = "scaled_pos_joint_traj_controller"
 #: the driver's control loop rate (Hz) when the controller configuration does not set one
 DEFAULT_LOOP_HZ = 500.0
+#: the program the External Control URCap runs, as the dashboard names it
+EXTERNAL_CONTROL_PROGRAM = "external_control.urp"
 #: the JTC's action_monitor_rate default (Hz)
 DEFAULT_ACTION_MONITOR_HZ = 20.0
 #: the alias's goal position tolerance (rad): its SUCCEEDED means "exactly at the trajectory's end", as robot_sim's did
@@ -200,7 +231,10 @@ class UrDriverSimNode:
         self.scaling = rospy.Publisher("speed_scaling_factor", Float64, queue_size=10)
         self.state_topic = rospy.Publisher(f"{CONTROLLER}/state", JointTrajectoryControllerState, queue_size=10)
         self.program_topic = rospy.Publisher("~robot_program_running", Bool, queue_size=1, latch=True)
-        self.program_topic.publish(Bool(True))
+        self.robot_mode_topic = rospy.Publisher("~robot_mode", RobotMode, queue_size=1, latch=True)
+        self.safety_mode_topic = rospy.Publisher("~safety_mode", SafetyMode, queue_size=1, latch=True)
+        self.modes = UrModes()
+        self.publish_modes()
 
         self.server = actionlib.ActionServer(
             f"{CONTROLLER}/follow_joint_trajectory",
@@ -220,13 +254,27 @@ class UrDriverSimNode:
         rospy.Service("~dashboard/play", Trigger, self.dashboard_play)
         rospy.Service("~dashboard/stop", Trigger, self.dashboard_stop)
         rospy.Service("~dashboard/unlock_protective_stop", Trigger, self.unlock_protective_stop)
+        rospy.Service("~dashboard/power_on", Trigger, lambda _request: TriggerResponse(*self.dashboard("power_on")))
+        rospy.Service("~dashboard/power_off", Trigger, lambda _request: TriggerResponse(*self.dashboard("power_off")))
+        rospy.Service(
+            "~dashboard/brake_release", Trigger, lambda _request: TriggerResponse(*self.dashboard("brake_release"))
+        )
+        rospy.Service("~hand_back_control", Trigger, self.hand_back_control)
+        if param("~headless_mode", False, flag):
+            rospy.Service("~resend_robot_program", Trigger, self.resend_robot_program)
+        rospy.Service("~dashboard/program_running", IsProgramRunning, self.dashboard_program_running)
+        rospy.Service("~dashboard/program_state", GetProgramState, self.dashboard_program_state)
+        rospy.Service("~dashboard/get_robot_mode", GetRobotMode, self.dashboard_robot_mode)
+        rospy.Service("~dashboard/get_safety_mode", GetSafetyMode, self.dashboard_safety_mode)
         rospy.Service("ur_driver_sim/set_program_running", SetBool, self.set_program_running)
         rospy.Service("ur_driver_sim/protective_stop", Trigger, self.protective_stop)
         rospy.Service("ur_driver_sim/unlock_protective_stop", Trigger, self.unlock_protective_stop)
         rospy.Service("ur_driver_sim/set_joint_state", SetJointState, self.set_joint_state)
         rospy.Service("robot_sim/set_joint_state", SetJointState, self.set_joint_state)
+        self.set_mode_server = actionlib.SimpleActionServer("~set_mode", SetModeAction, self.set_mode, False)
         self.server.start()
         self.alias_server.start()
+        self.set_mode_server.start()
         self.thread = threading.Thread(target=self.loop, name="control_loop", daemon=True)
         self.thread.start()
         rospy.loginfo(
@@ -448,13 +496,123 @@ class UrDriverSimNode:
 
     def _set_running(self, running: bool) -> tuple[bool, str]:
         with self.lock:
+            if running and not self.modes.can_play:
+                return False, f"the robot is in mode {self.modes.robot.name}: power it on and release the brakes"
             try:
                 self.finish(self.controller.set_program_running(running, rospy.Time.now().to_sec()))
             except InputError as exc:
                 return False, str(exc)
             state = self.controller.program_running
-        self.program_topic.publish(Bool(state))
+        self.publish_modes()
         return True, "program running" if state else "program stopped"
+
+    def _safety_mode(self) -> int:
+        return SafetyMode.PROTECTIVE_STOP if self.controller.protective_stopped else SafetyMode.NORMAL
+
+    def publish_modes(self) -> None:
+        """The latched robot mode, safety mode and program topics from the controller's state."""
+        with self.lock:
+            robot, safety, running = int(self.modes.robot), self._safety_mode(), self.controller.program_running
+        self.robot_mode_topic.publish(RobotMode(robot))
+        self.safety_mode_topic.publish(SafetyMode(safety))
+        self.program_topic.publish(Bool(running))
+
+    def dashboard(self, command: str) -> tuple[bool, str]:
+        """A dashboard command that changes the robot mode or the safety system: (success, the server's answer)."""
+        with self.lock:
+            now_s = rospy.Time.now().to_sec()
+            if command in ("power_off", "restart_safety"):
+                # the program stops with the power; restarting the safety system powers the arm off
+                self.finish(self.controller.set_program_running(False, now_s))
+                answer = self.modes.power_off() if command == "power_off" else (True, "Restarting safety")
+                self.modes.power_off()
+            elif command == "unlock_protective_stop":
+                was = self.controller.unlock_protective_stop()
+                answer = (True, "Protective stop releasing" if was else "no protective stop to unlock")
+            else:
+                answer = getattr(self.modes, command)()
+        self.publish_modes()
+        return answer
+
+    def set_mode(self, goal) -> None:
+        """ur_robot_driver's set_mode action (robot_state_helper): dashboard commands until the robot is in the target
+        mode, feedback after each; ``stop_program`` first, ``play_program`` at the end (target RUNNING)."""
+        target, first = int(goal.target_robot_mode.mode), True
+        for _ in range(MAX_SET_MODE_STEPS):
+            with self.lock:
+                robot, safety = int(self.modes.robot), self._safety_mode()
+            step = set_mode_step(target, robot, safety, first)
+            if first and step.command and goal.stop_program:
+                self._set_running(False)
+            first = False
+            if step.done:
+                break
+            if not step.command:
+                self.set_mode_server.set_aborted(
+                    SetModeResult(False, f"the simulated robot cannot leave robot mode {robot} by itself")
+                )
+                return
+            ok, answer = self.dashboard(step.command)
+            if not ok:
+                message = (
+                    "An error occurred while switching the robot mode. The respective dashboard service returned "
+                    f"non-success: {answer}"
+                )
+                self.set_mode_server.set_aborted(SetModeResult(False, message))
+                return
+            with self.lock:
+                self.set_mode_server.publish_feedback(SetModeFeedback(int(self.modes.robot), self._safety_mode()))
+        else:
+            self.set_mode_server.set_aborted(SetModeResult(False, f"no robot mode {target} after dashboard commands"))
+            return
+        if not step.success:
+            self.set_mode_server.set_aborted(SetModeResult(False, step.message))
+            return
+        if target == RobotMode.RUNNING and goal.play_program:
+            self._set_running(True)
+        self.set_mode_server.set_succeeded(SetModeResult(True, step.message))
+
+    def hand_back_control(self, _request):
+        with self.lock:
+            running = self.controller.program_running
+        if not running:
+            return TriggerResponse(True, "No control active. Nothing to do.")
+        self._set_running(False)
+        return TriggerResponse(True, "Deactivated control")
+
+    def resend_robot_program(self, _request):
+        ok, _message = self._set_running(True)
+        return TriggerResponse(ok, "Successfully resent robot program" if ok else "Could not resend robot program")
+
+    def dashboard_program_running(self, _request):
+        with self.lock:
+            running = self.controller.program_running
+        return IsProgramRunningResponse(
+            answer=f"Program running: {str(running).lower()}", program_running=running, success=True
+        )
+
+    def dashboard_program_state(self, _request):
+        with self.lock:
+            state = ProgramState.PLAYING if self.controller.program_running else ProgramState.STOPPED
+        return GetProgramStateResponse(
+            state=ProgramState(state),
+            program_name=EXTERNAL_CONTROL_PROGRAM,
+            answer=f"{state} {EXTERNAL_CONTROL_PROGRAM}",
+            success=True,
+        )
+
+    def dashboard_robot_mode(self, _request):
+        with self.lock:
+            mode = self.modes.robot
+        return GetRobotModeResponse(robot_mode=RobotMode(int(mode)), answer=f"Robotmode: {mode.name}", success=True)
+
+    def dashboard_safety_mode(self, _request):
+        with self.lock:
+            stopped = self.controller.protective_stopped
+        name = "PROTECTIVE_STOP" if stopped else "NORMAL"
+        return GetSafetyModeResponse(
+            safety_mode=SafetyMode(getattr(SafetyMode, name)), answer=f"Safetymode: {name}", success=True
+        )
 
     def set_program_running(self, request):
         return SetBoolResponse(*self._set_running(bool(request.data)))
@@ -470,13 +628,11 @@ class UrDriverSimNode:
     def protective_stop(self, _request):
         with self.lock:
             self.finish(self.controller.protective_stop(rospy.Time.now().to_sec()))
-        self.program_topic.publish(Bool(False))
+        self.publish_modes()
         return TriggerResponse(True, "protective stop: robot halted, program stopped")
 
     def unlock_protective_stop(self, _request):
-        with self.lock:
-            was = self.controller.unlock_protective_stop()
-        return TriggerResponse(True, "Protective stop releasing" if was else "no protective stop to unlock")
+        return TriggerResponse(*self.dashboard("unlock_protective_stop"))
 
     def set_joint_state(self, request):
         try:
