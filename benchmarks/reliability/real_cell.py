@@ -26,7 +26,13 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         figures_file = Path(args.yaml).resolve() if args.yaml else Path(tmp) / "figures.yaml"
         done = subprocess.run(
-            ["rostest", "agiprobot_measurement", "test_real_cell_faults.test", f"figures_file:={figures_file}"],
+            [
+                "rostest",
+                "agiprobot_measurement",
+                "test_real_cell_faults.test",
+                f"figures_file:={figures_file}",
+                "speed_slider:=0.3",
+            ],
             check=False,
         )
         if not figures_file.is_file():

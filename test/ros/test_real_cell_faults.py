@@ -4,7 +4,7 @@
 In order: a plan; the full plan at 100 % speed (duration, measured coverage); the UR program stopped during a
 measurement segment (``/ur_driver_sim/set_program_running`` false): the execution must stop within 1 s, say that the
 program stopped, keep the plan, and run again once the program runs; a protective stop likewise
-(``/ur_driver_sim/protective_stop``, then ``unlock_protective_stop``); the speed slider at 0.3
+(``/ur_driver_sim/protective_stop``, then ``unlock_protective_stop``); the speed slider at ~speed_slider (0.5; the benchmark: 0.3)
 (``/ur_hardware_interface/set_speed_slider``): the plan takes longer and measures the same coverage. The figures
 (stop latencies, durations, coverages) are printed and, given ``~figures_file``, written there as YAML
 (``python -m benchmarks.reliability.real_cell`` runs this test for them).
@@ -42,7 +42,7 @@ STILL_RAD = 1e-5
 KEEP_SAMPLES = 120000
 #: the robot must stand within this after the fault (s)
 STOP_WITHIN_S = 1.0
-#: measured coverage at 30 % vs 100 % speed (share of the sample points)
+#: measured coverage at the slowed vs 100 % speed (share of the sample points)
 COVERAGE_TOLERANCE = 0.01
 
 
@@ -224,9 +224,10 @@ class RealCellFaultTest(unittest.TestCase):
 
         self._fault_during_measurement("protective_stop", stop, recover, ["PROTECTIVE_STOP", "robot program stopped"])
 
-    def test_5_speed_slider_at_30_percent(self):
+    def test_5_speed_slider_slows_the_plan(self):
+        fraction = float(rospy.get_param("~speed_slider", 0.5))
         self._program_running()
-        reply = self.speed_slider(0.3)
+        reply = self.speed_slider(fraction)
         self.assertTrue(reply.success)
         try:
             state, result, duration = self._execute()
@@ -234,14 +235,15 @@ class RealCellFaultTest(unittest.TestCase):
             self.speed_slider(1.0)
         self.assertEqual(state, GoalStatus.SUCCEEDED, result.error)
         full = self.figures["speed_1.0"]
-        print(f"[real cell] 30 %: {duration:.2f} s (100 %: {full['duration_s']:.2f} s), "
+        print(f"[real cell] {fraction:.0%}: {duration:.2f} s (100 %: {full['duration_s']:.2f} s), "
               f"measured coverage {result.measured_coverage:.4f} (100 %: {full['measured_coverage']:.4f})")  # fmt: skip
-        self.figures["speed_0.3"] = {
+        self.figures[f"speed_{fraction:g}"] = {
             "duration_s": round(duration, 2),
             "phases_s": self.phases,
             "measured_coverage": result.measured_coverage,
         }
-        self.assertGreater(duration, 2.0 * full["duration_s"])
+        # the motion slows by the fraction; what happens between the segments (stitching, the scanner) does not
+        self.assertGreater(duration, 0.6 / fraction * full["duration_s"])
         self.assertLess(abs(result.measured_coverage - full["measured_coverage"]), COVERAGE_TOLERANCE)
 
 
