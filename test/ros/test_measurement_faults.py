@@ -314,6 +314,8 @@ class MeasurementFaultTest(unittest.TestCase):
         self.assertRegex(result.error, r"controller lost during segment \d+ of \d+: no /joint_states for")
         self.assertLess(elapsed, 2.5)
         self.assertEqual(self._plan_source(), source)
+        # the resumed controller publishes again (on a loaded machine it may take seconds to catch up)
+        rospy.wait_for_message("/joint_states", JointState, timeout=30)
         time.sleep(2.0)
         # a plan file runs on the resumed controller; its log line says the coverage is not known, not -100 %
         state, result = self._execute("baseline")
