@@ -24,7 +24,7 @@ from agiprobot_measurement.motion.cartesian import (
     STOP_JOINT_LIMITS,
     STOP_UNREACHABLE,
 )
-from agiprobot_measurement.motion.cartesian_kernels import follow_paths
+from agiprobot_measurement.motion.cartesian_kernels import TRACK_EXACT, follow_paths, track_paths
 from agiprobot_measurement.motion.errors import MotionInputError
 
 __all__ = ["CartesianPaths", "compute_cartesian_paths", "line_poses"]
@@ -32,6 +32,8 @@ __all__ = ["CartesianPaths", "compute_cartesian_paths", "line_poses"]
 #: the kernel's stop codes, in the order of :data:`STOP_NAMES`
 STOP_NAMES = (STOP_COMPLETE, STOP_UNREACHABLE, STOP_JOINT_JUMP, STOP_JOINT_LIMITS, STOP_INVALID_STATE)
 _INVALID = 4
+#: a path is tracked by continuation only where every other IK branch lies this much beyond the jump threshold (rad)
+TRACK_MARGIN_RAD = 0.3
 
 
 @dataclass(frozen=True)
@@ -126,18 +128,7 @@ def compute_cartesian_paths(
         empty = np.zeros(0)
         return CartesianPaths(empty, np.zeros((0, model.dof)), np.zeros(1, dtype=np.int64), empty.astype(np.int64))
     poses, pose_offsets = line_poses(model.fk(start_q), targets, step_mm * 1e-3, max_rotation_step_rad)
-    path_of_pose = np.repeat(np.arange(n_paths), np.diff(pose_offsets))
-    solutions, valid = ik.solve_all(poses, start_q[path_of_pose])
-    solutions = np.where(valid[..., None], solutions, 0.0)
-    states, counts, codes = follow_paths(
-        np.ascontiguousarray(solutions),
-        np.ascontiguousarray(valid),
-        pose_offsets.astype(np.int64),
-        np.ascontiguousarray(start_q),
-        float(jump_threshold_rad),
-        np.asarray(model.lower, dtype=np.float64),
-        np.asarray(model.upper, dtype=np.float64),
-    )
+    states, counts, codes = _walk(ik, poses, pose_offsets, start_q, float(jump_threshold_rad))
     # states: every path's (count + 1) states in the rows pose_offsets[i] + i ... (one more row per path)
     lengths = counts + 1
     base = pose_offsets[:-1] + np.arange(n_paths)
@@ -156,6 +147,58 @@ def compute_cartesian_paths(
     kept = np.repeat(base, lengths) + _ranks(lengths)
     fractions = np.maximum(counts, 0) / np.diff(pose_offsets)
     return CartesianPaths(fractions.astype(float), states[kept], offsets, codes.astype(np.int64))
+
+
+def _walk(ik, poses, pose_offsets, start_q, jump):
+    """(states, counts, codes) as :func:`~agiprobot_measurement.motion.cartesian_kernels.follow_paths` gives
+    them: the paths the continuation (:func:`~agiprobot_measurement.motion.cartesian_kernels.track_paths`) settles
+    from it (a UR arm's closed-form solver), the others from every closed-form branch of every waypoint."""
+    model = ik.model
+    lower, upper = np.asarray(model.lower, dtype=np.float64), np.asarray(model.upper, dtype=np.float64)
+    n_paths = len(start_q)
+    if hasattr(ik, "shoulder_gaps"):
+        pre, axes, tip = model.fk_segments
+        states, counts, codes = track_paths(
+            np.ascontiguousarray(poses),
+            pose_offsets.astype(np.int64),
+            np.ascontiguousarray(start_q),
+            ik.shoulder_gaps(poses),
+            pre,
+            axes,
+            tip,
+            lower,
+            upper,
+            jump,
+            TRACK_MARGIN_RAD,
+        )
+        exact = np.flatnonzero(codes >= TRACK_EXACT)
+    else:
+        states = np.zeros((len(poses) + n_paths, model.dof))
+        counts, codes = np.zeros(n_paths, dtype=np.int64), np.zeros(n_paths, dtype=np.int64)
+        exact = np.arange(n_paths)
+    if exact.size == 0:
+        return states, counts, codes
+    sizes = np.diff(pose_offsets)[exact]
+    rows = np.repeat(pose_offsets[exact], sizes) + _ranks(sizes)
+    sub_offsets = np.concatenate([[0], np.cumsum(sizes)])
+    sub_poses = poses[rows]
+    solutions, valid = ik.solve_all(sub_poses, np.repeat(start_q[exact], sizes, axis=0))
+    solutions = np.where(valid[..., None], solutions, 0.0)
+    sub_states, sub_counts, sub_codes = follow_paths(
+        np.ascontiguousarray(solutions),
+        np.ascontiguousarray(valid),
+        sub_offsets.astype(np.int64),
+        np.ascontiguousarray(start_q[exact]),
+        jump,
+        lower,
+        upper,
+    )
+    lengths = sub_counts + 1
+    target = np.repeat(pose_offsets[exact] + exact, lengths) + _ranks(lengths)
+    source = np.repeat(sub_offsets[:-1] + np.arange(exact.size), lengths) + _ranks(lengths)
+    states[target] = sub_states[source]
+    counts[exact], codes[exact] = sub_counts, sub_codes
+    return states, counts, codes
 
 
 def _ranks(lengths: np.ndarray) -> np.ndarray:

@@ -32,8 +32,10 @@ from agiprobot_measurement.motion.collision_config import (
     CollisionConfig,
     load_collision_config,
 )
+from agiprobot_measurement.motion.collision_kernels import sphere_candidates, sphere_candidates_numpy
 from agiprobot_measurement.motion.errors import MotionInputError, UnknownObjectError
 from agiprobot_measurement.motion.kinematics import KinematicModel
+from agiprobot_measurement.motion.kinematics_kernels import COMPILED_FROM_STATES, chain_frames
 from agiprobot_measurement.station import (
     ConfigError,
     PartPlacement,
@@ -190,6 +192,8 @@ class _FramePoser:
     def moving_frames(self, q: np.ndarray) -> np.ndarray:
         """(N, dof, 4, 4): the frame after each joint's rotation (all joints' steps built at once)."""
         n = q.shape[0]
+        if n >= COMPILED_FROM_STATES:
+            return chain_frames(q, self._pre, np.array(self.axes).reshape(-1, 3), np.eye(4))[0]
         sin, cos = np.sin(q)[..., None, None], np.cos(q)[..., None, None]
         rotation = np.eye(3) + sin * self._skew + (1.0 - cos) * self._skew2  # Rodrigues, (N, dof, 3, 3)
         step = np.zeros((n, self.dof, 4, 4))
@@ -532,15 +536,19 @@ class CollisionChecker:
         centers = poses[:, :, :3, 3]
         sure = np.zeros(n, dtype=bool)
         env = np.zeros((0, 3), dtype=int)
+        # stage 1, all (state, shape, obstacle): the shape's bounding sphere against the obstacle's box; and the
+        # self pairs' bounding spheres (compiled for large batches, without the (N, S, 3 O) temporaries)
+        stage = sphere_candidates if n >= COMPILED_FROM_STATES else sphere_candidates_numpy
+        i, j = self._self_pairs[:, 0], self._self_pairs[:, 1]
+        found, close_rows = stage(
+            centers, self._box_axes, self._box_center_flat, self._box_half_flat, self._world_bound,
+            self._env_checked, i, j, self._self_sphere_reach2,
+        )  # fmt: skip
         if len(self._object_list):
-            n_obj = len(self._object_list)
-            # stage 1, all (state, shape, obstacle): the shape's bounding sphere against the obstacle's box
-            offset = centers @ self._box_axes.T - self._box_center_flat  # centres in box coordinates (N, S, 3 O)
-            apart = np.abs(offset) > self._box_half_flat + self._world_bound[:, None]
-            state, shape, obstacle = np.nonzero(~apart.reshape(n, -1, n_obj, 3).any(axis=-1) & self._env_checked)
-            # stage 2, the few left: separating axes with exact supports (the box's axes, the shape's axis)
+            state, shape, obstacle = found.T
             rows = 3 * obstacle[:, None] + np.arange(3)
-            local = offset[state[:, None], shape[:, None], rows]  # (K, 3)
+            local = np.einsum("kj,kij->ki", centers[state, shape], self._box_axes[rows]) - self._box_center_flat[rows]
+            # stage 2, the few left: separating axes with exact supports (the box's axes, the shape's axis)
             box_rotation = self._box_rotation[obstacle]
             cosines = box_rotation.transpose(0, 2, 1) @ poses[state, shape, :3, :3]  # box axis i . shape axis k
             along = np.take_along_axis(cosines, self._shape_axis[shape, None, None], axis=2)[..., 0]  # (K, 3)
@@ -560,11 +568,10 @@ class CollisionChecker:
             env = np.stack([state[near], shape[near], obstacle[near]], axis=1)
         pairs = np.zeros((0, 2), dtype=int)
         if len(self._self_pairs):
-            i, j = self._self_pairs[:, 0], self._self_pairs[:, 1]
-            # bounding spheres of the capsules first: leaves few pairs for the segment distances
-            gap = centers[:, i] - centers[:, j]
-            close = (np.einsum("npi,npi->np", gap, gap) < self._self_sphere_reach2) & ~sure[:, None]
-            state, pair = np.nonzero(close)
+            # bounding spheres of the capsules first (above): leaves few pairs for the segment distances
+            state, pair = close_rows.T
+            keep = ~sure[state]
+            state, pair = state[keep], pair[keep]
             if len(state):
                 a, b = i[pair], j[pair]
                 da = poses[state, a, :3, self._shape_axis[a]] * self._own_half[a, None]
