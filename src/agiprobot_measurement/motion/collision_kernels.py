@@ -1,4 +1,4 @@
-"""Compiled first stages of the collision checker's broad phase for large batches of states.
+"""The collision checker's broad-phase geometry: segment distances, and its first stages compiled for large batches.
 
 Like :mod:`agiprobot_measurement.motion.kinematics_kernels`, this module owns the laziness of numba (compiled or
 loaded from its cache at the first call). :func:`sphere_candidates` gives the same candidates as the numpy code
@@ -12,7 +12,10 @@ import functools
 
 import numpy as np
 
-__all__ = ["sphere_candidates", "sphere_candidates_numpy"]
+__all__ = ["segment_distances", "sphere_candidates", "sphere_candidates_numpy"]
+
+#: segment lengths (squared, m^2) are floored at this, so degenerate segments work as points
+_EPS = 1e-12
 
 
 def sphere_candidates(centers, box_axes, box_center, box_half, bound, env_checked, pair_i, pair_j, reach2):
@@ -45,6 +48,27 @@ def sphere_candidates_numpy(centers, box_axes, box_center, box_half, bound, env_
     gap = centers[:, pair_i] - centers[:, pair_j]
     pairs = np.argwhere(np.einsum("npi,npi->np", gap, gap) < reach2)
     return env, pairs
+
+
+def segment_distances(p0, p1, q0, q1) -> np.ndarray:
+    """Distances between segments p0-p1 and q0-q1 (arrays (..., 3)); Ericson, Real-Time Collision Detection 5.1.9.
+
+    Degenerate segments (spheres) work as points: their squared lengths are floored at a tiny value, which
+    makes the general formulas reduce to the point cases.
+    """
+    d1, d2, r = p1 - p0, q1 - q0, p0 - q0
+    a = np.maximum((d1 * d1).sum(-1), _EPS)
+    e = np.maximum((d2 * d2).sum(-1), _EPS)
+    b, c, f = (d1 * d2).sum(-1), (d1 * r).sum(-1), (d2 * r).sum(-1)
+    denom = a * e - b * b
+    # parallel segments: any s works, 0 as in Ericson
+    s = np.where(denom > 1e-9 * a * e, (b * f - c * e) / np.maximum(denom, _EPS * _EPS), 0.0)
+    s = np.minimum(np.maximum(s, 0.0), 1.0)
+    t = (b * s + f) / e
+    clamped = np.minimum(np.maximum(t, 0.0), 1.0)
+    s = np.where(t != clamped, np.minimum(np.maximum((b * clamped - c) / a, 0.0), 1.0), s)
+    gap = r + d1 * s[..., None] - d2 * clamped[..., None]
+    return np.sqrt((gap * gap).sum(-1))
 
 
 @functools.cache
