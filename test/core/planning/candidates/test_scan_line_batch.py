@@ -76,3 +76,27 @@ def test_batched_verification_agrees_with_a_small_jump_threshold(cube_views):
     indices = np.random.default_rng(13).choice(len(views), size=min(80, len(views)), replace=False)
     one, many, one_paths, many_paths = _check_both(manager, views, indices, settings)
     _assert_same(one, many, one_paths, many_paths)
+
+
+def test_a_line_whose_first_branch_fails_is_run_on_another_branch_or_direction(cube_views, monkeypatch):
+    """Lines whose first attempt (the start branch nearest the preferred state, first direction) stops short are
+    tried on the next branches and the other direction: some run completely there, and the one-line check agrees."""
+    from agiprobot_measurement.planning.candidates import mechanics
+
+    manager, views = cube_views
+    rounds = []
+    real = mechanics.compute_cartesian_paths
+
+    def recorded(*args, **kwargs):
+        paths = real(*args, **kwargs)
+        rounds.append(paths.fractions.copy())
+        return paths
+
+    monkeypatch.setattr(mechanics, "compute_cartesian_paths", recorded)
+    settings = dict(manager.run.mechanics, joint_jump_threshold=0.05)
+    indices = np.random.default_rng(14).choice(len(views), size=min(120, len(views)), replace=False)
+    one, many, one_paths, many_paths = _check_both(manager, views, indices, settings)
+    _assert_same(one, many, one_paths, many_paths)
+    # the first round's short lines, and lines completed in a later round (another branch or the other direction)
+    assert len(rounds) >= 2 and (rounds[0] < 1.0).sum() >= 3
+    assert any((later >= 1.0).any() for later in rounds[1:])
