@@ -411,7 +411,8 @@ def _bound_text(report) -> str:
         return "no view-count bound (the objective is not the view count)"
     if report.views_lower_bound is None:
         return "lower bound: none known"
-    return f"lower bound {math.ceil(report.views_lower_bound - 1e-6)} views"
+    over = " (of covers by verified views)" if report.time_limit_hit else ""
+    return f"lower bound {math.ceil(report.views_lower_bound - 1e-6)} views{over}"
 
 
 def summarise(args, manager, report, times: dict, total_s: float, outputs: dict) -> tuple[list, dict]:
