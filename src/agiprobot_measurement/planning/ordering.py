@@ -14,7 +14,12 @@ import numpy as np
 
 from agiprobot_measurement.errors import AgiprobotError
 from agiprobot_measurement.motion.trajectory import JointTrajectory
-from agiprobot_measurement.planning.recovery import connect_with_fallbacks, cover_dropped_points, drop_view
+from agiprobot_measurement.planning.recovery import (
+    connect_with_fallbacks,
+    cover_dropped_points,
+    drop_view,
+    reject_view,
+)
 from agiprobot_measurement.planning.run import PlanningRun, PlanningTools
 from agiprobot_measurement.planning.selection.verify import finish_scan_trajectories, verify_mechanics
 
@@ -181,7 +186,7 @@ def _executable(run: PlanningRun, tools: PlanningTools, view) -> bool:
                 drop_view(run, view, "its scan line is not executable")
                 return False
     except AgiprobotError as exc:
-        view.mechanics_valid = False
+        reject_view(run, view)
         drop_view(run, view, f"its scan line cannot be time-parameterised: {exc}")
         return False
     return True

@@ -26,6 +26,7 @@ __all__ = [
     "connect_with_fallbacks",
     "cover_dropped_points",
     "drop_view",
+    "reject_view",
     "retract_and_approach",
 ]
 
@@ -140,7 +141,7 @@ def cover_dropped_points(run: PlanningRun, tools: PlanningTools, ordered: list, 
         try:
             finish_scan_trajectories(run, tools, [view])
         except AgiprobotError as exc:
-            _reject(run, view)
+            reject_view(run, view)
             drop_view(run, view, f"its scan line cannot be time-parameterised: {exc}")
             continue
         if view.get_trajectory_for_measurement() is None:
@@ -158,7 +159,7 @@ def cover_dropped_points(run: PlanningRun, tools: PlanningTools, ordered: list, 
     return added
 
 
-def _reject(run: PlanningRun, view) -> None:
+def reject_view(run: PlanningRun, view) -> None:
     """A view whose scan line failed for good: no longer executable, its coverage entries dead."""
     view.mechanics_valid = False
     span = column_range(run, view)
