@@ -403,6 +403,11 @@ def stage_times(manager, mechanics_s: float) -> dict[str, float]:
     }
 
 
+def _unverified_cause(report) -> str:
+    """Why some measurable points' views were never verified."""
+    return "time limit" if report.time_limit_hit else "the set cover's rounds ended before them"
+
+
 def _bound_text(report) -> str:
     """The view count's proven lower bound (the set cover's LP-based bound) as the summary states it."""
     if report.solver == "greedy":
@@ -449,7 +454,11 @@ def summarise(args, manager, report, times: dict, total_s: float, outputs: dict)
         (
             "measurable, executable",
             f"{report.n_coverable} of {samples} samples"
-            + (f" ({report.n_unverified} more not verified: time limit)" if report.n_unverified else ""),
+            + (
+                f" ({report.n_unverified} more not verified: {_unverified_cause(report)})"
+                if report.n_unverified
+                else ""
+            ),
         ),
         (
             "verified",
