@@ -7,7 +7,7 @@ GUI ?= 0
 
 BENCH_OUT ?= $(ROOT)/bench_results
 BENCH_ARGS ?=
-BENCHES := planning parts scale set-cover metrology motion kinematics collision nbv3d nbv-map nbv2d mild calibration phoxi scanner real-cell
+BENCHES := planning parts part-family scan-lines scale set-cover metrology motion kinematics collision nbv3d nbv-map nbv2d mild calibration phoxi scanner real-cell
 
 .PHONY: setup demo demo-station test lint format pytest rostest bench $(addprefix bench-,$(BENCHES)) fuzz clean
 
@@ -52,6 +52,12 @@ bench-planning: setup
 
 bench-parts: setup
 	$(call run_bench,parts,benchmarks.planning.parts,--json "$(BENCH_OUT)/parts.json")
+
+bench-scan-lines: setup
+	$(call run_bench,scan-lines,benchmarks.planning.scan_lines,--json "$(BENCH_OUT)/scan-lines.json")
+
+bench-part-family: setup
+	$(call run_bench,part-family,benchmarks.planning.part_family,--json "$(BENCH_OUT)/part-family.json")
 
 bench-scale: setup
 	$(call run_bench,scale,benchmarks.planning.scale,--json "$(BENCH_OUT)/scale.json")

@@ -403,6 +403,23 @@ def stage_times(manager, mechanics_s: float) -> dict[str, float]:
     }
 
 
+def _unverified_cause(report) -> str:
+    """Why some measurable points' views were never verified."""
+    return "time limit" if report.time_limit_hit else "the set cover's rounds ended before them"
+
+
+def _bound_text(report) -> str:
+    """The view count's proven lower bound (the set cover's LP-based bound) as the summary states it."""
+    if report.solver == "greedy":
+        return "greedy gives no lower bound"
+    if report.solver != "IP_basic":
+        return "no view-count bound (the objective is not the view count)"
+    if report.views_lower_bound is None:
+        return "lower bound: none known"
+    over = " (of covers by verified views)" if report.time_limit_hit else ""
+    return f"lower bound {math.ceil(report.views_lower_bound - 1e-6)} views{over}"
+
+
 def summarise(args, manager, report, times: dict, total_s: float, outputs: dict) -> tuple[list, dict]:
     """(rows for the table, a plain mapping for --summary YAML)."""
     result = manager.last_set_cover
@@ -415,20 +432,38 @@ def summarise(args, manager, report, times: dict, total_s: float, outputs: dict)
     if report.time_limit_hit:
         gap_text += f"; the time limit ({args.time_limit:g} s) stopped the verification"
     samples = report.n_samples
-    unconnected = f", {report.unconnected_views} could not be connected" if report.unconnected_views else ""
-    rows = [
+    dropped = f", {len(report.dropped_views)} dropped (below)" if report.dropped_views else ""
+    rows = []
+    if report.time_limit_hit:
+        rows.append(
+            (
+                "STOPPED BY THE TIME LIMIT",
+                f"{args.time_limit:g} s: {100.0 * report.verified_share:.1f} % of the measurable points verified; "
+                "raise --time-limit for a complete plan",
+            )
+        )
+    rows += [
         ("part", f"{args.part} ({args.units})"),
         ("samples", f"{samples} ({args.density:g} points/mm^2)"),
         ("candidates", f"{report.n_candidates} ({args.orientations} orientations, tilt {args.tilt})"),
         ("valid viewpoints", f"{report.n_valid_candidates}"),
-        ("views chosen", f"{report.n_views} ({args.solver}{unconnected})"),
+        ("views chosen", f"{report.n_views} ({args.solver}{dropped}); {_bound_text(report)}"),
         ("placement", f"{args.place}, reachable anchors for {_share(report.reachable_share)} of the samples"),
         ("tilt", str(manager.parameters.get("tilt_choice", args.tilt))),
         ("measurable (metrology)", f"{report.n_coverable_metrology} of {samples} samples"),
         (
             "measurable, executable",
             f"{report.n_coverable} of {samples} samples"
-            + (f" ({report.n_unverified} more not verified: time limit)" if report.n_unverified else ""),
+            + (
+                f" ({report.n_unverified} more not verified: {_unverified_cause(report)})"
+                if report.n_unverified
+                else ""
+            ),
+        ),
+        (
+            "verified",
+            f"{100.0 * report.verified_share:.1f} % of the measurable points "
+            f"({report.n_coverable_metrology - report.n_unverified} of {report.n_coverable_metrology})",
         ),
         (
             "covered",
@@ -448,8 +483,11 @@ def summarise(args, manager, report, times: dict, total_s: float, outputs: dict)
         ),
         ("solver gap", gap_text),
     ]
+    for item in report.dropped_views:
+        rows.append(("dropped view", f"{item['view']}: {item['reason']}"))
     for text in report.warnings:
-        rows.append(("warning", text))
+        if not text.startswith("view ") or " dropped: " not in text:  # listed above
+            rows.append(("warning", text))
     for stage in STAGES:
         rows.append((f"time: {stage}", f"{times[stage]:.2f} s"))
     rows.append(("time: total", f"{total_s:.2f} s"))
@@ -477,6 +515,9 @@ def summarise(args, manager, report, times: dict, total_s: float, outputs: dict)
         "valid_viewpoints": report.n_valid_candidates,
         "views": report.n_views,
         "unconnected_views": report.unconnected_views,
+        "dropped_views": report.dropped_views,
+        "views_lower_bound": report.views_lower_bound,
+        "verified_share": round(report.verified_share, 6),
         "coverable_metrology": report.n_coverable_metrology,
         "coverable": report.n_coverable,
         "coverable_executable": report.n_coverable,

@@ -32,8 +32,11 @@ from agiprobot_measurement.motion.collision_config import (
     CollisionConfig,
     load_collision_config,
 )
+from agiprobot_measurement.motion.collision_kernels import segment_distances as _segment_distances
+from agiprobot_measurement.motion.collision_kernels import sphere_candidates, sphere_candidates_numpy
 from agiprobot_measurement.motion.errors import MotionInputError, UnknownObjectError
 from agiprobot_measurement.motion.kinematics import KinematicModel
+from agiprobot_measurement.motion.kinematics_kernels import COMPILED_FROM_STATES, chain_frames
 from agiprobot_measurement.station import (
     ConfigError,
     PartPlacement,
@@ -48,7 +51,6 @@ __all__ = [
     "adjacent_link_pairs",
 ]
 
-_EPS = 1e-12
 _CHUNK = 4096  # states posed at once: bounds the broad phase's temporary arrays to a few tens of MB
 #: faces per bounding-volume tree of a mesh obstacle: FCL builds a tree in one native call that holds the
 #: interpreter (about 3 us per face), so a finely meshed part is built as several spatially compact trees, and a
@@ -190,6 +192,8 @@ class _FramePoser:
     def moving_frames(self, q: np.ndarray) -> np.ndarray:
         """(N, dof, 4, 4): the frame after each joint's rotation (all joints' steps built at once)."""
         n = q.shape[0]
+        if n >= COMPILED_FROM_STATES:
+            return chain_frames(q, self._pre, np.array(self.axes).reshape(-1, 3), np.eye(4))[0]
         sin, cos = np.sin(q)[..., None, None], np.cos(q)[..., None, None]
         rotation = np.eye(3) + sin * self._skew + (1.0 - cos) * self._skew2  # Rodrigues, (N, dof, 3, 3)
         step = np.zeros((n, self.dof, 4, 4))
@@ -207,27 +211,6 @@ class _FramePoser:
             anchor, offset = self.frames[link]
             poses[link] = np.broadcast_to(offset, (q.shape[0], 4, 4)) if anchor < 0 else moving[:, anchor] @ offset
         return poses
-
-
-def _segment_distances(p0, p1, q0, q1) -> np.ndarray:
-    """Distances between segments p0-p1 and q0-q1 (arrays (..., 3)); Ericson, Real-Time Collision Detection 5.1.9.
-
-    Degenerate segments (spheres) work as points: their squared lengths are floored at a tiny value, which
-    makes the general formulas reduce to the point cases.
-    """
-    d1, d2, r = p1 - p0, q1 - q0, p0 - q0
-    a = np.maximum((d1 * d1).sum(-1), _EPS)
-    e = np.maximum((d2 * d2).sum(-1), _EPS)
-    b, c, f = (d1 * d2).sum(-1), (d1 * r).sum(-1), (d2 * r).sum(-1)
-    denom = a * e - b * b
-    # parallel segments: any s works, 0 as in Ericson
-    s = np.where(denom > 1e-9 * a * e, (b * f - c * e) / np.maximum(denom, _EPS * _EPS), 0.0)
-    s = np.minimum(np.maximum(s, 0.0), 1.0)
-    t = (b * s + f) / e
-    clamped = np.minimum(np.maximum(t, 0.0), 1.0)
-    s = np.where(t != clamped, np.minimum(np.maximum((b * clamped - c) / a, 0.0), 1.0), s)
-    gap = r + d1 * s[..., None] - d2 * clamped[..., None]
-    return np.sqrt((gap * gap).sum(-1))
 
 
 # ----------------------------------------------------------------------------------------------- checker
@@ -457,6 +440,7 @@ class CollisionChecker:
         self._box_axes = self._box_rotation.transpose(0, 2, 1).reshape(-1, 3)
         self._box_center_flat = self._box_center_local.reshape(-1)
         self._box_half_flat = self._box_half.reshape(-1)
+        self._env_screened = None
         self._env_checked = np.array(
             [[not self._allowed(s, o) for o in objects] for s in self.shapes], dtype=bool
         ).reshape(len(self.shapes), n_obj)
@@ -522,8 +506,20 @@ class CollisionChecker:
         centers = poses[:, :, :3, 3]
         return centers - axes, centers + axes
 
-    def _broad_phase(self, poses: np.ndarray):
-        """Candidate pairs of the numpy broad phase for (N, S, 4, 4) shape poses.
+    def _screened(self, poses: np.ndarray) -> np.ndarray:
+        """The checked (shape, obstacle) pairs without those of a static robot shape the broad phase finds apart:
+        neither moves, so that holds for every state (computed once per world, from the first state's poses)."""
+        if self._env_screened is None:
+            static = self._env_checked & self._static[:, None]
+            sure, env, _ = self._broad_phase(poses[:1], checked=static)
+            screened = self._env_checked & ~self._static[:, None]
+            screened[env[:, 1], env[:, 2]] = True
+            self._env_screened = screened | static if sure[0] else screened
+        return self._env_screened
+
+    def _broad_phase(self, poses: np.ndarray, checked: np.ndarray | None = None):
+        """Candidate pairs of the numpy broad phase for (N, S, 4, 4) shape poses (``checked``: the (shape, obstacle)
+        pairs to check, default all but the static ones found apart).
 
         Returns (sure: (N,) states certainly in collision, env: (K, 3) rows [state, shape, object],
         pairs: (K, 2) rows [state, self-pair index]), candidates of the sure states left out.
@@ -532,15 +528,19 @@ class CollisionChecker:
         centers = poses[:, :, :3, 3]
         sure = np.zeros(n, dtype=bool)
         env = np.zeros((0, 3), dtype=int)
+        # stage 1, all (state, shape, obstacle): the shape's bounding sphere against the obstacle's box; and the
+        # self pairs' bounding spheres (compiled for large batches, without the (N, S, 3 O) temporaries)
+        stage = sphere_candidates if n >= COMPILED_FROM_STATES else sphere_candidates_numpy
+        i, j = self._self_pairs[:, 0], self._self_pairs[:, 1]
+        found, close_rows = stage(
+            centers, self._box_axes, self._box_center_flat, self._box_half_flat, self._world_bound,
+            self._screened(poses) if checked is None else checked, i, j, self._self_sphere_reach2,
+        )  # fmt: skip
         if len(self._object_list):
-            n_obj = len(self._object_list)
-            # stage 1, all (state, shape, obstacle): the shape's bounding sphere against the obstacle's box
-            offset = centers @ self._box_axes.T - self._box_center_flat  # centres in box coordinates (N, S, 3 O)
-            apart = np.abs(offset) > self._box_half_flat + self._world_bound[:, None]
-            state, shape, obstacle = np.nonzero(~apart.reshape(n, -1, n_obj, 3).any(axis=-1) & self._env_checked)
-            # stage 2, the few left: separating axes with exact supports (the box's axes, the shape's axis)
+            state, shape, obstacle = found.T
             rows = 3 * obstacle[:, None] + np.arange(3)
-            local = offset[state[:, None], shape[:, None], rows]  # (K, 3)
+            local = np.einsum("kj,kij->ki", centers[state, shape], self._box_axes[rows]) - self._box_center_flat[rows]
+            # stage 2, the few left: separating axes with exact supports (the box's axes, the shape's axis)
             box_rotation = self._box_rotation[obstacle]
             cosines = box_rotation.transpose(0, 2, 1) @ poses[state, shape, :3, :3]  # box axis i . shape axis k
             along = np.take_along_axis(cosines, self._shape_axis[shape, None, None], axis=2)[..., 0]  # (K, 3)
@@ -560,11 +560,10 @@ class CollisionChecker:
             env = np.stack([state[near], shape[near], obstacle[near]], axis=1)
         pairs = np.zeros((0, 2), dtype=int)
         if len(self._self_pairs):
-            i, j = self._self_pairs[:, 0], self._self_pairs[:, 1]
-            # bounding spheres of the capsules first: leaves few pairs for the segment distances
-            gap = centers[:, i] - centers[:, j]
-            close = (np.einsum("npi,npi->np", gap, gap) < self._self_sphere_reach2) & ~sure[:, None]
-            state, pair = np.nonzero(close)
+            # bounding spheres of the capsules first (above): leaves few pairs for the segment distances
+            state, pair = close_rows.T
+            keep = ~sure[state]
+            state, pair = state[keep], pair[keep]
             if len(state):
                 a, b = i[pair], j[pair]
                 da = poses[state, a, :3, self._shape_axis[a]] * self._own_half[a, None]

@@ -338,6 +338,15 @@ class URAnalyticIK:
         q[~valid] = np.nan
         return (q[0], valid[0]) if single else (q, valid)
 
+    def shoulder_gaps(self, poses: np.ndarray) -> np.ndarray:
+        """(N,) rad: how far apart the two shoulder branches' joint-1 angles are for each pose (N, 4, 4) of the tip
+        (pi - 2 asin(d4 / r), r the wrist centre's distance from the joint-1 axis; 0 where no branch exists)."""
+        target = self._base_inv @ np.asarray(poses, dtype=float) @ self._tip_inv
+        wrist = target[:, :3, 3] - self.d6 * target[:, :3, 2]
+        radius = np.hypot(wrist[:, 0], wrist[:, 1])
+        ratio = self.d4 / np.maximum(radius, 1e-300)
+        return np.where(ratio <= 1.0, np.pi - 2.0 * np.arcsin(np.minimum(ratio, 1.0)), 0.0)
+
     def refine(
         self,
         q: np.ndarray,

@@ -21,6 +21,7 @@ from agiprobot_measurement._paths import CONFIG_DIR
 from agiprobot_measurement.common.config import number, read_yaml, require
 from agiprobot_measurement.common.geometry import pose_matrix
 from agiprobot_measurement.motion.errors import MotionInputError
+from agiprobot_measurement.motion.kinematics_kernels import COMPILED_FROM_STATES, chain_frames
 from agiprobot_measurement.station import ConfigError, JointLimits, Station, UrKinematics, load_ur_kinematics
 from agiprobot_measurement.station.ur_kinematics import UR_BASE_RPY_RAD, UR_FLANGE_RPY_RAD, UR_TOOL0_RPY_RAD
 from agiprobot_measurement.station.urdf_model import UrdfJoint, UrdfModel
@@ -205,11 +206,19 @@ class KinematicModel:
                 acc = np.eye(4)
         return np.array(pre).reshape(-1, 4, 4), np.array(axes).reshape(-1, 3), acc
 
+    @property
+    def fk_segments(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The chain folded for FK (read only): per movable joint the transform (dof, 4, 4) from the previous
+        moving frame to its frame, its unit axis (dof, 3), and the last moving frame -> tip (4, 4); metres."""
+        return self._segments
+
     def _moving_frames(self, q: np.ndarray, joints: bool = False) -> tuple[np.ndarray | None, np.ndarray]:
         """The tip poses (N, 4, 4) and, with ``joints``, each joint's frame before its rotation (N, dof, 4, 4), for
         (N, dof) joint states: rotations and translations kept apart, a turn about z as two column mixes."""
         pre, axes, tip = self._segments
         n = q.shape[0]
+        if not joints and n >= COMPILED_FROM_STATES:
+            return None, chain_frames(q, pre, axes, tip)[1]
         rotation = np.broadcast_to(np.eye(3), (n, 3, 3))
         translation = np.zeros((n, 3))
         frames = np.zeros((n, self.dof, 4, 4)) if joints else None

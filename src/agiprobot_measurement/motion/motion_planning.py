@@ -26,7 +26,7 @@ from ompl import util as ou
 from agiprobot_measurement.motion.collision import CollisionChecker
 from agiprobot_measurement.motion.errors import MotionInputError
 from agiprobot_measurement.motion.point_to_point import point_to_point
-from agiprobot_measurement.motion.time_parameterization import time_optimal_trajectory
+from agiprobot_measurement.motion.time_parameterization import TimeParameterizationError, time_optimal_trajectory
 from agiprobot_measurement.motion.trajectory import JointTrajectory
 
 __all__ = [
@@ -38,7 +38,11 @@ __all__ = [
     "available_planners",
     "collision_free_trajectory",
     "interpolate_path",
+    "path_trajectory",
 ]
+
+#: a planned path's spline is tried through waypoints at most this far apart (rad), densest last
+PATH_WAYPOINT_STEPS_RAD = (0.01, 0.002)
 
 LOG = logging.getLogger(__name__)
 
@@ -410,15 +414,36 @@ def collision_free_trajectory(
     for _ in range(attempts):
         result = planner.plan(start, goal, time_budget_s=budget)
         if result.success:
-            trajectory = time_optimal_trajectory(
-                result.path,
-                limits,
-                velocity_scaling_factor=velocity_scaling,
-                acceleration_scaling_factor=velocity_scaling,
-                max_waypoint_step_rad=0.01,
-            )
+            trajectory = path_trajectory(result.path, limits, velocity_scaling)
             samples, _, _ = trajectory.sample(trajectory.dense_times(step_s=0.02, per_segment=2))
             if checker.check_states(samples).all():
                 return trajectory
         budget *= 2.0
     return None
+
+
+def path_trajectory(path, limits, velocity_scaling: float = 1.0) -> JointTrajectory:
+    """A time-parameterised trajectory (rad, s) along a joint path (K, n) rad whose straight segments were checked.
+
+    The time-optimal spline through the path's waypoints densified to :data:`PATH_WAYPOINT_STEPS_RAD` (the
+    first that stays within the joint limits; next to a limit the spline may overshoot it); when every one
+    leaves the limits, point-to-point moves from waypoint to waypoint, at rest at each: exactly the polyline,
+    within the limits, slower. Never raises for a path within the limits.
+    """
+    path = np.asarray(path, dtype=float)
+    for step in PATH_WAYPOINT_STEPS_RAD:
+        try:
+            return time_optimal_trajectory(
+                path,
+                limits,
+                velocity_scaling_factor=velocity_scaling,
+                acceleration_scaling_factor=velocity_scaling,
+                max_waypoint_step_rad=step,
+            )
+        except TimeParameterizationError as exc:
+            LOG.debug("path spline through waypoints %.3f rad apart failed: %s", step, exc)
+    moves = [point_to_point(a, b, limits, velocity_scaling, velocity_scaling) for a, b in itertools.pairwise(path)]
+    trajectory = moves[0]
+    for move in moves[1:]:
+        trajectory = trajectory.concatenated(move)
+    return trajectory

@@ -21,8 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from agiprobot_measurement.common.geometry import raise_elevation, slerp_unit
-from agiprobot_measurement.motion.motion_planning import collision_free_trajectory, interpolate_path
-from agiprobot_measurement.motion.time_parameterization import time_optimal_trajectory
+from agiprobot_measurement.motion.motion_planning import collision_free_trajectory, interpolate_path, path_trajectory
 
 __all__ = ["VIA_ACCEPT_RATIO", "VIA_CHECK_STEP_RAD", "RouteSettings", "Router", "path_length_rad"]
 
@@ -144,13 +143,7 @@ class Router:
         for waypoints in routes:
             if not self.checker.check_states(interpolate_path(waypoints, VIA_CHECK_STEP_RAD)).all():
                 continue
-            trajectory = time_optimal_trajectory(
-                waypoints,
-                self.limits,
-                velocity_scaling_factor=self.settings.velocity_scaling,
-                acceleration_scaling_factor=self.settings.velocity_scaling,
-                max_waypoint_step_rad=0.01,
-            )
+            trajectory = path_trajectory(waypoints, self.limits, self.settings.velocity_scaling)
             samples, _, _ = trajectory.sample(trajectory.dense_times(step_s=0.02, per_segment=2))
             if self.checker.check_states(samples).all():
                 return trajectory, path_length_rad(trajectory)

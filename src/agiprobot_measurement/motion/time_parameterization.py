@@ -263,8 +263,10 @@ def _build(
     sample_step_s: float | None,
     frame_id: str,
     joints: slice = slice(None),
+    limit_hint: str = "",
 ) -> tuple[JointTrajectory, float]:
-    """Sample the timing into a trajectory, slowed down by the returned factor k >= 1 until peaks fit."""
+    """Sample the timing into a trajectory, slowed down by the returned factor k >= 1 until peaks fit.
+    ``limit_hint``: what the caller's caller can do when the spline leaves the position limits (the error adds it)."""
     knot_times = timing.ts[np.searchsorted(timing.ss, s_knots)]
     times = _sample_times(knot_times, float(timing.ts[-1]), sample_step_s)
     _, _, _, q, qd, qdd = timing.evaluate(times)
@@ -298,8 +300,7 @@ def _build(
         j = int(np.argmax(np.any(outside, axis=0)))
         raise TimeParameterizationError(
             f"the spline through the waypoints leaves the position limits of {names[j]} "
-            f"([{limits.lower[j]}, {limits.upper[j]}] rad); pass max_waypoint_step_rad to keep it close to "
-            "the straight segments between the waypoints"
+            f"([{limits.lower[j]}, {limits.upper[j]}] rad){limit_hint}"
         )
     return trajectory, factor
 
@@ -359,7 +360,12 @@ def time_optimal_trajectory(
     max_velocity = limits.max_velocity * vel_scale
     max_acceleration = limits.max_acceleration * acc_scale
     timing = _Timing.solve(spline, s, max_velocity, max_acceleration)
-    trajectory, _ = _build(timing, s, q, names, limits, max_velocity, max_acceleration, sample_step_s, frame_id)
+    hint = "; pass max_waypoint_step_rad to keep it close to the straight segments between the waypoints"
+    if max_waypoint_step_rad is not None:
+        hint = f" (waypoints {max_waypoint_step_rad:g} rad apart)"
+    trajectory, _ = _build(
+        timing, s, q, names, limits, max_velocity, max_acceleration, sample_step_s, frame_id, limit_hint=hint
+    )
     return trajectory
 
 

@@ -12,6 +12,8 @@ Modules:
 - ``pipeline``: the whole pipeline on a loaded part, and tilt auto.
 - ``connection``: ``ConnectionPlanner``, collision-free connection moves over the motion layer.
 - ``ordering``: move times, view order, unwrapping, connecting the chosen views.
+- ``recovery``: when a move fails: the other scan direction, retract-and-approach, dropping a view and covering its
+  points again.
 - ``errors``: the planning errors.
 - ``candidates/``: candidate generation (samples, viewpoints, reachability, streamed and distributed metrology,
   scan-line mechanics).

@@ -12,14 +12,23 @@ import time
 
 import numpy as np
 
+from agiprobot_measurement.errors import AgiprobotError
 from agiprobot_measurement.motion.trajectory import JointTrajectory
-from agiprobot_measurement.planning.errors import PlanningError
+from agiprobot_measurement.planning.recovery import (
+    connect_with_fallbacks,
+    cover_dropped_points,
+    drop_view,
+    reject_view,
+)
 from agiprobot_measurement.planning.run import PlanningRun, PlanningTools
 from agiprobot_measurement.planning.selection.verify import finish_scan_trajectories, verify_mechanics
 
 LOG = logging.getLogger(__name__)
 
-__all__ = ["connect_views", "order_views", "p2p_durations", "unwrapped_towards", "wrapping_joints"]
+#: the points of dropped views are covered again for at least this long (s), even when the time limit came
+RECOVERY_MIN_S = 10.0
+
+__all__ = ["RECOVERY_MIN_S", "connect_views", "order_views", "p2p_durations", "unwrapped_towards", "wrapping_joints"]
 
 
 def p2p_durations(
@@ -122,41 +131,62 @@ def order_views(current: np.ndarray, starts: np.ndarray, ends: np.ndarray, limit
 
 def connect_views(run: PlanningRun, tools: PlanningTools, unordered_viewpoints, min_planning_time=0.2) -> list:
     """Order the views for a fast execution and connect them (the facade's ``connect_viewpoints``): greedy by
-    connection time from the current state, either scan direction, then 2-opt; the run's ``last_ordered`` and
-    ``unconnected_views`` are set. Returns the ordered list."""
+    connection time from the current state, either scan direction, then 2-opt; the run's ``last_ordered``,
+    ``unconnected_views`` and ``dropped_views`` are set. A view no move connects (after the fallbacks of
+    :mod:`~agiprobot_measurement.planning.recovery`) is dropped and its points covered again by other verified
+    views. Returns the ordered list."""
     views = [v for v in unordered_viewpoints]
     t0 = time.perf_counter()
-    finish_scan_trajectories(run, tools, views)
-    for view in views:
-        if not view.mechanics_verified or view.get_trajectory_for_measurement() is None:
-            if not verify_mechanics(run, tools, view):
-                raise PlanningError(f"{view} has no executable measurement trajectory")
+    run.unconnected_views, run.dropped_views = [], []
+    views = [v for v in views if _executable(run, tools, v)]
     if not views:
+        run.last_ordered = []
         return []
     starts = np.array([v.get_trajectory_for_measurement().start for v in views])
     ends = np.array([v.get_trajectory_for_measurement().end for v in views])
     order, flips = order_views(tools.current_state, starts, ends, tools.limits)
-    ordered, unconnected = [], []
+    ordered = []
     state = tools.current_state.copy()
+
+    def connect(state, view):
+        unwrap = lambda trajectory, reference: unwrapped_towards(trajectory, reference, tools.limits)  # noqa: E731
+        return connect_with_fallbacks(tools, state, view, unwrap, min_planning_time)
+
     for k, (i, flip) in enumerate(zip(order, flips, strict=True)):
         view = views[i]
         if flip != view.reversed:
             view.reverse_trajectory_for_measurement()
-        view.set_trajectory_for_measurement(
-            unwrapped_towards(view.get_trajectory_for_measurement(), state, tools.limits)
-        )
-        entry = view.get_trajectory_for_measurement().start
         tools.report("connection", k / len(order), f"connecting view {k + 1} of {len(order)}")
-        connection = tools.connect(state, entry, planning_time_s=min_planning_time)
-        if connection is None:
-            LOG.warning("view %d cannot be connected from the previous state: left out", i)
-            unconnected.append(view)
+        outcome = connect(state, view)
+        if outcome is not True:
+            drop_view(run, view, f"not connected: {outcome}")
             continue
-        view.set_trajectory_to_view(connection)
         ordered.append(view)
         state = view.get_trajectory_for_measurement().end.copy()
-    run.unconnected_views = unconnected
+    if run.unconnected_views:
+        clock = run.clock
+        deadline = time.perf_counter() + RECOVERY_MIN_S
+        if clock is not None:
+            deadline = max(deadline, clock.started_s + clock.limit_s)
+        added = cover_dropped_points(run, tools, ordered, state, connect, deadline)
+        run.parameters["replacement_views"] = added
     run.last_ordered = ordered
     run.timings_s["connection"] = time.perf_counter() - t0
-    tools.report("connection", 1.0, f"{len(ordered)} views connected, {len(unconnected)} left out")
+    tools.report("connection", 1.0, f"{len(ordered)} views connected, {len(run.unconnected_views)} left out")
     return ordered
+
+
+def _executable(run: PlanningRun, tools: PlanningTools, view) -> bool:
+    """The view's measurement trajectory exists (computed now when it was deferred); a view whose scan line
+    fails its check or its time parameterisation is dropped (with the reason) instead of failing the plan."""
+    try:
+        finish_scan_trajectories(run, tools, [view])
+        if not view.mechanics_verified or view.get_trajectory_for_measurement() is None:
+            if not verify_mechanics(run, tools, view):
+                drop_view(run, view, "its scan line is not executable")
+                return False
+    except AgiprobotError as exc:
+        reject_view(run, view)
+        drop_view(run, view, f"its scan line cannot be time-parameterised: {exc}")
+        return False
+    return True

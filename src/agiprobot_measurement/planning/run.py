@@ -73,6 +73,8 @@ class PlanningRun:
     last_viewpoints: list = field(default_factory=list)
     last_ordered: list = field(default_factory=list)
     unconnected_views: list = field(default_factory=list)
+    #: the views left out of the plan and why: [{"view": label, "reason": text}] (a failed move, never an error)
+    dropped_views: list = field(default_factory=list)
     timings_s: dict = field(default_factory=dict)
     parameters: dict = field(default_factory=dict)
     mechanics_checked: int = 0

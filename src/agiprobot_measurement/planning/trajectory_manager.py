@@ -438,7 +438,7 @@ class TrajectoryManager:
 #: the run's attributes the facade exposes under their documented names (read and written through to ``run``)
 RUN_ATTRIBUTES = (
     "part target_mesh samples sampled_surface_points candidates measurability last_set_cover last_viewpoints "
-    "last_ordered unconnected_views timings_s parameters mechanics_checked warnings reachable_share time_limit_hit "
+    "last_ordered unconnected_views dropped_views timings_s parameters mechanics_checked warnings reachable_share time_limit_hit "
     "revived_views last_stream_stats last_work_estimate last_plan_path loaded_plan"
 ).split()
 for _name in RUN_ATTRIBUTES:

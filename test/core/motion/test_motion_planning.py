@@ -237,3 +237,28 @@ def test_best_of_returns_the_shortest_of_its_solutions(checker, hard_pairs, monk
 def test_best_of_must_be_positive(checker):
     with pytest.raises(ValueError, match="best_of"):
         MotionPlanner(checker, best_of=0)
+
+
+def test_a_path_whose_spline_leaves_the_limits_is_timed_as_point_to_point_moves(station):
+    """The elbow held at its upper limit between two corners: every spline through the path overshoots the limit
+    (time_optimal_trajectory refuses it at any waypoint density); path_trajectory falls back to point-to-point moves
+    along the polyline, within the limits."""
+    from agiprobot_measurement.motion.motion_planning import path_trajectory
+    from agiprobot_measurement.motion.time_parameterization import TimeParameterizationError, time_optimal_trajectory
+
+    limits = station.limits
+    upper = limits.upper[2]
+    path = np.array([[0, -1.5, -0.5, 0, 0, 0], [0, -1.5, upper, 0, 0, 0], [0.3, -1.5, upper, 0, 0, 0],
+                     [0.3, -1.5, -0.5, 0, 0, 0]], dtype=float)  # fmt: skip
+    for step in (None, 0.01, 0.002):
+        with pytest.raises(TimeParameterizationError):
+            time_optimal_trajectory(path, limits, max_waypoint_step_rad=step)
+    trajectory = path_trajectory(path, limits)
+    positions, velocities, _ = trajectory.sample(trajectory.dense_times())
+    assert np.all(positions <= limits.upper + 1e-9) and np.all(positions >= limits.lower - 1e-9)
+    assert np.all(np.abs(velocities) <= limits.max_velocity + 1e-6)
+    np.testing.assert_allclose(trajectory.start, path[0])
+    np.testing.assert_allclose(trajectory.end, path[-1])
+    # it passes every corner of the path
+    for corner in path[1:-1]:
+        assert np.min(np.abs(positions - corner).max(axis=1)) < 1e-6

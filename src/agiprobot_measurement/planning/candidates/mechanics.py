@@ -12,6 +12,7 @@ from collections.abc import Callable
 import numpy as np
 
 from agiprobot_measurement.motion.cartesian import compute_cartesian_path
+from agiprobot_measurement.motion.cartesian_batch import compute_cartesian_paths
 from agiprobot_measurement.motion.time_parameterization import constant_speed_scan_trajectory
 
 # the chunked metrology moved to the streaming module; re-exported here for its callers
@@ -20,6 +21,7 @@ from agiprobot_measurement.planning.candidates.streaming import evaluate_in_chun
 __all__ = [
     "SCAN_ACCELERATION_MM_S2",
     "check_scan_line",
+    "check_scan_lines",
     "estimate_scan_duration",
     "evaluate_in_chunks",
     "reachable_anchors",
@@ -187,7 +189,6 @@ def check_scan_line(
     """
     view.mechanics_verified = True
     step = settings["trajectory_sample_step"]
-    overmeasure = settings["minimum_required_overmeasure"]
     lo, hi = view.scan_line if not view.reversed else view.scan_line[::-1]
     best = None
     for direction in ((lo, hi), (hi, lo)):
@@ -196,6 +197,13 @@ def check_scan_line(
             best = attempt
         if best is not None and best[0] >= 1.0:
             break
+    return _accept_scan_line(view, best, settings, scan_speed_mm_s, connect_from_current)
+
+
+def _accept_scan_line(view, best, settings: dict, scan_speed_mm_s: float, connect_from_current) -> np.ndarray | None:
+    """The end of :func:`check_scan_line` for the best ``(fraction, joint path, line)`` attempt (or None): reject,
+    shorten (partial acceptance) or accept the view; returns the joint path or None."""
+    overmeasure = settings["minimum_required_overmeasure"]
     if best is None:
         view.mechanics_valid = False
         return None
@@ -225,6 +233,113 @@ def check_scan_line(
     view.estimated_duration_s = estimate_scan_duration(view.scan_line, scan_speed_mm_s)
     view.mechanics_valid = True
     return path
+
+
+def check_scan_lines(
+    views,
+    settings: dict,
+    *,
+    ik,
+    collision,
+    preferred_state: np.ndarray,
+    scan_speed_mm_s: float,
+    connect_from_current: Callable[[np.ndarray], object] | None = None,
+    chunk: int = 1024,
+) -> list:
+    """:func:`check_scan_line` for many views at once: the same joint paths (or None), the same changes to the
+    views, in a few batched steps per ``chunk`` views instead of a dozen small numpy calls per view.
+
+    Each view tries its line's start branches (collision-free closed-form IK solutions, nearest
+    ``preferred_state`` first) in the first scan direction, then in the other, until one attempt runs the whole
+    line; the best attempt is the first one that goes furthest. Attempt k of every view still looking is computed
+    for all of them at once (:func:`~agiprobot_measurement.motion.cartesian_batch.compute_cartesian_paths`: one
+    IK call, one compiled walk with the jump and limit checks, one collision check of all states); most views
+    are settled by their first attempt. Solvers without ``solve_all`` (KDL) are checked one view at a time.
+    """
+    views = list(views)
+    if not hasattr(ik, "solve_all"):
+        return [
+            check_scan_line(
+                v,
+                settings,
+                ik=ik,
+                collision=collision,
+                preferred_state=preferred_state,
+                scan_speed_mm_s=scan_speed_mm_s,
+                connect_from_current=connect_from_current,
+            )
+            for v in views
+        ]
+    out = []
+    for begin in range(0, len(views), chunk):
+        part = views[begin : begin + chunk]
+        bests = _best_attempts(part, settings, ik, collision, preferred_state)
+        out += [
+            _accept_scan_line(v, b, settings, scan_speed_mm_s, connect_from_current)
+            for v, b in zip(part, bests, strict=True)
+        ]
+    return out
+
+
+def _best_attempts(views, settings: dict, ik, collision, preferred_state: np.ndarray) -> list:
+    """Each view's best ``(fraction, joint path, line)`` attempt as :func:`check_scan_line` finds it, or None."""
+    n = len(views)
+    for view in views:
+        view.mechanics_verified = True
+    lines = np.array([v.scan_line if not v.reversed else v.scan_line[::-1] for v in views], dtype=float).reshape(n, 2)
+    anchors = np.stack([v.get_anchor_pose() for v in views]) if n else np.zeros((0, 4, 4))
+    # ends of both directions: row d * n + i is view i's direction d (0: lo -> hi, 1: hi -> lo)
+    start_t = np.concatenate([lines[:, 0], lines[:, 1]])
+    end_t = np.concatenate([lines[:, 1], lines[:, 0]])
+    both = np.concatenate([anchors, anchors])
+    starts, ends = both.copy(), both.copy()
+    starts[:, :3, 3] += start_t[:, None] * both[:, :3, 0]
+    ends[:, :3, 3] += end_t[:, None] * both[:, :3, 0]
+    starts_m, ends_m = tip_pose_m(starts), tip_pose_m(ends)
+    solutions, valid = ik.solve_all(starts_m, seeds=preferred_state)
+    rows, branches = np.nonzero(valid)
+    free = np.zeros(valid.shape, dtype=bool)
+    if rows.size:
+        free[rows, branches] = collision.check_states(solutions[rows, branches])
+    # every view's attempts in order: the free branches of direction 0 nearest the preferred state first, then
+    # those of direction 1
+    distance = np.abs(np.nan_to_num(solutions) - preferred_state).max(axis=2)
+    attempts = [[] for _ in range(n)]
+    for r in range(2 * n):
+        branch = np.flatnonzero(free[r])
+        if branch.size:
+            attempts[r % n] += [(r, int(b)) for b in branch[np.argsort(distance[r, branch], kind="stable")]]
+    best = [None] * n
+    active = [i for i in range(n) if attempts[i]]
+    stage = 0
+    step = settings["trajectory_sample_step"]
+    while active:
+        todo = [i for i in active if stage < len(attempts[i])]
+        if not todo:
+            break
+        picked = [attempts[i][stage] for i in todo]
+        rows_ = np.array([r for r, _ in picked], dtype=np.int64)
+        branches_ = np.array([b for _, b in picked], dtype=np.int64)
+        paths = compute_cartesian_paths(
+            ik,
+            solutions[rows_, branches_],
+            ends_m[rows_],
+            step_mm=step,
+            jump_threshold_rad=settings["joint_jump_threshold"],
+            validity_checker=collision.check_states,
+        )
+        still = []
+        for k, i in enumerate(todo):
+            path = paths.joint_path(k)
+            fraction = float(paths.fractions[k])
+            if len(path) >= 2 and (best[i] is None or fraction > best[i][0]):
+                r = int(rows_[k])
+                best[i] = (fraction, path, (float(start_t[r]), float(end_t[r])))
+            if best[i] is None or best[i][0] < 1.0:
+                still.append(i)
+        active = still
+        stage += 1
+    return best
 
 
 def set_scan_trajectory(view, path: np.ndarray, *, kinematics, limits, scan_speed_mm_s: float) -> None:

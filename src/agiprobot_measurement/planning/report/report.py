@@ -56,6 +56,10 @@ class CoverageReport:
     time_limit_hit: bool = False
     tilt_mode: str = ""
     warnings: list = field(default_factory=list)
+    #: views left out of the plan and why ([{"view", "reason"}]): failed moves, their points covered again
+    dropped_views: list = field(default_factory=list)
+    #: the set cover's proven lower bound of its objective (IP_basic: views; greedy: None; others: their units)
+    views_lower_bound: float | None = None
 
     @property
     def coverage_of_coverable(self) -> float:
@@ -70,11 +74,19 @@ class CoverageReport:
         """covered / metrologically coverable."""
         return self.n_covered / self.n_coverable_metrology if self.n_coverable_metrology else 0.0
 
+    @property
+    def verified_share(self) -> float:
+        """The share of the measurable points whose views were verified (1.0 unless the time limit stopped the
+        verification): measurable minus those only never-verified views see, over measurable."""
+        m = self.n_coverable_metrology
+        return (m - self.n_unverified) / m if m else 1.0
+
     def as_dict(self) -> dict:
         out = {k: v for k, v in self.__dict__.items()}
         out["coverage_of_coverable"] = self.coverage_of_coverable
         out["coverage_of_samples"] = self.coverage_of_samples
         out["coverage_of_metrology"] = self.coverage_of_metrology
+        out["verified_share"] = self.verified_share
         return out
 
 
@@ -139,6 +151,8 @@ def run_report(run, views: Iterable | None = None) -> CoverageReport:
         time_limit_hit=bool(run.time_limit_hit),
         tilt_mode=str(run.parameters.get("viewpoint_tilt_mode", "")),
         warnings=list(run.warnings),
+        dropped_views=[dict(d) for d in run.dropped_views],
+        views_lower_bound=None if result is None or result.lower_bound is None else float(result.lower_bound),
     )
 
 
@@ -166,9 +180,12 @@ def run_metadata(run, version: str) -> dict:
             "coverable_executable": report.n_coverable,
             "covered": report.n_covered,
             "unverified": report.n_unverified,
+            "verified_share": round(report.verified_share, 6),
             "reachable_share": None if report.reachable_share is None else round(report.reachable_share, 4),
             "time_limit_hit": report.time_limit_hit,
             "views": report.n_views,
+            "views_lower_bound": report.views_lower_bound,
+            "dropped_views": report.dropped_views,
             "estimated_execution_time_s": round(report.estimated_execution_time_s, 3),
             "mean_uncertainty_mm": round(report.mean_uncertainty_mm, 6),
             "max_uncertainty_mm": round(report.max_uncertainty_mm, 6),

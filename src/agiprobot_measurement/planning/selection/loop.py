@@ -19,7 +19,6 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse
 
-from agiprobot_measurement.planning.candidates.viewpoint import ViewPoint
 from agiprobot_measurement.planning.cover.solve import SOLVER_TYPES, SetCoverResult, solve_set_cover
 from agiprobot_measurement.planning.errors import PlanningError, PlanningInputError
 from agiprobot_measurement.planning.run import PlanningRun, PlanningTools
@@ -29,7 +28,7 @@ from agiprobot_measurement.planning.selection.revival import revive_in
 from agiprobot_measurement.planning.selection.verify import (
     finish_scan_trajectories,
     screen_scan_lines,
-    verify_mechanics,
+    verify_mechanics_batch,
 )
 
 __all__ = ["CoverLoop", "cover_points_with_verified", "solve_scp"]
@@ -61,6 +60,8 @@ POINT_VIEWS_PER_ROUND = 24
 MAX_POINT_VIEWS_PER_ROUND = 2000
 #: each verification round also takes this many unverified views sharing the most points with each picked one
 SUBSTITUTES_PER_VIEW = 20
+#: scan lines verified in one batched call (:func:`verify_mechanics_batch`); the deadline is checked between them
+VERIFY_CHUNK = 256
 #: the candidate pool takes at most this many of a solve's most likely columns (or four times the batch)
 POOL_LIKELY_COLUMNS = 6000
 
@@ -125,9 +126,18 @@ class CoverLoop:
         candidates = self.run.candidates
         return max(len(self.views), 0 if candidates is None else len(candidates.poses))
 
-    def _verify(self, view: ViewPoint) -> None:
-        verify_mechanics(self.run, self.tools, view, time_parameterize=not self.defer_trajectories)
-        self.verified_count += 1
+    def _verify(self, views: list, *, until_deadline: bool = True) -> None:
+        """Verify the unverified ``views`` in batches of :data:`VERIFY_CHUNK`; with ``until_deadline`` only while
+        the deadline has not come (the batch started before it is finished)."""
+        todo = [v for v in dict.fromkeys(views) if v.mechanics_verified is False]
+        for begin in range(0, len(todo), VERIFY_CHUNK):
+            if until_deadline and time.perf_counter() >= self.deadline:
+                break
+            part = todo[begin : begin + VERIFY_CHUNK]
+            verify_mechanics_batch(self.run, self.tools, part, time_parameterize=not self.defer_trajectories)
+            self.verified_count += len(part)
+            done = min(1.0, self.verified_count / (self.verified_count + 10))
+            self.tools.report("mechanics", done, f"verified {self.verified_count} scan lines")
 
     def solve_round(self, round_index: int) -> _Round:
         """This round's cover: over all views, the pool, or (the fallback, after the last round or at the
@@ -215,11 +225,7 @@ class CoverLoop:
         open_columns = open_point_views(step.matrix, views, per_point)[:MAX_POINT_VIEWS_PER_ROUND]
         if open_columns.size and time.perf_counter() < self.deadline and round_index + 1 < self.max_rounds:
             self.verified_count += screen_scan_lines(self.run, self.tools, [views[j] for j in open_columns.tolist()])
-            for j in open_columns.tolist():
-                if time.perf_counter() >= self.deadline:
-                    break
-                if views[j].mechanics_verified is False:
-                    self._verify(views[j])
+            self._verify([views[j] for j in open_columns.tolist()])
             # revived views join the problem, not the pool: they come into it verified, as the open
             # points' views (above) or through a solve over all views
             revive_in(self.run, self.tools, views, self.provided)
@@ -281,15 +287,9 @@ class CoverLoop:
         )  # fmt: skip
         # views without a free start at either end of their line are settled for the whole batch at once
         self.verified_count += screen_scan_lines(self.run, self.tools, batch)
-        for k, view in enumerate(batch):
-            if view.mechanics_verified is not False:
-                continue
-            if k >= len(pending) and time.perf_counter() >= self.deadline:
-                break  # the picked views first; the likely ones only while there is time
-            self._verify(view)
-            if self.verified_count % 25 == 0 or k == len(batch) - 1:
-                done = min(1.0, self.verified_count / (self.verified_count + 10))
-                self.tools.report("mechanics", done, f"verified {self.verified_count} scan lines")
+        # the picked views first, whatever the time; the likely ones only while there is time
+        self._verify(batch[: len(pending)], until_deadline=False)
+        self._verify(batch[len(pending) :])
         if all(v.mechanics_verified is True and v.mechanics_valid for v in chosen):
             still = np.zeros(result.covered.size, dtype=bool)
             for view in chosen:

@@ -10,6 +10,7 @@ import numpy as np
 
 from agiprobot_measurement.planning.candidates.mechanics import (
     check_scan_line,
+    check_scan_lines,
     scan_line_starts_free,
     set_scan_trajectory,
 )
@@ -23,6 +24,7 @@ __all__ = [
     "screen_scan_lines",
     "set_trajectory",
     "verify_mechanics",
+    "verify_mechanics_batch",
 ]
 
 
@@ -49,7 +51,6 @@ def verify_mechanics(
     for the views a cover keeps (the time parameterisation costs twice the check).
     """
     started = time.perf_counter()
-    path = None
     try:
         path = check_scan_line(
             view,
@@ -60,16 +61,22 @@ def verify_mechanics(
             scan_speed_mm_s=tools.scan_speed_mm_s,
             connect_from_current=lambda q: tools.connect(tools.current_state, q, planning_time_s=1.0),
         )
-        if path is not None:
-            if time_parameterize:
-                set_trajectory(run, tools, view, path)
-            else:
-                view.set_trajectory_for_measurement(None)
-                run.pending_scan_paths[id(view)] = (view, path)
+        return _record_check(run, tools, view, path, time_parameterize)
     finally:
         run.add_time("mechanics", time.perf_counter() - started)
         run.mechanics_checked += 1
+
+
+def _record_check(run: PlanningRun, tools: PlanningTools, view: ViewPoint, path, time_parameterize: bool) -> bool:
+    """The coverage store's side of a checked view (rejected: its entries die; shortened: the points it no longer
+    sweeps), and its trajectory or its deferred path."""
     valid = path is not None
+    if valid:
+        if time_parameterize:
+            set_trajectory(run, tools, view, path)
+        else:
+            view.set_trajectory_for_measurement(None)
+            run.pending_scan_paths[id(view)] = (view, path)
     span = column_range(run, view)
     if span is not None:
         a, b = span
@@ -82,6 +89,32 @@ def verify_mechanics(
             if time_parameterize:
                 record_duration(run, view)
     return valid
+
+
+def verify_mechanics_batch(
+    run: PlanningRun, tools: PlanningTools, views, settings: dict | None = None, time_parameterize: bool = True
+) -> list[bool]:
+    """:func:`verify_mechanics` for many views at once (:func:`check_scan_lines`: batched IK, compiled branch
+    walks, one collision check per attempt round); the same verdicts and the same changes to the views and the
+    run's coverage store. Returns each view's validity."""
+    views = list(views)
+    if not views:
+        return []
+    started = time.perf_counter()
+    try:
+        paths = check_scan_lines(
+            views,
+            settings or run.mechanics,
+            ik=tools.ik,
+            collision=tools.collision,
+            preferred_state=tools.preferred_state,
+            scan_speed_mm_s=tools.scan_speed_mm_s,
+            connect_from_current=lambda q: tools.connect(tools.current_state, q, planning_time_s=1.0),
+        )
+        return [_record_check(run, tools, v, p, time_parameterize) for v, p in zip(views, paths, strict=True)]
+    finally:
+        run.add_time("mechanics", time.perf_counter() - started)
+        run.mechanics_checked += len(views)
 
 
 def set_trajectory(run: PlanningRun, tools: PlanningTools, view: ViewPoint, path: np.ndarray) -> None:

@@ -1,0 +1,208 @@
+"""Many straight-line Cartesian paths at once: :func:`compute_cartesian_paths` gives, for P (start state, target
+pose) pairs, the same paths as P calls of :func:`~agiprobot_measurement.motion.cartesian.compute_cartesian_path`
+with one target each, in a few vectorised steps instead of P rounds of small numpy calls.
+
+The interpolated poses of every path are solved in one closed-form IK call (each seeded with its path's start
+state), the branches are followed, and joint jumps and joint limits checked, in one compiled pass over all paths
+(:func:`~agiprobot_measurement.motion.cartesian_kernels.follow_paths`), and the states of every path go through
+the validity checker (a collision check) in one call. Poses 4x4 in metres, joints rad, steps mm.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from agiprobot_measurement.motion.cartesian import (
+    STOP_COMPLETE,
+    STOP_INVALID_STATE,
+    STOP_JOINT_JUMP,
+    STOP_JOINT_LIMITS,
+    STOP_UNREACHABLE,
+)
+from agiprobot_measurement.motion.cartesian_kernels import TRACK_EXACT, follow_paths, track_paths
+from agiprobot_measurement.motion.errors import MotionInputError
+
+__all__ = ["CartesianPaths", "compute_cartesian_paths", "line_poses"]
+
+#: the kernel's stop codes, in the order of :data:`STOP_NAMES`
+STOP_NAMES = (STOP_COMPLETE, STOP_UNREACHABLE, STOP_JOINT_JUMP, STOP_JOINT_LIMITS, STOP_INVALID_STATE)
+_INVALID = 4
+#: a path is tracked by continuation only where every other IK branch lies this much beyond the jump threshold (rad)
+TRACK_MARGIN_RAD = 0.3
+
+
+@dataclass(frozen=True)
+class CartesianPaths:
+    """Outcome of :func:`compute_cartesian_paths` for P paths.
+
+    ``fractions`` (P,): achieved steps / requested steps. ``states`` (S, dof) rad: every path's joint states one
+    after the other (start included); path i owns ``states[offsets[i]:offsets[i + 1]]`` (empty when its start
+    state is invalid). ``stop_codes`` (P,): indices into :data:`STOP_NAMES`.
+    """
+
+    fractions: np.ndarray
+    states: np.ndarray
+    offsets: np.ndarray
+    stop_codes: np.ndarray
+
+    def joint_path(self, i: int) -> np.ndarray:
+        """Path ``i``'s joint states (K, dof) rad."""
+        return self.states[self.offsets[i] : self.offsets[i + 1]]
+
+    def stop_reason(self, i: int) -> str:
+        """Why path ``i`` stopped (see :mod:`agiprobot_measurement.motion.cartesian`)."""
+        return STOP_NAMES[int(self.stop_codes[i])]
+
+
+def line_poses(
+    starts: np.ndarray, targets: np.ndarray, step_m: float, max_rotation_step_rad: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The interpolated poses of P one-segment lines, start excluded: (poses (M, 4, 4), offsets (P + 1,)).
+
+    Line i runs from ``starts[i]`` to ``targets[i]`` (4x4, metres) in the fewest equal steps that keep the
+    translation per step <= ``step_m`` and the rotation per step <= ``max_rotation_step_rad`` (position linear,
+    orientation by slerp, the last pose exactly the target), as
+    :func:`~agiprobot_measurement.motion.cartesian.interpolate_poses` does for one line.
+    """
+    distance = np.linalg.norm(targets[:, :3, 3] - starts[:, :3, 3], axis=1)
+    relative = np.einsum("pji,pjk->pik", starts[:, :3, :3], targets[:, :3, :3])
+    rotvec = Rotation.from_matrix(relative).as_rotvec() if len(starts) else np.zeros((0, 3))
+    angle = np.linalg.norm(rotvec, axis=1)
+    steps = np.maximum.reduce(
+        [
+            np.ones(len(starts), dtype=np.int64),
+            np.ceil(distance / step_m - 1e-9).astype(np.int64),
+            np.ceil(angle / max_rotation_step_rad - 1e-9).astype(np.int64),
+        ]
+    )
+    offsets = np.concatenate([[0], np.cumsum(steps)])
+    line = np.repeat(np.arange(len(starts)), steps)
+    s = (np.arange(offsets[-1]) - offsets[line] + 1) / steps[line]
+    # Rodrigues' formula of each line's rotation vector scaled by s (the slerp of interpolate_poses)
+    axis = np.where(angle[:, None] > 1e-15, rotvec / np.maximum(angle, 1e-300)[:, None], 0.0)
+    x, y, z = axis[line].T
+    k = np.zeros((len(line), 3, 3))
+    k[:, 0, 1], k[:, 0, 2], k[:, 1, 0], k[:, 1, 2], k[:, 2, 0], k[:, 2, 1] = -z, y, z, -x, -y, x
+    theta = angle[line] * s
+    rotation = np.eye(3) + np.sin(theta)[:, None, None] * k + (1.0 - np.cos(theta))[:, None, None] * (k @ k)
+    poses = np.zeros((len(line), 4, 4))
+    poses[:, :3, :3] = starts[line, :3, :3] @ rotation
+    poses[:, :3, 3] = starts[line, :3, 3] + s[:, None] * (targets[line, :3, 3] - starts[line, :3, 3])
+    poses[:, 3, 3] = 1.0
+    poses[offsets[1:] - 1] = targets  # end exactly on the target
+    return poses, offsets
+
+
+def compute_cartesian_paths(
+    ik,
+    start_q: np.ndarray,
+    targets: np.ndarray,
+    step_mm: float = 2.0,
+    jump_threshold_rad: float = 1.5,
+    validity_checker: Callable[[np.ndarray], np.ndarray] | None = None,
+    max_rotation_step_rad: float = 0.05,
+) -> CartesianPaths:
+    """Straight tip lines from the poses at ``start_q`` (P, dof) rad to ``targets`` (P, 4, 4) metres.
+
+    Path i is the one ``compute_cartesian_path(ik, start_q[i], targets[i], ...)`` gives (same parameters); ``ik``
+    must offer ``solve_all`` (the closed-form solver). ``validity_checker`` is called once with all paths' states.
+    """
+    model = ik.model
+    start_q = np.asarray(start_q, dtype=float).reshape(-1, model.dof)
+    targets = np.asarray(targets, dtype=float).reshape(-1, 4, 4)
+    if len(start_q) != len(targets):
+        raise MotionInputError(f"got {len(start_q)} start states for {len(targets)} targets")
+    if not hasattr(ik, "solve_all"):
+        raise MotionInputError("compute_cartesian_paths needs a closed-form IK solver (one with solve_all)")
+    if not np.all(model.within_limits(start_q, tolerance=1e-9)):
+        raise MotionInputError("a start state lies outside the joint limits")
+    if not (math.isfinite(step_mm) and step_mm > 0.0) or not jump_threshold_rad > 0.0:
+        raise MotionInputError(f"step_mm and jump_threshold_rad must be positive, got {step_mm}, {jump_threshold_rad}")
+    n_paths = len(start_q)
+    if n_paths == 0:
+        empty = np.zeros(0)
+        return CartesianPaths(empty, np.zeros((0, model.dof)), np.zeros(1, dtype=np.int64), empty.astype(np.int64))
+    poses, pose_offsets = line_poses(model.fk(start_q), targets, step_mm * 1e-3, max_rotation_step_rad)
+    states, counts, codes = _walk(ik, poses, pose_offsets, start_q, float(jump_threshold_rad))
+    # states: every path's (count + 1) states in the rows pose_offsets[i] + i ... (one more row per path)
+    lengths = counts + 1
+    base = pose_offsets[:-1] + np.arange(n_paths)
+    if validity_checker is not None:
+        rows = np.repeat(base, lengths) + _ranks(lengths)
+        ok = np.asarray(validity_checker(states[rows]), dtype=bool)
+        if ok.shape != (len(rows),):
+            raise MotionInputError(f"validity_checker must return one bool per state, shape ({len(rows)},)")
+        bad_rank = np.where(ok, np.iinfo(np.int64).max, _ranks(lengths))
+        first_bad = np.minimum.reduceat(bad_rank, np.concatenate([[0], np.cumsum(lengths)[:-1]]))
+        cut = first_bad < lengths
+        lengths = np.where(cut, first_bad, lengths)
+        counts = np.where(cut, first_bad - 1, counts)
+        codes = np.where(cut, _INVALID, codes)
+    offsets = np.concatenate([[0], np.cumsum(lengths)])
+    kept = np.repeat(base, lengths) + _ranks(lengths)
+    fractions = np.maximum(counts, 0) / np.diff(pose_offsets)
+    return CartesianPaths(fractions.astype(float), states[kept], offsets, codes.astype(np.int64))
+
+
+def _walk(ik, poses, pose_offsets, start_q, jump):
+    """(states, counts, codes) as :func:`~agiprobot_measurement.motion.cartesian_kernels.follow_paths` gives
+    them: the paths the continuation (:func:`~agiprobot_measurement.motion.cartesian_kernels.track_paths`) settles
+    from it (a UR arm's closed-form solver), the others from every closed-form branch of every waypoint."""
+    model = ik.model
+    lower, upper = np.asarray(model.lower, dtype=np.float64), np.asarray(model.upper, dtype=np.float64)
+    n_paths = len(start_q)
+    if hasattr(ik, "shoulder_gaps"):
+        pre, axes, tip = model.fk_segments
+        states, counts, codes = track_paths(
+            np.ascontiguousarray(poses),
+            pose_offsets.astype(np.int64),
+            np.ascontiguousarray(start_q),
+            ik.shoulder_gaps(poses),
+            pre,
+            axes,
+            tip,
+            lower,
+            upper,
+            jump,
+            TRACK_MARGIN_RAD,
+        )
+        exact = np.flatnonzero(codes >= TRACK_EXACT)
+    else:
+        states = np.zeros((len(poses) + n_paths, model.dof))
+        counts, codes = np.zeros(n_paths, dtype=np.int64), np.zeros(n_paths, dtype=np.int64)
+        exact = np.arange(n_paths)
+    if exact.size == 0:
+        return states, counts, codes
+    sizes = np.diff(pose_offsets)[exact]
+    rows = np.repeat(pose_offsets[exact], sizes) + _ranks(sizes)
+    sub_offsets = np.concatenate([[0], np.cumsum(sizes)])
+    sub_poses = poses[rows]
+    solutions, valid = ik.solve_all(sub_poses, np.repeat(start_q[exact], sizes, axis=0))
+    solutions = np.where(valid[..., None], solutions, 0.0)
+    sub_states, sub_counts, sub_codes = follow_paths(
+        np.ascontiguousarray(solutions),
+        np.ascontiguousarray(valid),
+        sub_offsets.astype(np.int64),
+        np.ascontiguousarray(start_q[exact]),
+        jump,
+        lower,
+        upper,
+    )
+    lengths = sub_counts + 1
+    target = np.repeat(pose_offsets[exact] + exact, lengths) + _ranks(lengths)
+    source = np.repeat(sub_offsets[:-1] + np.arange(exact.size), lengths) + _ranks(lengths)
+    states[target] = sub_states[source]
+    counts[exact], codes[exact] = sub_counts, sub_codes
+    return states, counts, codes
+
+
+def _ranks(lengths: np.ndarray) -> np.ndarray:
+    """0, 1, ..., n_i - 1 for every n_i of ``lengths``, concatenated."""
+    total = int(lengths.sum())
+    starts = np.concatenate([[0], np.cumsum(lengths)[:-1]])
+    return np.arange(total) - np.repeat(starts, lengths)

@@ -1,0 +1,124 @@
+"""The collision checker's broad-phase geometry: segment distances, and its first stages compiled for large batches.
+
+Like :mod:`agiprobot_measurement.motion.kinematics_kernels`, this module owns the laziness of numba (compiled or
+loaded from its cache at the first call). :func:`sphere_candidates` gives the same candidates as the numpy code
+of :meth:`CollisionChecker._broad_phase <agiprobot_measurement.motion.collision.CollisionChecker>`'s first
+stage, without its (states x shapes x obstacles x 3) temporaries.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+__all__ = ["segment_distances", "sphere_candidates", "sphere_candidates_numpy"]
+
+#: segment lengths (squared, m^2) are floored at this, so degenerate segments work as points
+_EPS = 1e-12
+
+
+def sphere_candidates(centers, box_axes, box_center, box_half, bound, env_checked, pair_i, pair_j, reach2):
+    """(env (K, 3) rows [state, shape, obstacle], pairs (L, 2) rows [state, self-pair]), both in row-major order:
+    the robot shapes whose bounding sphere (``centers`` (N, S, 3) m, radii ``bound`` (S,)) meets an obstacle's box
+    (axes as rows ``box_axes`` (3 O, 3), centre coordinates along them ``box_center`` (3 O,), half extents
+    ``box_half`` (3 O,)) where ``env_checked`` (S, O) asks for it, and the self pairs (``pair_i``, ``pair_j`` (P,))
+    whose centres are closer than sqrt(``reach2`` (P,))."""
+    return _compiled()(
+        np.ascontiguousarray(centers, dtype=np.float64),
+        np.ascontiguousarray(box_axes, dtype=np.float64),
+        np.ascontiguousarray(box_center, dtype=np.float64),
+        np.ascontiguousarray(box_half, dtype=np.float64),
+        np.ascontiguousarray(bound, dtype=np.float64),
+        np.ascontiguousarray(env_checked, dtype=np.bool_),
+        np.ascontiguousarray(pair_i, dtype=np.int64),
+        np.ascontiguousarray(pair_j, dtype=np.int64),
+        np.ascontiguousarray(reach2, dtype=np.float64),
+    )
+
+
+def sphere_candidates_numpy(centers, box_axes, box_center, box_half, bound, env_checked, pair_i, pair_j, reach2):
+    """:func:`sphere_candidates` in numpy (no compilation: as fast for small batches)."""
+    n, n_obj = centers.shape[0], env_checked.shape[1]
+    env = np.zeros((0, 3), dtype=np.int64)
+    if n_obj:
+        offset = centers @ box_axes.T - box_center  # centres in box coordinates (N, S, 3 O)
+        apart = np.abs(offset) > box_half + bound[:, None]
+        env = np.argwhere(~apart.reshape(n, -1, n_obj, 3).any(axis=-1) & env_checked)
+    gap = centers[:, pair_i] - centers[:, pair_j]
+    pairs = np.argwhere(np.einsum("npi,npi->np", gap, gap) < reach2)
+    return env, pairs
+
+
+def segment_distances(p0, p1, q0, q1) -> np.ndarray:
+    """Distances between segments p0-p1 and q0-q1 (arrays (..., 3)); Ericson, Real-Time Collision Detection 5.1.9.
+
+    Degenerate segments (spheres) work as points: their squared lengths are floored at a tiny value, which
+    makes the general formulas reduce to the point cases.
+    """
+    d1, d2, r = p1 - p0, q1 - q0, p0 - q0
+    a = np.maximum((d1 * d1).sum(-1), _EPS)
+    e = np.maximum((d2 * d2).sum(-1), _EPS)
+    b, c, f = (d1 * d2).sum(-1), (d1 * r).sum(-1), (d2 * r).sum(-1)
+    denom = a * e - b * b
+    # parallel segments: any s works, 0 as in Ericson
+    s = np.where(denom > 1e-9 * a * e, (b * f - c * e) / np.maximum(denom, _EPS * _EPS), 0.0)
+    s = np.minimum(np.maximum(s, 0.0), 1.0)
+    t = (b * s + f) / e
+    clamped = np.minimum(np.maximum(t, 0.0), 1.0)
+    s = np.where(t != clamped, np.minimum(np.maximum((b * clamped - c) / a, 0.0), 1.0), s)
+    gap = r + d1 * s[..., None] - d2 * clamped[..., None]
+    return np.sqrt((gap * gap).sum(-1))
+
+
+@functools.cache
+def _compiled():
+    import numba  # lazily, see the module docstring
+
+    return numba.njit(cache=True)(_sphere_candidates)
+
+
+def _sphere_candidates(
+    centers, box_axes, box_center, box_half, bound, env_checked, pair_i, pair_j, reach2
+):  # pragma: no cover - compiled
+    n, n_shapes, _ = centers.shape
+    n_obj = env_checked.shape[1]
+    n_pairs = pair_i.shape[0]
+    env = np.empty((max(n * 4, 16), 3), dtype=np.int64)
+    k = 0
+    pairs = np.empty((max(n * 4, 16), 2), dtype=np.int64)
+    p = 0
+    for state in range(n):
+        for s in range(n_shapes):
+            cx, cy, cz = centers[state, s, 0], centers[state, s, 1], centers[state, s, 2]
+            for o in range(n_obj):
+                if not env_checked[s, o]:
+                    continue
+                apart = False
+                for a in range(3):
+                    row = 3 * o + a
+                    local = cx * box_axes[row, 0] + cy * box_axes[row, 1] + cz * box_axes[row, 2] - box_center[row]
+                    if abs(local) > box_half[row] + bound[s]:
+                        apart = True
+                        break
+                if apart:
+                    continue
+                if k == env.shape[0]:
+                    grown = np.empty((2 * k, 3), dtype=np.int64)
+                    grown[:k] = env
+                    env = grown
+                env[k, 0], env[k, 1], env[k, 2] = state, s, o
+                k += 1
+        for q in range(n_pairs):
+            a, b = pair_i[q], pair_j[q]
+            dx = centers[state, a, 0] - centers[state, b, 0]
+            dy = centers[state, a, 1] - centers[state, b, 1]
+            dz = centers[state, a, 2] - centers[state, b, 2]
+            if dx * dx + dy * dy + dz * dz < reach2[q]:
+                if p == pairs.shape[0]:
+                    grown2 = np.empty((2 * p, 2), dtype=np.int64)
+                    grown2[:p] = pairs
+                    pairs = grown2
+                pairs[p, 0], pairs[p, 1] = state, q
+                p += 1
+    return env[:k].copy(), pairs[:p].copy()

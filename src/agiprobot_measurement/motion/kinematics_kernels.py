@@ -1,0 +1,90 @@
+"""Compiled forward kinematics of a serial chain for large batches of joint states.
+
+Like :mod:`agiprobot_measurement.motion.cartesian_kernels`, this module owns the laziness of numba: the kernel is
+compiled (or loaded from numba's cache, about 0.6 s) at the first call, so only processes that pose many states at
+once (the IK's refinement and the collision checks of batched scan-line verification) pay for it. Below
+:data:`COMPILED_FROM_STATES` states the numpy code of the callers is as fast.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+__all__ = ["COMPILED_FROM_STATES", "chain_frames"]
+
+#: batches of at least this many joint states go through the compiled kernel
+COMPILED_FROM_STATES = 512
+
+
+def chain_frames(q, pre, axes, tip):
+    """(frames (N, dof, 4, 4): each joint's frame after its rotation, tips (N, 4, 4): the last frame times ``tip``)
+    for joint states ``q`` (N, dof) rad, the fixed transforms ``pre`` (dof, 4, 4) from the previous moving frame to
+    each joint's frame, the joints' unit ``axes`` (dof, 3) and the last moving frame -> tip transform (4, 4)."""
+    return _compiled()(
+        np.ascontiguousarray(q, dtype=np.float64),
+        np.ascontiguousarray(pre, dtype=np.float64),
+        np.ascontiguousarray(axes, dtype=np.float64),
+        np.ascontiguousarray(tip, dtype=np.float64),
+    )
+
+
+@functools.cache
+def _compiled():
+    import numba  # lazily, see the module docstring
+
+    return numba.njit(cache=True)(_chain_frames)
+
+
+def _chain_frames(q, pre, axes, tip):  # pragma: no cover - compiled
+    n, dof = q.shape
+    frames = np.zeros((n, dof, 4, 4))
+    tips = np.zeros((n, 4, 4))
+    rot = np.zeros((3, 3))
+    cur = np.zeros((4, 4))
+    nxt = np.zeros((4, 4))
+    for i in range(n):
+        for r in range(4):
+            for c in range(4):
+                cur[r, c] = 1.0 if r == c else 0.0
+        for k in range(dof):
+            x, y, z = axes[k, 0], axes[k, 1], axes[k, 2]
+            s, c1 = np.sin(q[i, k]), 1.0 - np.cos(q[i, k])
+            # Rodrigues: I + s K + (1 - c) K^2 with K the axis' skew matrix
+            rot[0, 0] = 1.0 - c1 * (y * y + z * z)
+            rot[0, 1] = -s * z + c1 * x * y
+            rot[0, 2] = s * y + c1 * x * z
+            rot[1, 0] = s * z + c1 * x * y
+            rot[1, 1] = 1.0 - c1 * (x * x + z * z)
+            rot[1, 2] = -s * x + c1 * y * z
+            rot[2, 0] = -s * y + c1 * x * z
+            rot[2, 1] = s * x + c1 * y * z
+            rot[2, 2] = 1.0 - c1 * (x * x + y * y)
+            # nxt = cur @ pre[k] @ [rot 0; 0 1]
+            for r in range(3):
+                for c in range(3):
+                    acc = 0.0
+                    for m in range(3):
+                        pm = 0.0
+                        for j in range(3):
+                            pm += pre[k, m, j] * rot[j, c]
+                        acc += cur[r, m] * pm
+                    nxt[r, c] = acc
+                t = cur[r, 3]
+                for m in range(3):
+                    t += cur[r, m] * pre[k, m, 3]
+                nxt[r, 3] = t
+            nxt[3, 0], nxt[3, 1], nxt[3, 2], nxt[3, 3] = 0.0, 0.0, 0.0, 1.0
+            for r in range(4):
+                for c in range(4):
+                    cur[r, c] = nxt[r, c]
+                    frames[i, k, r, c] = nxt[r, c]
+        for r in range(3):
+            for c in range(4):
+                acc = cur[r, 3] if c == 3 else 0.0
+                for m in range(3):
+                    acc += cur[r, m] * tip[m, c]
+                tips[i, r, c] = acc
+        tips[i, 3, 3] = 1.0
+    return frames, tips
