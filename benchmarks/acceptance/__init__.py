@@ -211,7 +211,9 @@ def run_phoxi(spec: AcceptanceSpec, error_model: ErrorModel, positions: int | No
     """Rows of one PhoXi's test, with the averaged-plane row (see :func:`judge`)."""
     rig = _PhoxiRig(spec, error_model, seed)
     rows = _run(spec, rig, positions)
-    rows.append(_average_plane(rig, int(spec.settings.get("average_frames", 16))))
+    frames = int(spec.settings.get("average_frames", 16))
+    if frames > 0:
+        rows.append(_average_plane(rig, frames))
     return {"scanner": spec.name, "rows": rows}
 
 

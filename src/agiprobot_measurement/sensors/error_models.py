@@ -470,8 +470,9 @@ def value_noise(points_mm: np.ndarray, cell_mm: float, seed: int) -> np.ndarray:
         value = (h & 0xFFFFFF).astype(float) / float(0xFFFFFF) * 2.0 - 1.0
         weight = np.prod(np.where(offset == 1, frac, 1.0 - frac), axis=1)
         out += weight * value
-    # trilinear value noise of uniform(-1, 1) corners with smoothstep weights has variance ~0.1: normalise
-    return out / 0.316
+    # value noise of uniform(-1, 1) corners with smoothstep weights has a standard deviation of 0.37 over space
+    # (measured on 200,000 random points; 0.37-0.43 on a plane through lattice nodes): normalise to about 1
+    return out / 0.37
 
 
 class LaserErrors(_DeviceErrors):
