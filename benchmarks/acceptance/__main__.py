@@ -59,9 +59,9 @@ def main(argv=None) -> int:
             result["checks"] += multi["checks"]
             result["multi_sweep_seconds"] = time.perf_counter() - start
         results.append(result)
-        print(f"\n## {name} ({spec.kind}), {result['seconds']:.1f} s", end="")
+        print(f"\n## {name} ({spec.kind}), {result['seconds']:.1f} s wall, {result['cpu_seconds']:.1f} s CPU", end="")
         if "multi_sweep_seconds" in result:
-            print(f" + multi-sweep {result['multi_sweep_seconds']:.1f} s", end="")
+            print(f" + multi-sweep {result['multi_sweep_seconds']:.1f} s wall", end="")
         print("\n")
         print(table(result["rows"]))
         print("\nsummary: " + ", ".join(f"{k} {v:.4f}" for k, v in result["summary"].items()))
