@@ -233,16 +233,19 @@ def reconstruct_depth(nominal_rays, true_points, nominal_projector, true_project
     """Structured-light reconstruction: depth (same unit as the points, camera z) at which each nominal pixel ray
     meets the nominal projector's plane of the projector column that the true projector lit ``true_points`` with
     (camera frame; rays z = 1; projector poses camera <- projector, metres or the points' unit)."""
+    # written out per component: BLAS matmuls of (N, 3) x (3, 3) cost far more than they bring
     rt, tt = true_projector[:3, :3], true_projector[:3, 3]
-    local = (true_points - tt) @ rt  # projector-frame coordinates
-    column = local[:, 0] / local[:, 2]
+    px, py, pz = (true_points[:, k] - tt[k] for k in range(3))
+    x_p = px * rt[0, 0] + py * rt[1, 0] + pz * rt[2, 0]  # projector-frame coordinates (R^T (p - t))
+    z_p = px * rt[0, 2] + py * rt[1, 2] + pz * rt[2, 2]
+    column = x_p / z_p
     rn, tn = nominal_projector[:3, :3], nominal_projector[:3, 3]
-    ray_p = nominal_rays @ rn  # R^T r
+    rx, ry, rz = (nominal_rays[:, k] for k in range(3))
+    ray_x = rx * rn[0, 0] + ry * rn[1, 0] + rz * rn[2, 0]  # R^T r
+    ray_z = rx * rn[0, 2] + ry * rn[1, 2] + rz * rn[2, 2]
     origin_p = -(tn @ rn)  # R^T (0 - t)
     # (origin_p + lam ray_p) . (1, 0, -column) = 0
-    num = origin_p[0] - column * origin_p[2]
-    den = ray_p[:, 0] - column * ray_p[:, 2]
-    return -num / den
+    return -(origin_p[0] - column * origin_p[2]) / (ray_x - column * ray_z)
 
 
 def _phoxi_calibration(model, serial: str, settings: dict) -> PhoxiCalibration:
