@@ -19,6 +19,7 @@ from agiprobot_measurement.motion.ik import make_ik_solver
 from agiprobot_measurement.motion.kinematics import KinematicModel, TrueKinematics, load_kinematics_correction
 from agiprobot_measurement.sensors.acceptance import AcceptanceSpec, evaluate_sphere
 from agiprobot_measurement.sensors.error_models import ErrorModel, LaserErrors
+from agiprobot_measurement.sensors.errors import SensorInputError, SensorStateError
 from agiprobot_measurement.sensors.laser_line.model import SensorModel
 from agiprobot_measurement.sensors.laser_line.simulator import LaserLineScannerSimulator, pose_chain_poses
 from agiprobot_measurement.station import Station, load_scanner_config
@@ -46,7 +47,7 @@ def run_multi_sweep(spec: AcceptanceSpec, error_model: ErrorModel, poses: int | 
     settings = spec.settings
     test = spec.multi_sweep
     if not test:
-        raise RuntimeError(f"scanner {spec.name}: no multi_sweep test configured")
+        raise SensorInputError(f"scanner {spec.name}: no multi_sweep test configured")
     station = Station.load()
     kin = KinematicModel.from_station(station, tip_frame="tool0", base_frame="base")
     ik = make_ik_solver(kin, station.robot)
@@ -105,7 +106,7 @@ def run_multi_sweep(spec: AcceptanceSpec, error_model: ErrorModel, poses: int | 
             ends[:, :3, 3] /= 1000.0
             q_ends, ok = ik.solve_nearest(ends, np.vstack([SEED_Q, SEED_Q]))
             if not np.all(ok):
-                raise RuntimeError(f"multi-sweep pose {i}: no IK solution for a sweep end")
+                raise SensorStateError(f"multi-sweep pose {i}: no IK solution for a sweep end")
             share = np.linspace(0.0, 1.0, len(xs))[:, None]
             q = q_ends[0] * (1.0 - share) + q_ends[1] * share
             nominal = kin.fk(q)
@@ -129,3 +130,37 @@ def run_multi_sweep(spec: AcceptanceSpec, error_model: ErrorModel, poses: int | 
     checks = [{"name": "multi-sweep max |SD| (mm)", "value": summary["SD_maxabs"], "low": low, "high": high,
                "holds": bool(low <= summary["SD_maxabs"] <= high)}]  # fmt: skip
     return {"rows": rows, "summary": summary, "checks": checks}
+
+
+def main(argv=None) -> int:
+    """``python -m benchmarks.acceptance.multi_sweep [--residual-scales S ...]``: the multi-sweep SD against the share of
+    the true robot's deviation left after kinematic calibration (the rest of the pose chain as configured)."""
+    import argparse
+
+    from agiprobot_measurement.sensors.acceptance import load_acceptance_specs
+    from agiprobot_measurement.sensors.error_models import load_error_model
+
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.acceptance.multi_sweep", description=main.__doc__)
+    parser.add_argument("--error-model", default="realistic")
+    parser.add_argument("--residual-scales", type=float, nargs="*", default=None)
+    parser.add_argument("--poses", type=int, default=None)
+    args = parser.parse_args(argv)
+    spec = load_acceptance_specs()["laser"]
+    model = load_error_model(args.error_model)
+    chain = model.laser.get("pose_chain")
+    scales = args.residual_scales if args.residual_scales and chain else [None]
+    print("| robot residual scale | max abs SD (mm) | RMS SD (mm) | SD per pose (mm) |")
+    print("|---|---|---|---|")
+    for scale in scales:
+        varied = (
+            model if scale is None else model.with_blocks("laser", pose_chain={**chain, "robot_residual_scale": scale})
+        )
+        result = run_multi_sweep(spec, varied, args.poses)
+        per_pose = " ".join(f"{row['SD']:+.3f}" for row in result["rows"])
+        label = "configured" if scale is None else f"{scale:g}"
+        print(f"| {label} | {result['summary']['SD_maxabs']:.3f} | {result['summary']['SD_rms']:.3f} | {per_pose} |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

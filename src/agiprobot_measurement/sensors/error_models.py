@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 import zlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -150,14 +150,13 @@ class ErrorModel:
 
     def with_blocks(self, scanner: str, **blocks) -> ErrorModel:
         """A copy with some blocks of ``scanner`` ('phoxi' or 'laser') replaced (None switches a block off)."""
-        current = dict(getattr(self, scanner))
-        current.update(blocks)
-        return ErrorModel(
-            f"{self.name}+", **{**self._fields(), scanner: current}, laser_serial=self.laser_serial, source=self.source
-        )
-
-    def _fields(self) -> dict:
-        return {"phoxi": self.phoxi, "laser": self.laser}
+        if scanner not in ("phoxi", "laser"):
+            raise ConfigError(f"with_blocks: scanner must be 'phoxi' or 'laser', got {scanner!r}")
+        known = _PHOXI_BLOCKS if scanner == "phoxi" else _LASER_BLOCKS
+        unknown = set(blocks) - set(known)
+        if unknown:
+            raise ConfigError(f"with_blocks: unknown {scanner} block(s) {sorted(unknown)}")
+        return replace(self, name=f"{self.name}+", **{scanner: {**getattr(self, scanner), **blocks}})
 
 
 def load_error_model(name_or_path: str | Path = DEFAULT_ERROR_MODEL) -> ErrorModel:
