@@ -5,7 +5,8 @@ A configuration holds switchable blocks per scanner (see ``config/error_models/r
 
 * PhoXi: ``calibration`` (render with the true camera/projector, reconstruct with the nominal ones, scaled to the
   maker's calibration accuracy), ``fixed_pattern`` (a static low-pass noise field per device), ``material``
-  (dark / saturated points invalid, specular share per scene object), ``edges`` (mixed pixels at depth jumps);
+  (dark / saturated points invalid, specular share per scene object), ``edges`` (mixed pixels at depth jumps),
+  ``interreflection`` (single bounce off specular surfaces: wrongly decoded points in concave regions);
 * laser: ``calibration`` (true vs nominal triangulation angle, baseline, detector and lateral scale, scaled to a
   linearity envelope), ``noise`` (measurement noise apart from the planning ``u``: depth and incidence law,
   static speckle and temporal parts), ``material``, ``edges`` and ``pose_chain`` (true robot, hand-eye, latency).
@@ -99,6 +100,7 @@ _PHOXI_BLOCKS = {
         "specular_share": {"default": 0.0},
     },
     "edges": {"jump_rel": 0.01, "probability": 0.5},
+    "interreflection": {"strength": 1.0},
 }
 _LASER_BLOCKS = {
     "calibration": {
@@ -326,6 +328,7 @@ class PhoxiErrors(_DeviceErrors):
         cal = settings.get("calibration")
         self.calibration = _phoxi_calibration(model, self.serial, cal) if cal else None
         self.fixed_pattern = settings.get("fixed_pattern")
+        self.interreflection = settings.get("interreflection") if self.material else None
         self._fields: dict[tuple[int, int], np.ndarray] = {}
         self._rays: dict[tuple[int, int], np.ndarray] = {}
 

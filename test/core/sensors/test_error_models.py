@@ -257,3 +257,28 @@ def test_plane_fit_recovers_a_plane():
     _, normal, residual = fit_plane(points)
     assert np.abs(residual).max() < 1e-9
     assert abs(normal @ np.array([-0.1, 0.0, 1.0]) / math.hypot(0.1, 1.0)) == pytest.approx(1.0)
+
+
+def test_phoxi_interreflection_off_a_mirror_corrupts_the_points_it_lights(realistic):
+    model = _small()
+    # a diffuse back wall and, in front of it on the projector's side, a plate turned 45 deg towards the camera's left:
+    # projector light mirrored by the plate lands on the wall left of it, where the camera sees the wall
+    plate = SceneGeometry.from_trimesh(primitive_mesh("box", [0.1, 0.2, 0.004]), "plate", 0.8)
+    turn = np.eye(4)
+    c = math.sqrt(0.5)
+    turn[:3, :3] = np.array([[c, 0.0, -c], [0.0, 1.0, 0.0], [c, 0.0, c]])  # normal (z) to (-1, 0, -1) / sqrt 2
+    turn[:3, 3] = [0.05, 0.0, 0.40]
+    scene = SceneGeometry.concatenate([_wall(0.47), plate.transformed(turn)])
+    settings = ScanSettings(resolution=1, noise=True, seed=2)
+    depths = {}
+    for share in (0.0, 1.0):
+        material = {**realistic.phoxi["material"], "specular_share": {"default": 0.0, "plate": share}}
+        model_errors = realistic.with_blocks(
+            "phoxi", calibration=None, fixed_pattern=None, edges=None, material=material
+        )
+        errors = PhoxiErrors.create(model, "x", model_errors)
+        depths[share] = StructuredLightScanner(model, errors=errors).capture(scene, np.eye(4), settings).depth_mm
+    wall = depths[0.0] > 465.0
+    # wall points decoded with the plate's pattern: triangulated off the wall, or dropped when that lies out of range
+    hit = wall & ((depths[1.0] == 0.0) | (np.abs(depths[1.0] - depths[0.0]) > 2.0))
+    assert 20 < hit.sum() < 0.5 * wall.sum()

@@ -32,7 +32,8 @@ Error models (``errors``: :class:`~agiprobot_measurement.sensors.error_models.Ph
     distortion) and the depth is reconstructed with the nominal camera and projector from the projector column
     the true projector lit; fixed pattern: ``share`` of sigma_z comes from a static per-device field; material:
     points whose projector signal is below ``min_signal_counts`` or saturates (specular glints) are invalid;
-    edges: mixed pixels next to depth jumps. See ``docs/sensor-errors.md``.
+    edges: mixed pixels next to depth jumps; interreflection: a pixel seeing light that a specular surface mirrored
+    onto its point decodes the mirror point's pattern column (a biased depth). See ``docs/sensor-errors.md``.
 
 Texture
     Lambertian shading of the projector light: ``full_scale * exposure_gain * albedo * (cos(theta_p) *
@@ -259,6 +260,7 @@ class _FrameJob:
     cast_rays: np.ndarray | None = None  # (N, 3) the true camera's rays when it differs from the nominal one
     pattern: np.ndarray | None = None  # (N,) the device's fixed-pattern field
     specular: np.ndarray | None = None  # (F,) specular share per face
+    bounces: list | None = None  # per chunk (points, mirror directions, shares) of lit specular points
 
 
 class StructuredLightScanner:
@@ -317,6 +319,8 @@ class StructuredLightScanner:
             job.pattern = errors.pattern_field(intrinsics.width, intrinsics.height)
             if errors.material is not None:
                 job.specular = errors.specular_shares(geometry.names)[np.asarray(geometry.owner, dtype=np.int64)]
+                if errors.interreflection is not None and settings.noise and job.specular.any():
+                    job.bounces = []
         chunks = [slice(start, min(start + CHUNK_PIXELS, n)) for start in range(0, n, CHUNK_PIXELS)]
         if self.workers > 1 and len(chunks) > 1:
             if self._pool is None:
@@ -333,6 +337,8 @@ class StructuredLightScanner:
             rng = np.random.default_rng([int(settings.seed), int(frame_index), 1 << 30])
             jump = np.float32(errors.edges["jump_rel"]) * depth
             job.depth_mm = mix_depth_edges(depth, depth > 0.0, jump, errors.edges["probability"], rng).reshape(-1)
+        if job.bounces:
+            self._interreflect(job, intrinsics)
         return Frame(
             index=int(frame_index),
             intrinsics=intrinsics,
@@ -435,12 +441,58 @@ class StructuredLightScanner:
                 share = np.float32(self.errors.fixed_pattern["share"])
                 temporal = rng.standard_normal(len(rays), dtype=np.float32) * np.float32(math.sqrt(1.0 - share**2))
                 measured += (temporal + share * job.pattern[chunk]) * sigma
+        if job.bounces is not None:
+            share = job.specular[face]
+            bounce = lit & (share > 0.0)
+            if bounce.any():
+                incoming = -to_projector[bounce] / projector_distance[bounce, None]
+                n_b = normal[bounce]
+                mirror = incoming - 2.0 * np.einsum("ij,ij->i", incoming, n_b)[:, None] * n_b
+                job.bounces.append((point[bounce], mirror, share[bounce]))
         normal *= valid[:, None]
         job.depth_mm[chunk] = measured
         job.normals_out[chunk] = normal
         job.confidence[chunk] = sigma
         job.texture[chunk] = texture
         return int(hit.sum()), int(lit.sum()), int(valid.sum())
+
+    def _interreflect(self, job: _FrameJob, intrinsics) -> None:
+        """Single-bounce interreflection: the projector light that a specular point A mirrors onto a surface point B
+        carries A's pattern column; the pixel that sees B then decodes that column (with probability A's specular
+        share times ``strength``) and triangulates a wrong depth: its ray against A's projector plane."""
+        points = np.concatenate([b[0] for b in job.bounces]).astype(float)
+        mirrors = np.concatenate([b[1] for b in job.bounces]).astype(float)
+        shares = np.concatenate([b[2] for b in job.bounces]).astype(float)
+        rotation = job.rotation.astype(float)
+        start = points + 1e-4 * mirrors  # leave A's surface (m)
+        distance, faces = job.caster.first_hit(start @ rotation.T + job.origin, mirrors @ rotation.T)
+        landed = (faces >= 0) & np.isfinite(distance)
+        if not landed.any():
+            return
+        a, b = points[landed], start[landed] + mirrors[landed] * distance[landed, None].astype(float)
+        share = shares[landed]
+        in_front = b[:, 2] > 1e-6
+        a, b, share = a[in_front], b[in_front], share[in_front]
+        pixel = np.rint(intrinsics.project(b)).astype(np.int64)
+        inside = (pixel[:, 0] >= 0) & (pixel[:, 0] < intrinsics.width) & (pixel[:, 1] >= 0)
+        inside &= pixel[:, 1] < intrinsics.height
+        a, b, share, pixel = a[inside], b[inside], share[inside], pixel[inside]
+        index = pixel[:, 1] * intrinsics.width + pixel[:, 0]
+        depth = job.depth_mm[index]
+        # the pixel must see B itself (not something in front of it)
+        seen = (depth > 0.0) & (np.abs(depth - 1000.0 * b[:, 2]) < np.maximum(1.0, 10.0 * job.confidence[index]))
+        settings = job.settings
+        rng = np.random.default_rng([int(settings.seed), job.frame_index, 1 << 29])
+        hit = seen & (rng.random(len(seen)) < np.minimum(share * self.errors.interreflection["strength"], 1.0))
+        if not hit.any():
+            return
+        calibration = self.errors.calibration
+        true_projector = self.projector if calibration is None else calibration.projector_pose
+        wrong = reconstruct_depth(job.rays[index[hit]].astype(float), a[hit], self.projector, true_projector)
+        # a depth outside the scanning range is an inconsistent code: the point is dropped rather than moved
+        wrong_mm = 1000.0 * np.where(np.isfinite(wrong), wrong, 0.0)
+        low, high = self.model.scanning_range_mm
+        job.depth_mm[index[hit]] = np.where((wrong_mm >= low) & (wrong_mm <= high), wrong_mm, 0.0).astype(np.float32)
 
     def _signal_ok(self, job, material, face, normal, point, to_projector, projector_distance, albedo):
         """Material gate: the projector signal (camera counts) lies between the dark limit and saturation."""
