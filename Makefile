@@ -7,7 +7,7 @@ GUI ?= 0
 
 BENCH_OUT ?= $(ROOT)/bench_results
 BENCH_ARGS ?=
-BENCHES := planning parts part-family scan-lines scale set-cover metrology motion kinematics collision nbv3d nbv-map nbv2d mild calibration phoxi scanner real-cell
+BENCHES := planning parts part-family scan-lines scale set-cover metrology motion kinematics collision nbv3d nbv-map nbv2d mild calibration phoxi scanner real-cell acceptance
 
 .PHONY: setup demo demo-station test lint format pytest rostest bench $(addprefix bench-,$(BENCHES)) fuzz clean
 
@@ -100,6 +100,9 @@ bench-scanner: setup
 
 bench-real-cell: setup
 	$(call run_bench,real-cell,benchmarks.reliability.real_cell,)
+
+bench-acceptance: setup
+	$(call run_bench,acceptance,benchmarks.acceptance,--json "$(BENCH_OUT)/acceptance.json")
 
 # The reliability probe replayed (minutes; not part of `make test`): hostile inputs to every command-line tool and
 # node, one row each, holds / DEFECT; the table goes to bench_results/fuzz.txt, the rows to fuzz.json.

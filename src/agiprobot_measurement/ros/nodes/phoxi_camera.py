@@ -26,7 +26,8 @@ Parameters: the driver's (scanner_id: "" starts disconnected, a listed id connec
   scanner's own housing, which lens and projector sit on and cannot see; "" renders every link), ~output_dir
   (where relative file names resolve; "" = the node's working directory, as the driver's paths),
   ~allowed_save_dirs (list, or a string of paths separated by spaces or colons: where absolute names may also
-  point; default the working directory, ROS_HOME and /tmp), ~frame_buffer_size, ~noise_seed, ~models
+  point; default the working directory, ROS_HOME and /tmp), ~frame_buffer_size, ~noise_seed, ~error_model
+  (realistic: config/error_models/<name>.yaml, drawn per scanner hw_identification; ideal = noise model only), ~models
   (config/phoxi_models.yaml), ~devices (the scanners listed, default the models file's ``devices``), ~pixel_step
   (1; n > 1: every n-th pixel in both directions, a low-resolution camera with the same field of view that renders
   n^2 times faster, for tests), ~free_run_rate_hz (1.0: frames per second in free run), ~tf_timeout_s (0.5, for the
@@ -112,6 +113,7 @@ from agiprobot_measurement.ros import phoxi_messages
 from agiprobot_measurement.ros.conversions import transform_stamped, transform_to_matrix
 from agiprobot_measurement.ros.node import run_node
 from agiprobot_measurement.ros.params import file_param, flag, has_param, param, vector_param
+from agiprobot_measurement.sensors.error_models import DEFAULT_ERROR_MODEL, load_error_model
 from agiprobot_measurement.sensors.phoxi import reconfigure as phoxi_config
 from agiprobot_measurement.sensors.phoxi.device import (
     API_VERSION,
@@ -229,6 +231,7 @@ class PhoxiCameraNode:
             frame_buffer_size=param("~frame_buffer_size", 3, whole),
             allowed_dirs=_allowed_save_dirs(param("~allowed_save_dirs", "")),
             scanners=scanners,
+            error_model=load_error_model(param("~error_model", DEFAULT_ERROR_MODEL)),
         )
         self.noise_seed = param("~noise_seed", 0, whole)
         # the configuration as the driver starts it: the cfg's defaults overridden by the node's parameters; the

@@ -20,7 +20,10 @@ Parameters (the driver's): ~resolution (-1 = highest), ~serial, ~frame_id (scanc
 sensor's timestamp and are +Inf).
 Parameters (the simulator's): ~scanner (config/laser_scanner.yaml), ~world_frame (world), ~emitter_frame
 (laser_emitter_frame), ~profile_rate_hz (the scanner config's), ~stamp_latency_s (0.0), ~noise_scale (1.0),
-~seed (0).
+~seed (0), ~error_model (realistic: config/error_models/<name>.yaml; ideal = the planning model's noise only,
+scaled by ~noise_scale). With an error model the head's calibration error, measurement noise, material and edge
+effects apply, and its hand-eye error: profiles are cast from the tf pose times that error and reported at the tf
+pose (docs/sensor-errors.md).
 """
 
 from __future__ import annotations
@@ -52,6 +55,7 @@ from agiprobot_measurement.planning.part_loading import PartLoadError, load_part
 from agiprobot_measurement.ros.conversions import transform_to_matrix
 from agiprobot_measurement.ros.node import run_node
 from agiprobot_measurement.ros.params import Param, param, read_params, text
+from agiprobot_measurement.sensors.error_models import DEFAULT_ERROR_MODEL, LaserErrors, load_error_model
 from agiprobot_measurement.sensors.laser_line.model import SensorModel
 from agiprobot_measurement.sensors.laser_line.scancontrol import (
     GENERAL_FUNCTION_OK,
@@ -108,6 +112,7 @@ class ScanControlDriverSim:
                 Param("~stamp_latency_s", 0.0, number),
                 Param("~noise_scale", 1.0, number),
                 Param("~seed", 0, whole),
+                Param("~error_model", DEFAULT_ERROR_MODEL, text),
             )
         )
         self.frame_id = settings.frame_id
@@ -122,9 +127,15 @@ class ScanControlDriverSim:
             measuring_range_m=(model.minimum_standoff / 1000.0, model.maximum_standoff / 1000.0),
         )
         self.device.select_resolution(settings.resolution)
+        errors = LaserErrors.create(model, load_error_model(settings.error_model), settings.serial or None)
         self.simulator = LaserLineScannerSimulator(
-            model, points_per_profile=self.device.resolution, seed=settings.seed, noise_scale=settings.noise_scale
+            model,
+            points_per_profile=self.device.resolution,
+            seed=settings.seed,
+            noise_scale=settings.noise_scale,
+            errors=errors,
         )
+        self.hand_eye_error = errors.hand_eye_error if errors is not None else None
         self.has_target = False
         self.lock = threading.Lock()
         self.next_exposure: rospy.Time | None = None
@@ -243,13 +254,19 @@ class ScanControlDriverSim:
                 self.next_exposure += period
             if not poses or self.publisher.get_num_connections() == 0:
                 return  # nobody listens: the sensor runs on, nothing to compute
-            profiles = self.simulator.profiles(np.array(poses)) if self.has_target else [None] * len(poses)
+            profiles = self._profiles(np.array(poses)) if self.has_target else [None] * len(poses)
             clouds = [
                 sensor_frame_profile(profile, pose @ sensor_in_emitter, self.device)
                 for profile, pose in zip(profiles, poses, strict=True)
             ]
         for exposure, cloud in zip(exposures, clouds, strict=True):
             self.publisher.publish(profile_cloud(cloud, Header(stamp=exposure + self.latency, frame_id=self.frame_id)))
+
+    def _profiles(self, poses: np.ndarray):
+        """Profiles at the tf poses; with a hand-eye error cast from where the head really is, reported at tf."""
+        if self.hand_eye_error is None:
+            return self.simulator.profiles(poses)
+        return self.simulator.profiles(poses @ self.hand_eye_error, poses)
 
 
 def main():

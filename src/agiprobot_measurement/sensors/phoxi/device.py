@@ -40,6 +40,7 @@ from agiprobot_measurement.common.files import FileRoot, PathPolicyError
 from agiprobot_measurement.common.geometry import look_at, matrix_to_rpy
 from agiprobot_measurement.common.limits import excerpt
 from agiprobot_measurement.errors import InputError
+from agiprobot_measurement.sensors.error_models import ErrorModel, PhoxiErrors
 from agiprobot_measurement.sensors.phoxi import reconfigure as phoxi_config
 from agiprobot_measurement.sensors.phoxi.models import SIMULATED_SCANNER_ID, ScannerModel, SimulatedScanner
 from agiprobot_measurement.sensors.phoxi.point_cloud_io import (
@@ -332,6 +333,7 @@ class PhoxiDevice:
         allowed_dirs: Iterable[str | Path] = (),
         scanners: Iterable[SimulatedScanner] | None = None,
         environ: Mapping[str, str] | None = None,
+        error_model: ErrorModel | None = None,
     ):
         if frame_buffer_size < 1:
             raise ConfigError("frame_buffer_size must be at least 1")
@@ -348,6 +350,8 @@ class PhoxiDevice:
         self.settings = settings or ScanSettings()
         self.current: SimulatedScanner | None = None
         self._scanner_optics: dict[str, StructuredLightScanner] = {}
+        #: the error model each scanner's errors are drawn from (per hw_identification); None = noise model only
+        self.error_model = error_model
         self.acquiring = False
         self.trigger_mode = TRIGGER_SOFTWARE
         self.coordinate_space = CAMERA_SPACE
@@ -459,9 +463,11 @@ class PhoxiDevice:
             parts.append(self.robot.posed(link_poses))
         geometry = SceneGeometry.concatenate(parts)
         index = self.next_index
-        optics = self._scanner_optics.get(self.model.name)
+        key = self.current.hw_identification
+        optics = self._scanner_optics.get(key)
         if optics is None or optics.model is not self.model:
-            optics = self._scanner_optics[self.model.name] = StructuredLightScanner(self.model)
+            errors = PhoxiErrors.create(self.model, key, self.error_model)
+            optics = self._scanner_optics[key] = StructuredLightScanner(self.model, errors=errors)
         frame = optics.capture(geometry, camera_pose, self.settings, index, RayCaster(geometry))
         frame.coordinate_space = self.coordinate_space
         frame.output_transform = self.output_transform().copy()

@@ -27,6 +27,14 @@ Noise model (seeded by ``ScanSettings.seed`` and the frame index)
     the square root is shot noise (less light on a tilted or dark surface, more with longer or repeated exposure).
     The confidence map is this sigma_z in mm, so it follows the noise point by point.
 
+Error models (``errors``: :class:`~agiprobot_measurement.sensors.error_models.PhoxiErrors`, None = none)
+    calibration: the rays are cast from the device's true camera (focal scale, principal point, residual
+    distortion) and the depth is reconstructed with the nominal camera and projector from the projector column
+    the true projector lit; fixed pattern: ``share`` of sigma_z comes from a static per-device field; material:
+    points whose projector signal is below ``min_signal_counts`` or saturates (specular glints) are invalid;
+    edges: mixed pixels next to depth jumps; interreflection: a pixel seeing light that a specular surface mirrored
+    onto its point decodes the mirror point's pattern column (a biased depth). See ``docs/sensor-errors.md``.
+
 Texture
     Lambertian shading of the projector light: ``full_scale * exposure_gain * albedo * (cos(theta_p) *
     (sweet_spot / r_p)^2 [lit] + ambient * cos(theta_c))``, clipped at the camera's saturation; pixels whose
@@ -46,6 +54,7 @@ from functools import lru_cache
 import numpy as np
 
 from agiprobot_measurement.errors import InputError
+from agiprobot_measurement.sensors.error_models import PhoxiErrors, mix_depth_edges, reconstruct_depth
 
 # Scanner models and scene geometry live in their own modules; the names the calibration simulation, its tests and
 # tools import from here stay importable (re-exported in __all__).
@@ -248,6 +257,10 @@ class _FrameJob:
     normals_out: np.ndarray
     confidence: np.ndarray
     texture: np.ndarray
+    cast_rays: np.ndarray | None = None  # (N, 3) the true camera's rays when it differs from the nominal one
+    pattern: np.ndarray | None = None  # (N,) the device's fixed-pattern field
+    specular: np.ndarray | None = None  # (F,) specular share per face
+    bounces: list | None = None  # per chunk (points, mirror directions, shares) of lit specular points
 
 
 class StructuredLightScanner:
@@ -258,8 +271,10 @@ class StructuredLightScanner:
     depend on the number of threads.
     """
 
-    def __init__(self, model: ScannerModel, workers: int | None = None):
+    def __init__(self, model: ScannerModel, workers: int | None = None, errors: PhoxiErrors | None = None):
         self.model = model
+        #: the device's realised error models (None: the noise model only)
+        self.errors = errors
         self.projector = model.projector_pose()
         half_h, half_v = (math.radians(a) / 2.0 for a in model.projector_fov_deg)
         self._tan_projector = (math.tan(half_h), math.tan(half_v))
@@ -298,6 +313,14 @@ class StructuredLightScanner:
             confidence=np.empty(n, dtype=np.float32),
             texture=np.empty(n, dtype=np.float32),
         )
+        errors = self.errors
+        if errors is not None:
+            job.cast_rays = errors.true_rays(intrinsics)
+            job.pattern = errors.pattern_field(intrinsics.width, intrinsics.height)
+            if errors.material is not None:
+                job.specular = errors.specular_shares(geometry.names)[np.asarray(geometry.owner, dtype=np.int64)]
+                if errors.interreflection is not None and settings.noise and job.specular.any():
+                    job.bounces = []
         chunks = [slice(start, min(start + CHUNK_PIXELS, n)) for start in range(0, n, CHUNK_PIXELS)]
         if self.workers > 1 and len(chunks) > 1:
             if self._pool is None:
@@ -309,6 +332,13 @@ class StructuredLightScanner:
             counts = [self._render_chunk(job, chunk) for chunk in chunks]
         hits, lit, valid = (int(v) for v in np.sum(counts, axis=0))
         h, w = intrinsics.height, intrinsics.width
+        if errors is not None and errors.edges is not None and settings.noise:
+            depth = job.depth_mm.reshape(h, w)
+            rng = np.random.default_rng([int(settings.seed), int(frame_index), 1 << 30])
+            jump = np.float32(errors.edges["jump_rel"]) * depth
+            job.depth_mm = mix_depth_edges(depth, depth > 0.0, jump, errors.edges["probability"], rng).reshape(-1)
+        if job.bounces:
+            self._interreflect(job, intrinsics)
         return Frame(
             index=int(frame_index),
             intrinsics=intrinsics,
@@ -324,17 +354,18 @@ class StructuredLightScanner:
     def _render_chunk(self, job: _FrameJob, chunk: slice) -> tuple[int, int, int]:
         model, noise, settings = self.model, self.model.noise, job.settings
         rays = job.rays[chunk]
-        directions = _rotate(rays, job.rotation)
+        cast = rays if job.cast_rays is None else job.cast_rays[chunk]
+        directions = _rotate(cast, job.rotation)
         origins = np.empty_like(directions)
         origins[:] = job.origin
         distance, faces = job.caster.first_hit(origins, directions)
         hit = faces >= 0
         face = np.maximum(faces, 0)
         depth = np.where(hit, distance, np.float32(0.0))  # rays have z = 1: the distance along them is the depth (m)
-        point = rays * depth[:, None]
+        point = cast * depth[:, None]
 
         normal = job.normals[face]
-        cos_camera = -np.einsum("ij,ij->i", normal, rays) * job.inverse_ray_norms[chunk]
+        cos_camera = -np.einsum("ij,ij->i", normal, cast) * job.inverse_ray_norms[chunk]
         # thin or open surfaces seen from behind show their other side
         side = np.where(cos_camera < 0.0, np.float32(-1.0), np.float32(1.0))
         normal *= side[:, None]
@@ -361,10 +392,30 @@ class StructuredLightScanner:
         lit = candidate & ~job.caster.occluded(origins, shadow_dirs, t_max)
 
         albedo = job.albedo[face]
+        errors = self.errors
+        if errors is not None and errors.calibration is not None and hit.any():
+            # reconstructed with the nominal calibration from what the true camera and projector saw
+            measured_depth = reconstruct_depth(
+                rays[hit].astype(float), point[hit].astype(float), self.projector, errors.calibration.projector_pose
+            )
+            depth = depth.copy()
+            depth[hit] = measured_depth
         depth_mm = depth * np.float32(1000.0)
         sigma = depth_sigma_mm(model, settings, depth_mm, cos_projector, albedo)
         low, high = model.scanning_range_mm
         valid = lit & (depth_mm >= low) & (depth_mm <= high)
+        if errors is not None and errors.material is not None and not settings.camera_only_mode:
+            at = np.flatnonzero(valid)
+            valid[at] = self._signal_ok(
+                job,
+                errors.material,
+                face[at],
+                normal[at],
+                point[at],
+                to_projector[at],
+                projector_distance[at],
+                albedo[at],
+            )
         if settings.confidence > 0.0:
             valid &= sigma <= settings.confidence
         if settings.camera_only_mode:
@@ -384,13 +435,79 @@ class StructuredLightScanner:
         measured = np.where(valid, depth_mm, np.float32(0.0))
         if settings.noise:
             rng = np.random.default_rng([int(settings.seed), job.frame_index, chunk.start])
-            measured += rng.standard_normal(len(rays), dtype=np.float32) * sigma
+            if job.pattern is None:
+                measured += rng.standard_normal(len(rays), dtype=np.float32) * sigma
+            else:
+                share = np.float32(self.errors.fixed_pattern["share"])
+                temporal = rng.standard_normal(len(rays), dtype=np.float32) * np.float32(math.sqrt(1.0 - share**2))
+                measured += (temporal + share * job.pattern[chunk]) * sigma
+        if job.bounces is not None:
+            share = job.specular[face]
+            bounce = lit & (share > 0.0)
+            if bounce.any():
+                incoming = -to_projector[bounce] / projector_distance[bounce, None]
+                n_b = normal[bounce]
+                mirror = incoming - 2.0 * np.einsum("ij,ij->i", incoming, n_b)[:, None] * n_b
+                job.bounces.append((point[bounce], mirror, share[bounce]))
         normal *= valid[:, None]
         job.depth_mm[chunk] = measured
         job.normals_out[chunk] = normal
         job.confidence[chunk] = sigma
         job.texture[chunk] = texture
         return int(hit.sum()), int(lit.sum()), int(valid.sum())
+
+    def _interreflect(self, job: _FrameJob, intrinsics) -> None:
+        """Single-bounce interreflection: the projector light that a specular point A mirrors onto a surface point B
+        carries A's pattern column; the pixel that sees B then decodes that column (with probability A's specular
+        share times ``strength``) and triangulates a wrong depth: its ray against A's projector plane."""
+        points = np.concatenate([b[0] for b in job.bounces]).astype(float)
+        mirrors = np.concatenate([b[1] for b in job.bounces]).astype(float)
+        shares = np.concatenate([b[2] for b in job.bounces]).astype(float)
+        rotation = job.rotation.astype(float)
+        start = points + 1e-4 * mirrors  # leave A's surface (m)
+        distance, faces = job.caster.first_hit(start @ rotation.T + job.origin, mirrors @ rotation.T)
+        landed = (faces >= 0) & np.isfinite(distance)
+        if not landed.any():
+            return
+        a, b = points[landed], start[landed] + mirrors[landed] * distance[landed, None].astype(float)
+        share = shares[landed]
+        in_front = b[:, 2] > 1e-6
+        a, b, share = a[in_front], b[in_front], share[in_front]
+        pixel = np.rint(intrinsics.project(b)).astype(np.int64)
+        inside = (pixel[:, 0] >= 0) & (pixel[:, 0] < intrinsics.width) & (pixel[:, 1] >= 0)
+        inside &= pixel[:, 1] < intrinsics.height
+        a, b, share, pixel = a[inside], b[inside], share[inside], pixel[inside]
+        index = pixel[:, 1] * intrinsics.width + pixel[:, 0]
+        depth = job.depth_mm[index]
+        # the pixel must see B itself (not something in front of it)
+        seen = (depth > 0.0) & (np.abs(depth - 1000.0 * b[:, 2]) < np.maximum(1.0, 10.0 * job.confidence[index]))
+        settings = job.settings
+        rng = np.random.default_rng([int(settings.seed), job.frame_index, 1 << 29])
+        hit = seen & (rng.random(len(seen)) < np.minimum(share * self.errors.interreflection["strength"], 1.0))
+        if not hit.any():
+            return
+        calibration = self.errors.calibration
+        true_projector = self.projector if calibration is None else calibration.projector_pose
+        wrong = reconstruct_depth(job.rays[index[hit]].astype(float), a[hit], self.projector, true_projector)
+        # a depth outside the scanning range is an inconsistent code: the point is dropped rather than moved
+        wrong_mm = 1000.0 * np.where(np.isfinite(wrong), wrong, 0.0)
+        low, high = self.model.scanning_range_mm
+        job.depth_mm[index[hit]] = np.where((wrong_mm >= low) & (wrong_mm <= high), wrong_mm, 0.0).astype(np.float32)
+
+    def _signal_ok(self, job, material, face, normal, point, to_projector, projector_distance, albedo):
+        """Material gate: the projector signal (camera counts) lies between the dark limit and saturation."""
+        noise, settings = self.model.noise, job.settings
+        share = job.specular[face] if job.specular is not None else np.float32(0.0)
+        incoming = -to_projector / projector_distance[:, None]
+        mirror = incoming - 2.0 * np.einsum("ij,ij->i", incoming, normal)[:, None] * normal
+        to_camera = -point / np.maximum(np.linalg.norm(point, axis=1), 1e-9)[:, None]
+        lobe = np.maximum(np.einsum("ij,ij->i", mirror, to_camera), 0.0) ** np.float32(material["specular_exponent"])
+        cos_p = np.einsum("ij,ij->i", normal, -incoming)
+        ratio = np.float32(self.model.sweet_spot_mm / 1000.0) / projector_distance
+        exposure_gain = settings.effective_shutter_multiplier() * settings.exposure_ms() / noise.reference_exposure_ms
+        diffuse = albedo * (1.0 - share) * np.maximum(cos_p, 0.0) * ratio * ratio
+        signal = noise.texture_full_scale * exposure_gain * (diffuse + share * material["specular_peak"] * lobe)
+        return (signal >= material["min_signal_counts"]) & (signal < noise.texture_saturation)
 
 
 @lru_cache(maxsize=4)
