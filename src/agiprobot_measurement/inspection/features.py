@@ -30,7 +30,10 @@ __all__ = ["FeatureContext", "FeatureResult", "evaluate_feature"]
 #: flatness: the face's heights are averaged within this radius (mm) before the minimum zone (noise filter)
 FLATNESS_FILTER_RADIUS_MM = 5.0
 #: hole edge ring: angular bins of the edge points
-HOLE_EDGE_BINS = 180
+HOLE_EDGE_BINS = 36
+#: hole wall: fewest points and smallest arc (deg) for the LS circle through the wall (else the edge ring)
+MIN_WALL_POINTS = 100
+MIN_WALL_ARC_DEG = 90.0
 #: fewest points a feature is evaluated on
 MIN_FEATURE_POINTS = 30
 
@@ -52,7 +55,7 @@ class FeatureResult:
         for v in ("not conform", "indeterminate", "conform"):
             if v in verdicts:
                 return v
-        return "not evaluated"
+        return "reported" if self.values else "not evaluated"
 
     def as_dict(self) -> dict:
         return {"name": self.name, "type": self.type, "verdict": self.verdict, "points": self.points,
@@ -132,6 +135,44 @@ def _hole(feature: Feature, ctx: FeatureContext) -> FeatureResult:
     height = (ctx.points - face_point) @ axis
     band = max(4.0 * float(np.median(ctx.sigma)), 0.3)
     radial = np.linalg.norm(rel - np.outer(rel @ axis, axis), axis=1)
+    wall = ctx.usable & (height < -band) & (np.abs(radial - radius) < 1.5)
+    if wall.sum() >= MIN_WALL_POINTS and _arc_deg(ctx.points[wall] - centre, u, v) >= MIN_WALL_ARC_DEG:
+        fit, method = fit_circle(ctx.points[wall], centre, axis), "wall"
+        count = int(wall.sum())
+        note = "centre and diameter from an LS circle through the hole wall's points (axis along the datum normal)"
+    else:
+        fit, count = _edge_ring(feature, ctx, centre, axis, radius, height, radial, band, u, v)
+        method = "edge ring"
+        note = (
+            "centre and diameter from the innermost face point in each direction (edge ring): the centre is "
+            "unbiased, the diameter reads about one point spacing large"
+        )
+    c = np.array([(fit.centre - centre) @ u, (fit.centre - centre) @ v])
+    offset = np.linalg.norm(c)
+    direction = c / offset if offset > 1e-9 else np.array([1.0, 0.0])
+    u_fit = float(np.hypot(*(fit.centre_sigma_mm * direction)))
+    d3 = direction[0] * u + direction[1] * v
+    u_reg = float(ctx.registration_sigma(centre[None], d3[None])[0])
+    position = 2.0 * offset
+    decisions = [decide("position", position, p["position_tolerance_mm"], 2.0 * expanded(u_fit, u_reg))]
+    diameter = 2.0 * fit.radius
+    if "diameter_tolerance_mm" in p:
+        tol = p["diameter_tolerance_mm"]
+        decisions.append(decide("diameter", diameter, p["diameter_mm"] + tol, expanded(2 * fit.radius_sigma_mm),
+                                lower=p["diameter_mm"] - tol))  # fmt: skip
+    values = {"position_mm": position, "centre_offset_mm": (fit.centre - centre).tolist(), "diameter_mm": diameter,
+              "nominal_diameter_mm": p["diameter_mm"], "method": method, "fit_points": fit.count}  # fmt: skip
+    return FeatureResult(feature.name, "hole", values, decisions, count, [note])
+
+
+def _arc_deg(rel: np.ndarray, u: np.ndarray, v: np.ndarray) -> float:
+    """Angle (deg) the points span around the axis: 360 minus the largest empty gap."""
+    angles = np.sort(np.degrees(np.arctan2(rel @ v, rel @ u)))
+    gaps = np.diff(np.r_[angles, angles[0] + 360.0])
+    return float(360.0 - gaps.max())
+
+
+def _edge_ring(feature, ctx, centre, axis, radius, height, radial, band, u, v):
     near = ctx.usable & (np.abs(height) < band) & (radial > radius - 1.5) & (radial < radius + 3.0)
     pts = ctx.points[near]
     if len(pts) < MIN_FEATURE_POINTS:
@@ -151,23 +192,7 @@ def _hole(feature: Feature, ctx: FeatureContext) -> FeatureResult:
                                        f"{HOLE_EDGE_BINS} directions only")  # fmt: skip
         fit = fit_circle(pts[first], centre, axis)
         c = np.array([(fit.centre - centre) @ u, (fit.centre - centre) @ v])
-    offset = np.linalg.norm(c)
-    direction = c / offset if offset > 1e-9 else np.array([1.0, 0.0])
-    u_fit = float(np.hypot(*(fit.centre_sigma_mm * direction)))
-    d3 = direction[0] * u + direction[1] * v
-    u_reg = float(ctx.registration_sigma(centre[None], d3[None])[0])
-    position = 2.0 * offset
-    decisions = [decide("position", position, p["position_tolerance_mm"], 2.0 * expanded(u_fit, u_reg))]
-    diameter = 2.0 * fit.radius
-    if "diameter_tolerance_mm" in p:
-        tol = p["diameter_tolerance_mm"]
-        decisions.append(decide("diameter", diameter, p["diameter_mm"] + tol, expanded(2 * fit.radius_sigma_mm),
-                                lower=p["diameter_mm"] - tol))  # fmt: skip
-    values = {"position_mm": position, "centre_offset_mm": (fit.centre - centre).tolist(), "diameter_mm": diameter,
-              "nominal_diameter_mm": p["diameter_mm"], "edge_points": fit.count}  # fmt: skip
-    return FeatureResult(feature.name, "hole", values, decisions, len(pts),
-                         ["centre and diameter from the innermost face point in each direction (edge ring): the centre is "
-                          "unbiased, the diameter reads about one point spacing large"])  # fmt: skip
+    return fit, len(pts)
 
 
 def _plane(feature: Feature, ctx: FeatureContext) -> FeatureResult:

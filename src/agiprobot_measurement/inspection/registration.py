@@ -185,12 +185,14 @@ def _plane(points: np.ndarray, normal_hint: np.ndarray, fixed_normal: np.ndarray
     if fixed_normal is not None:
         return centroid, fixed_normal
     centred = points - centroid
-    if perpendicular_to is not None:
-        centred = centred - np.outer(centred @ perpendicular_to, perpendicular_to)
-    normal = np.linalg.svd(centred, full_matrices=False)[2][-1]
-    if perpendicular_to is not None:
-        normal = normal - (normal @ perpendicular_to) * perpendicular_to
-        normal /= np.linalg.norm(normal)
+    if perpendicular_to is None:
+        normal = np.linalg.svd(centred, full_matrices=False)[2][-1]
+    else:  # the normal in the plane perpendicular to that axis: a line fit of the points seen along it
+        u = np.cross(perpendicular_to, np.eye(3)[int(np.argmin(np.abs(perpendicular_to)))])
+        u /= np.linalg.norm(u)
+        v = np.cross(perpendicular_to, u)
+        smallest = np.linalg.svd(np.stack([centred @ u, centred @ v], axis=1), full_matrices=False)[2][-1]
+        normal = smallest[0] * u + smallest[1] * v
     return centroid, normal if normal @ normal_hint >= 0 else -normal
 
 
