@@ -62,6 +62,7 @@ class InspectionResult:
     features: list[FeatureResult]
     coverage: dict
     surface_uncertainty_mm: float
+    smoothed_mm: np.ndarray  # per point: the mean deviation of its patch (NaN where masked)
     timings_s: dict = field(default_factory=dict)
 
     @property
@@ -172,7 +173,7 @@ def inspect_cloud(points_world_mm, nominal: trimesh.Trimesh, spec: InspectionSpe
     timings["deviations"] = time.perf_counter() - t
     report("regions", 0.0)
     t = time.perf_counter()
-    regions, u_surface = _regions(nominal, cp, sigma, use, reg, s)
+    regions, u_surface, smoothed = _regions(nominal, cp, sigma, use, reg, s)
     face_of_point, face_stats, face_points = _faces(nominal, spec, cp, use, s.tolerance_mm)
     coverage = _coverage(nominal, spec, cp.closest_mm[use], s.no_data_radius_mm)
     timings["regions"] = time.perf_counter() - t
@@ -185,13 +186,15 @@ def inspect_cloud(points_world_mm, nominal: trimesh.Trimesh, spec: InspectionSpe
     timings["total"] = time.perf_counter() - t0
     report("done", 1.0)
     return InspectionResult(spec, cad, cp.signed_mm, sigma, face_of_point, edge, outlier, reg, transform, regions,
-                            face_stats, results, coverage, u_surface, timings)  # fmt: skip
+                            face_stats, results, coverage, u_surface, smoothed, timings)  # fmt: skip
 
 
-def _regions(mesh, cp, sigma, use, reg, s) -> tuple[list[SurfaceRegion], float]:
+def _regions(mesh, cp, sigma, use, reg, s) -> tuple[list[SurfaceRegion], float, np.ndarray]:
     pat = patches(cp.closest_mm, cp.signed_mm, sigma, use, s.voxel_mm, s.patch_radius_mm)
+    smoothed = np.full(len(cp.signed_mm), np.nan)
     if not len(pat.mean_mm):
-        return [], float("nan")
+        return [], float("nan"), smoothed
+    smoothed[use] = pat.mean_mm[pat.voxel_of_point[use]]
     normals = mesh.face_normals[cp.face[use]]
     voxel = pat.voxel_of_point[use]
     n_sum = np.stack([np.bincount(voxel, weights=normals[:, k], minlength=len(pat.count)) for k in range(3)], axis=1)
@@ -209,7 +212,7 @@ def _regions(mesh, cp, sigma, use, reg, s) -> tuple[list[SurfaceRegion], float]:
         regions.append(SurfaceRegion(NOT_CONFORM if not_conform else INDETERMINATE, extreme, location.tolist(),
                                      float(len(members) * s.voxel_mm**2), float(uncertainty[worst]), len(members)))  # fmt: skip
     regions.sort(key=lambda r: -abs(r.extreme_mm))
-    return regions, float(np.median(uncertainty))
+    return regions, float(np.median(uncertainty)), smoothed
 
 
 def _peak(cp, use, pat, members, worst, s) -> tuple[float, np.ndarray]:

@@ -78,18 +78,21 @@ def report_dict(result: InspectionResult, meta: dict | None = None) -> dict:
     }  # fmt: skip
 
 
-def _write_ply(path: Path, points: np.ndarray, rgb: np.ndarray, signed: np.ndarray) -> None:
+def _write_ply(path: Path, points: np.ndarray, rgb: np.ndarray, signed: np.ndarray, smoothed: np.ndarray) -> None:
     table = np.empty(len(points), dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("red", "u1"), ("green", "u1"),
-                                         ("blue", "u1"), ("deviation", "<f4")])  # fmt: skip
+                                         ("blue", "u1"), ("deviation", "<f4"), ("patch_deviation", "<f4")])  # fmt: skip
     for k, name in enumerate("xyz"):
         table[name] = points[:, k]
     for k, name in enumerate(("red", "green", "blue")):
         table[name] = rgb[:, k]
     table["deviation"] = signed
+    table["patch_deviation"] = smoothed
     header = (
-        "ply\nformat binary_little_endian 1.0\ncomment inspection: signed deviation (mm) from the nominal, CAD frame\n"
+        "ply\nformat binary_little_endian 1.0\ncomment inspection: signed deviation (mm) from the nominal, CAD frame;"
+        " patch_deviation: its patch's mean (NaN where masked), colours from it\n"
         f"element vertex {len(points)}\nproperty float x\nproperty float y\nproperty float z\nproperty uchar red\n"
-        "property uchar green\nproperty uchar blue\nproperty float deviation\nend_header\n"
+        "property uchar green\nproperty uchar blue\nproperty float deviation\nproperty float patch_deviation\n"
+        "end_header\n"
     )
     with path.open("wb") as stream:
         stream.write(header.encode("ascii"))
@@ -113,20 +116,22 @@ def _figures(result: InspectionResult, folder: Path) -> None:
     idx = np.arange(len(result.points_cad))
     if len(idx) > PLOT_POINTS:
         idx = np.sort(rng.choice(idx, PLOT_POINTS, replace=False))
-    pts, rgb = result.points_cad[idx], deviation_colours(result.signed_mm[idx], t, masked[idx]) / 255.0
+    smooth = np.nan_to_num(result.smoothed_mm[idx])
+    pts, rgb = result.points_cad[idx], deviation_colours(smooth, t, masked[idx]) / 255.0
     fig, axes = plt.subplots(1, 3, figsize=(15, 5))
     for ax, (a, b, c, title) in zip(axes, ((0, 1, 2, "top (x-y)"), (0, 2, 1, "front (x-z)"), (1, 2, 0, "side (y-z)")),
                                      strict=True):  # fmt: skip
         order = np.argsort(pts[:, c]) if title.startswith("top") else np.argsort(-pts[:, c])
         ax.scatter(pts[order, a], pts[order, b], c=rgb[order], s=0.5, linewidths=0)
-        for region in result.regions[:10]:
+        for region in [r for r in result.regions if r.verdict == "not conform"][:10]:
             loc = region.location_mm
             ax.annotate(f"{region.extreme_mm:+.3f}", (loc[a], loc[b]), fontsize=8, color="k")
         ax.set_aspect("equal")
         ax.set_title(title)
         ax.set_xlabel("xyz"[a] + " (mm)")
         ax.set_ylabel("xyz"[b] + " (mm)")
-    fig.suptitle(f"{result.spec.part}: signed deviation, green within +-{t} mm, blue/red saturate at +-{3 * t} mm")
+    fig.suptitle(f"{result.spec.part}: signed deviation (patch means within {result.spec.surface.patch_radius_mm} mm), "
+                 f"green within +-{t:g} mm, blue/red saturate at +-{3 * t:g} mm; labels: regions out of tolerance")  # fmt: skip
     fig.tight_layout()
     fig.savefig(folder / "deviation_map.png", dpi=90)
     plt.close(fig)
@@ -211,8 +216,9 @@ def write_report(
         data = report_dict(result, meta)
         (tmp / "report.json").write_text(json.dumps(data, indent=1))
         _figures(result, tmp)
-        rgb = deviation_colours(result.signed_mm, result.spec.surface.tolerance_mm, result.edge | result.outlier)
-        _write_ply(tmp / "deviations.ply", result.points_cad, rgb, result.signed_mm)
+        rgb = deviation_colours(np.nan_to_num(result.smoothed_mm), result.spec.surface.tolerance_mm,
+                                result.edge | result.outlier)  # fmt: skip
+        _write_ply(tmp / "deviations.ply", result.points_cad, rgb, result.signed_mm, result.smoothed_mm)
         (tmp / "report.html").write_text(_html(data))
         tmp.chmod(0o755)
         if out.exists():
