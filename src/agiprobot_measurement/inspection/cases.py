@@ -76,6 +76,20 @@ _VIEWS = {
 }
 
 
+_TOP, _PX, _NX, _PY, _NY = (0.15, 0.1, 1.0), (1.0, 0.1, 0.3), (-1.0, -0.1, 0.3), (0.1, 1.0, 0.3), (-0.1, -1.0, 0.3)
+#: laser sweeps per case, (view direction, sweep direction): the laser sees faces within about 45 deg of its
+#: boresight, so each face group gets its own sweep
+_LASER_SWEEPS = {
+    "null": [(_TOP, (1, 0, 0)), (_PX, (0, 1, 0)), (_NX, (0, 1, 0)), (_PY, (1, 0, 0)), (_NY, (1, 0, 0))],
+    "dent": [(_TOP, (1, 0, 0)), (_PX, (0, 1, 0)), (_PY, (1, 0, 0))],
+    "hole": [((0.4, 0.4, 1.0), (1, -1, 0)), ((-0.4, -0.4, 1.0), (1, -1, 0)), (_NX, (0, 1, 0)), (_NY, (1, 0, 0))],
+    "warp": [((0.1, 0.15, 1.0), (1, 0, 0))],
+    "scale": [(_TOP, (1, 0, 0)), (_PX, (0, 1, 0)), (_NX, (0, 1, 0)), (_PY, (1, 0, 0)), (_NY, (1, 0, 0))],
+}
+#: laser sweep step between profiles (mm)
+LASER_STEP_MM = 0.2
+
+
 def _scan(mesh_world, origin, case: str, sensor: str, seed: int) -> simulate.ScannedCloud:
     views = _VIEWS[case]
     if sensor in ("phoxi", "phoxi_low"):
@@ -83,11 +97,15 @@ def _scan(mesh_world, origin, case: str, sensor: str, seed: int) -> simulate.Sca
     if sensor != "laser":
         raise InspectionInputError(f"unknown sensor {sensor!r} (known: {list(SENSORS)})")
     clouds = []
-    for k, view in enumerate(views):
+    for k, (view, sweep) in enumerate(_LASER_SWEEPS[case]):
         v = np.asarray(view, float)
-        horizontal = np.array([-v[1], v[0], 0.0]) if np.linalg.norm(v[:2]) > 1e-6 else np.array([1.0, 0.0, 0.0])
+        unit = v / np.linalg.norm(v)
         length = 1.2 * float(np.max(mesh_world.extents))
-        clouds.append(simulate.scan_laser(mesh_world, v, horizontal, length, origin, 0.1, seed + 1000 * k))
+        # the visible half of the part (depth 0 .. nearest point along the view) centred in the standoff range
+        depth = (np.asarray(mesh_world.vertices) - origin) @ unit
+        offset = 0.5 * depth.max() * unit
+        clouds.append(simulate.scan_laser(mesh_world, v, sweep, length, origin, LASER_STEP_MM, seed + 1000 * k, 1.0,
+                                          offset))  # fmt: skip
     return simulate.ScannedCloud(np.vstack([c.points_mm for c in clouds]), np.concatenate([c.sigma_mm for c in clouds]),
                                  "laser_line")  # fmt: skip
 

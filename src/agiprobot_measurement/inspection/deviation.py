@@ -108,6 +108,7 @@ class Patches:
 
     centre_mm: np.ndarray
     mean_mm: np.ndarray
+    patch_centre_mm: np.ndarray  # mean position of the patch's points (the point its mean deviation belongs to)
     count: np.ndarray
     sigma_mm: np.ndarray
     voxel_of_point: np.ndarray
@@ -132,7 +133,7 @@ def patches(closest_mm: np.ndarray, signed_mm: np.ndarray, sigma_mm: np.ndarray,
     idx = np.flatnonzero(use)
     if not len(idx):
         empty = np.zeros(0)
-        return Patches(np.zeros((0, 3)), empty, empty, empty, voxel_of_point, coo_matrix((0, 0)))
+        return Patches(np.zeros((0, 3)), empty, np.zeros((0, 3)), empty, empty, voxel_of_point, coo_matrix((0, 0)))
     keys = np.floor(closest_mm[idx] / voxel_mm).astype(np.int64)
     low = keys.min(axis=0)
     span = keys.max(axis=0) - low + 1
@@ -146,7 +147,8 @@ def patches(closest_mm: np.ndarray, signed_mm: np.ndarray, sigma_mm: np.ndarray,
     sums = np.bincount(inverse, weights=signed_mm[idx], minlength=m)
     var = np.bincount(inverse, weights=sigma_mm[idx] ** 2, minlength=m)
     centre = np.stack([np.bincount(inverse, weights=closest_mm[idx, k], minlength=m) for k in range(3)], axis=1)
-    centre /= count[:, None]
+    centre_sums = centre
+    centre = centre / count[:, None]
     reach = int(np.ceil(radius_mm / voxel_mm))
     grid = np.arange(-reach, reach + 1)
     offsets = np.stack(np.meshgrid(grid, grid, grid, indexing="ij"), axis=-1).reshape(-1, 3)
@@ -167,5 +169,6 @@ def patches(closest_mm: np.ndarray, signed_mm: np.ndarray, sigma_mm: np.ndarray,
     adjacency = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(m, m)).tocsr()
     n_patch = adjacency @ count
     mean = (adjacency @ sums) / n_patch
+    patch_centre = (adjacency @ centre_sums) / n_patch[:, None]
     sigma = np.sqrt(adjacency @ var) / n_patch
-    return Patches(centre, mean, n_patch, sigma, voxel_of_point, adjacency.tocoo())
+    return Patches(centre, mean, patch_centre, n_patch, sigma, voxel_of_point, adjacency.tocoo())
