@@ -7,7 +7,7 @@ GUI ?= 0
 
 BENCH_OUT ?= $(ROOT)/bench_results
 BENCH_ARGS ?=
-BENCHES := planning parts scale set-cover metrology motion kinematics collision nbv3d nbv-map nbv2d mild calibration phoxi scanner real-cell
+BENCHES := planning parts scale set-cover metrology motion kinematics collision nbv3d nbv-map nbv2d mild calibration phoxi scanner real-cell inspection
 
 .PHONY: setup demo demo-station test lint format pytest rostest bench $(addprefix bench-,$(BENCHES)) fuzz clean
 
@@ -94,6 +94,9 @@ bench-scanner: setup
 
 bench-real-cell: setup
 	$(call run_bench,real-cell,benchmarks.reliability.real_cell,)
+
+bench-inspection: setup
+	$(call run_bench,inspection,benchmarks.inspection,--speed --json "$(BENCH_OUT)/inspection.json")
 
 # The reliability probe replayed (minutes; not part of `make test`): hostile inputs to every command-line tool and
 # node, one row each, holds / DEFECT; the table goes to bench_results/fuzz.txt, the rows to fuzz.json.

@@ -34,6 +34,8 @@ __all__ = [
 DOF_NAMES = ("rx", "ry", "rz", "tx", "ty", "tz")
 #: Gauss-Newton steps on fixed correspondences between two closest-point queries
 INNER_ITERATIONS = 8
+#: share of the points that must lie within max_distance_mm of the nominal after prealignment
+MIN_OVERLAP = 0.3
 
 
 def apply(transform: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -120,7 +122,7 @@ def icp(points_mm: np.ndarray, mesh: trimesh.Trimesh, settings: IcpSettings = Ic
     converged, iteration, info, scale, used, overlap = False, 0, np.eye(6), 1.0, 0, 0.0
     centre = apply(transform, points).mean(axis=0)
     # outer loop: correspondences (closest face of each point); inner loop: Gauss-Newton on those faces' planes
-    for iteration in range(1, settings.max_iterations + 1):  # noqa: B007 (the count is reported)
+    for iteration in range(1, settings.max_iterations + 1):
         current = apply(transform, points)
         cp = closest_points(mesh, current)
         normals = normals_of_faces[cp.face]
@@ -129,9 +131,10 @@ def icp(points_mm: np.ndarray, mesh: trimesh.Trimesh, settings: IcpSettings = Ic
         if edge_tree is not None:
             d, _ = edge_tree.query(cp.closest_mm, k=1, distance_upper_bound=settings.edge_margin_mm)
             near &= ~np.isfinite(d)
-        if near.sum() < 50:
+        if near.sum() < 50 or (iteration == 1 and overlap < MIN_OVERLAP):
             raise RegistrationError(
-                f"only {int(near.sum())} of {len(points)} points lie within {settings.max_distance_mm} mm of the "
+                f"only {int(near.sum())} of {len(points)} points ({100 * overlap:.0f} %) lie within "
+                f"{settings.max_distance_mm} mm of the "
                 "nominal surface after prealignment: a cloud of another part, another unit or a wrong placement?"
             )
         anchor = np.einsum("ij,ij->i", cp.closest_mm, normals)

@@ -158,7 +158,7 @@ def _html(data: dict) -> str:
     reg = data["registration"]
     parts = [
         f"<!doctype html><html><head><meta charset='utf-8'><title>Inspection {e(data['part'])}</title>",
-        "<style>body{font-family:sans-serif;margin:2em}table{border-collapse:collapse}td,th{border:1px solid #999;"
+        "<style>body{font-family:sans-serif;margin:2em}table{border-collapse:collapse}td,th{border:1px solid #aaa;"
         "padding:2px 6px}.conform{color:green}.notconform{color:#c00}.indeterminate{color:#c80}</style></head><body>",
         f"<h1>Inspection of {e(data['part'])}: <span class='{data['verdict'].replace(' ', '')}'>{e(data['verdict'])}"
         "</span></h1>",
