@@ -120,14 +120,8 @@ def fit_circle(points, origin, normal) -> CircleFit:
     return CircleFit(origin + x[0] * u + x[1] * v, float(x[2]), float(rms), sig[:2], float(sig[2]), len(points))
 
 
-@dataclass
-class SphereFit:
-    centre: np.ndarray
-    radius: float
-    rms_mm: float
-    centre_sigma_mm: np.ndarray
-    radius_sigma_mm: float
-    count: int
+class SphereFit(CircleFit):
+    """Centre (3D), radius, residual RMS and 1-sigma of the centre (3) and the radius (mm)."""
 
 
 def fit_sphere(points) -> SphereFit:
