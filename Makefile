@@ -7,7 +7,7 @@ GUI ?= 0
 
 BENCH_OUT ?= $(ROOT)/bench_results
 BENCH_ARGS ?=
-BENCHES := planning parts part-family scan-lines scale set-cover metrology motion kinematics collision nbv3d nbv-map nbv2d mild calibration phoxi scanner real-cell acceptance
+BENCHES := planning parts part-family scan-lines scale set-cover metrology motion kinematics collision nbv3d nbv-map nbv2d mild calibration phoxi scanner real-cell acceptance inspection
 
 .PHONY: setup demo demo-station test lint format pytest rostest bench $(addprefix bench-,$(BENCHES)) fuzz clean
 
@@ -103,6 +103,9 @@ bench-real-cell: setup
 
 bench-acceptance: setup
 	$(call run_bench,acceptance,benchmarks.acceptance,--json "$(BENCH_OUT)/acceptance.json")
+
+bench-inspection: setup
+	$(call run_bench,inspection,benchmarks.inspection,--speed --json "$(BENCH_OUT)/inspection.json")
 
 # The reliability probe replayed (minutes; not part of `make test`): hostile inputs to every command-line tool and
 # node, one row each, holds / DEFECT; the table goes to bench_results/fuzz.txt, the rows to fuzz.json.

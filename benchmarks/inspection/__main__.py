@@ -1,0 +1,3 @@
+from benchmarks.inspection.run import main
+
+raise SystemExit(main())

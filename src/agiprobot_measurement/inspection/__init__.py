@@ -1,0 +1,44 @@
+"""Inspection: a measured cloud against the nominal CAD -- registration, signed deviations, features, ISO 14253-1
+decisions and a report; plus actual parts with analytic truth and their simulated scans for testing it.
+
+Modules: ``spec`` (the spec file: faces, features, alignment), ``registration`` (prealignment, robust ICP with
+locked DOFs, 3-2-1 datums), ``deviation`` (closest points, signed distances, masks, patch statistics),
+``fitting`` (LS plane/circle/sphere/cylinder, minimum-zone flatness), ``features`` (the spec's features
+evaluated), ``decision`` (ISO 14253-1 rules), ``pipeline`` (the facade :func:`inspect_cloud`), ``report`` (JSON,
+HTML, PNG, coloured PLY, written atomically), ``actual`` (deviated parts with truth), ``simulate`` (scanning
+them with the PhoXi and laser simulators), ``errors``.
+"""
+
+from agiprobot_measurement.inspection.actual import ActualPart
+from agiprobot_measurement.inspection.decision import CONFORM, INDETERMINATE, NOT_CONFORM, Decision, decide
+from agiprobot_measurement.inspection.errors import (
+    InspectionInputError,
+    InspectionInternalError,
+    RegistrationError,
+    SpecError,
+)
+from agiprobot_measurement.inspection.pipeline import STAGES, InspectionResult, inspect_cloud
+from agiprobot_measurement.inspection.registration import IcpSettings, Registration, icp
+from agiprobot_measurement.inspection.spec import InspectionSpec, load_spec, parse_spec
+
+__all__ = [
+    "CONFORM",
+    "INDETERMINATE",
+    "NOT_CONFORM",
+    "STAGES",
+    "ActualPart",
+    "Decision",
+    "IcpSettings",
+    "InspectionInputError",
+    "InspectionInternalError",
+    "InspectionResult",
+    "InspectionSpec",
+    "Registration",
+    "RegistrationError",
+    "SpecError",
+    "decide",
+    "icp",
+    "inspect_cloud",
+    "load_spec",
+    "parse_spec",
+]

@@ -1,0 +1,123 @@
+"""Test cases with analytic truth: an actual part, its simulated scan and the spec to inspect it with.
+
+``build_case(case, magnitude, seed, sensor)`` returns a :class:`Case`: the nominal CAD, the planned placement, the
+measured cloud (world, mm) with its noise sigma, the spec and the truth. The part is placed with a placement error
+of 2 mm / 1 deg (random direction, seeded); defect positions are seeded too. Sensors: ``phoxi`` (PhoXi S, high
+resolution), ``phoxi_low`` (low resolution, for quick tests) and ``laser`` (laser line sweeps).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+
+from agiprobot_measurement._paths import CONFIG_DIR
+from agiprobot_measurement.inspection import actual, simulate
+from agiprobot_measurement.inspection.errors import InspectionInputError
+from agiprobot_measurement.inspection.spec import InspectionSpec, load_spec
+
+__all__ = ["CASES", "SENSORS", "Case", "build_case", "spec_path"]
+
+CASES = ("null", "dent", "hole", "warp", "scale")
+SENSORS = ("phoxi", "phoxi_low", "laser")
+#: placement error of every case: translation (mm) and rotation (deg)
+PLACEMENT_ERROR = (2.0, 1.0)
+#: where the parts stand in the world (mm): the planned placement is a translation to here
+PART_ORIGIN_MM = np.array([600.0, 0.0, 100.0])
+
+
+@dataclass
+class Case:
+    name: str
+    magnitude: float
+    seed: int
+    sensor: str
+    part: actual.ActualPart
+    points_mm: np.ndarray
+    sigma_mm: np.ndarray
+    spec: InspectionSpec
+
+    @property
+    def nominal(self) -> trimesh.Trimesh:
+        return self.part.nominal
+
+    @property
+    def truth(self) -> dict:
+        return self.part.truth
+
+
+def spec_path(name: str):
+    return CONFIG_DIR / "inspection" / f"{name}.yaml"
+
+
+def _part(case: str, magnitude: float, rng: np.random.Generator) -> tuple[actual.ActualPart, str]:
+    if case in ("null", "dent"):
+        centre = np.r_[rng.uniform(-30.0, 30.0, 2), 50.0]
+        return actual.dented(actual.cube(), centre, (0, 0, 1), magnitude if case == "dent" else 0.0), "cube_100"
+    if case == "hole":
+        angle = rng.uniform(0, 2 * np.pi)
+        return actual.holed_plate(magnitude * np.array([np.cos(angle), np.sin(angle)])), "plate_hole"
+    if case == "warp":
+        return actual.warped(bow_mm=magnitude), "plate_warp"
+    if case == "scale":
+        return actual.scaled(actual.cube(), magnitude), "cube_100"
+    raise InspectionInputError(f"unknown case {case!r} (known: {list(CASES)})")
+
+
+#: view directions (part -> sensor) per case: enough faces for a determined fit and for the case's features
+_VIEWS = {
+    "null": [(1, 1, 1.5), (-1, -1, 1.5)],
+    "dent": [(1, 1, 1.5)],
+    "hole": [(-1, -1, 1.5), (1, 1, 1.5)],
+    "warp": [(0.2, 0.1, 1.0)],
+    "scale": [(1, 1, 1.5), (-1, -1, 1.5)],
+}
+
+
+_TOP, _PX, _NX, _PY, _NY = (0.15, 0.1, 1.0), (1.0, 0.1, 0.3), (-1.0, -0.1, 0.3), (0.1, 1.0, 0.3), (-0.1, -1.0, 0.3)
+#: laser sweeps per case, (view direction, sweep direction): the laser sees faces within about 45 deg of its
+#: boresight, so each face group gets its own sweep
+_LASER_SWEEPS = {
+    "null": [(_TOP, (1, 0, 0)), (_PX, (0, 1, 0)), (_NX, (0, 1, 0)), (_PY, (1, 0, 0)), (_NY, (1, 0, 0))],
+    "dent": [(_TOP, (1, 0, 0)), (_PX, (0, 1, 0)), (_PY, (1, 0, 0))],
+    "hole": [((0.4, 0.4, 1.0), (1, -1, 0)), ((-0.4, -0.4, 1.0), (1, -1, 0)), (_NX, (0, 1, 0)), (_NY, (1, 0, 0))],
+    "warp": [((0.1, 0.15, 1.0), (1, 0, 0))],
+    "scale": [(_TOP, (1, 0, 0)), (_PX, (0, 1, 0)), (_NX, (0, 1, 0)), (_PY, (1, 0, 0)), (_NY, (1, 0, 0))],
+}
+#: laser sweep step between profiles (mm)
+LASER_STEP_MM = 0.2
+
+
+def _scan(mesh_world, origin, case: str, sensor: str, seed: int) -> simulate.ScannedCloud:
+    views = _VIEWS[case]
+    if sensor in ("phoxi", "phoxi_low"):
+        return simulate.scan_phoxi(mesh_world, views, origin, "S", sensor == "phoxi", seed)
+    if sensor != "laser":
+        raise InspectionInputError(f"unknown sensor {sensor!r} (known: {list(SENSORS)})")
+    clouds = []
+    for k, (view, sweep) in enumerate(_LASER_SWEEPS[case]):
+        v = np.asarray(view, float)
+        unit = v / np.linalg.norm(v)
+        length = 1.2 * float(np.max(mesh_world.extents))
+        # the visible half of the part (depth 0 .. nearest point along the view) centred in the standoff range
+        depth = (np.asarray(mesh_world.vertices) - origin) @ unit
+        offset = 0.5 * depth.max() * unit
+        clouds.append(simulate.scan_laser(mesh_world, v, sweep, length, origin, LASER_STEP_MM, seed + 1000 * k, 1.0,
+                                          offset))  # fmt: skip
+    return simulate.ScannedCloud(np.vstack([c.points_mm for c in clouds]), np.concatenate([c.sigma_mm for c in clouds]),
+                                 "laser_line")  # fmt: skip
+
+
+def build_case(case: str, magnitude: float = 0.0, seed: int = 0, sensor: str = "phoxi") -> Case:
+    """The case's actual part placed with the placement error, scanned; the inspection sees nominal + cloud."""
+    rng = np.random.default_rng(seed)
+    part, spec_name = _part(case, magnitude, rng)
+    planned = np.eye(4)
+    planned[:3, 3] = PART_ORIGIN_MM
+    error = actual.placement_error(rng, *PLACEMENT_ERROR)
+    part = part.with_placement(planned, error)
+    cloud = _scan(part.placed_actual(), PART_ORIGIN_MM, case, sensor, seed)
+    return Case(case, float(magnitude), int(seed), sensor, part, cloud.points_mm, cloud.sigma_mm,
+                load_spec(spec_path(spec_name)))  # fmt: skip

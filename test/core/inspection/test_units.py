@@ -1,0 +1,129 @@
+"""The inspection's building blocks on synthetic data with exact answers: fits, minimum zone, decisions, spec
+checks, signed distances, registration with locks and 3-2-1 datums."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+from scipy.spatial.transform import Rotation
+
+from agiprobot_measurement.inspection import actual, decision, fitting, registration
+from agiprobot_measurement.inspection.deviation import closest_points, edge_mask
+from agiprobot_measurement.inspection.errors import InspectionInputError, SpecError
+from agiprobot_measurement.inspection.spec import parse_spec
+
+RNG = np.random.default_rng(7)
+
+
+def test_plane_circle_sphere_cylinder_fits_recover_their_parameters():
+    xy = RNG.uniform(-20, 20, (2000, 2))
+    plane = np.c_[xy, 0.01 * xy[:, 0] + 3 + RNG.normal(0, 0.01, 2000)]
+    fit = fitting.fit_plane(plane, (0, 0, 1))
+    assert fit.normal[2] > 0 and abs(fit.centroid[2] - 3) < 0.01
+    angles = RNG.uniform(0, np.pi, 500)  # half a circle
+    circle = np.c_[5 + 4 * np.cos(angles), -2 + 4 * np.sin(angles), np.zeros(500)] + RNG.normal(0, 0.005, (500, 3))
+    c = fitting.fit_circle(circle, (0, 0, 0), (0, 0, 1))
+    assert np.allclose(c.centre[:2], (5, -2), atol=0.005) and abs(c.radius - 4) < 0.005
+    d = RNG.normal(size=(3000, 3))
+    sphere = (1, 2, 3) + 12.5 * d / np.linalg.norm(d, axis=1, keepdims=True)
+    s = fitting.fit_sphere(sphere)
+    assert np.allclose(s.centre, (1, 2, 3), atol=1e-6) and abs(s.radius - 12.5) < 1e-6
+    t = RNG.uniform(0, 2 * np.pi, 2000)
+    cyl = np.c_[3 * np.cos(t) + 1, 3 * np.sin(t), RNG.uniform(-10, 10, 2000)]
+    y = fitting.fit_cylinder(cyl, (0.8, 0.1, 0), (0.02, 0, 1), 2.8)
+    assert abs(y.radius - 3) < 1e-6 and abs(abs(y.axis[2]) - 1) < 1e-9
+
+
+def test_min_zone_flatness_is_the_narrowest_zone():
+    xy = RNG.uniform(-50, 50, (5000, 2))
+    # a tilted plane with heights in [0, 0.2] and the extremes present: zone 0.2 whatever the tilt
+    h = RNG.uniform(0, 0.2, 5000)
+    h[:3], h[3:6] = 0.0, 0.2
+    pts = np.c_[xy, h + 0.05 * xy[:, 0]]
+    assert fitting.min_zone_flatness(pts, (0, 0, 1)) == pytest.approx(0.2, abs=1e-6)
+
+
+def test_iso_14253_decisions_use_the_guard_bands():
+    assert decision.decide("x", 0.05, 0.1, 0.02).verdict == decision.CONFORM
+    assert decision.decide("x", 0.09, 0.1, 0.02).verdict == decision.INDETERMINATE
+    assert decision.decide("x", 0.13, 0.1, 0.02).verdict == decision.NOT_CONFORM
+    d = decision.decide("size", 99.85, 100.1, 0.01, lower=99.9)
+    assert d.verdict == decision.NOT_CONFORM and d.detection_limit_mm == pytest.approx(100.11)
+
+
+SPEC = {
+    "part": "cube",
+    "faces": {"top": {"normal": [0, 0, 1], "point": [0, 0, 50]}, "px": {"normal": [1, 0, 0], "point": [50, 0, 0]}},
+    "features": [{"name": "f", "type": "flatness", "face": "top", "tolerance_mm": 0.1}],
+}
+
+
+def test_spec_errors_name_the_problem():
+    cube = actual.cube()
+    parse_spec(SPEC).check_against(cube)
+    with pytest.raises(SpecError, match="unknown face 'side'"):
+        parse_spec({**SPEC, "features": [{"name": "f", "type": "flatness", "face": "side", "tolerance_mm": 0.1}]})
+    moved = {**SPEC, "faces": {**SPEC["faces"], "top": {"normal": [0, 0, 1], "point": [0, 0, 40]}}}
+    with pytest.raises(SpecError, match="matches no triangle"):
+        parse_spec(moved).check_against(cube)
+    with pytest.raises(SpecError, match="unknown type"):
+        parse_spec({**SPEC, "features": [{"name": "f", "type": "roundness"}]})
+    with pytest.raises(SpecError, match="lacks"):
+        parse_spec({**SPEC, "features": [{"name": "f", "type": "flatness", "face": "top"}]})
+    with pytest.raises(SpecError, match="degrees of freedom"):
+        parse_spec({**SPEC, "alignment": {"lock": ["qx"]}})
+
+
+def test_signed_distance_is_positive_outside_and_edges_are_masked():
+    cube = actual.cube()
+    pts = np.array([[0, 0, 50.2], [0, 0, 49.7], [49.9, 0, 50.1], [10, 10, 50.0]])
+    cp = closest_points(cube, pts)
+    assert cp.signed_mm[:2] == pytest.approx([0.2, -0.3])
+    assert edge_mask(cube, cp.closest_mm, 1.0).tolist() == [False, False, True, False]
+
+
+def _surface_points(mesh, n, noise, rng):
+    pts, _ = trimesh.sample.sample_surface(mesh, n, seed=int(rng.integers(1 << 30)))
+    return pts + rng.normal(0, noise, pts.shape)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_icp_recovers_a_placement_error(seed):
+    rng = np.random.default_rng(seed)
+    cube = actual.cube()
+    pts = _surface_points(cube, 60000, 0.05, rng)
+    pts = pts[pts @ np.array([1, 1, 1]) > -40]  # three faces and parts of the others
+    error = actual.placement_error(rng, 2.0, 1.0)
+    world = registration.apply(error, pts)
+    reg = registration.icp(world, cube)
+    err_mm, err_deg = registration.transform_error(reg.transform, np.linalg.inv(error), cube.vertices)
+    assert reg.converged and err_mm <= 0.01 and err_deg <= 0.005
+
+
+def test_locked_degrees_of_freedom_stay_fixed():
+    rng = np.random.default_rng(3)
+    cube = actual.cube()
+    pts = _surface_points(cube, 30000, 0.02, rng)
+    shift = np.eye(4)
+    shift[:3, 3] = (0.5, -0.4, 0.3)
+    reg = registration.icp(registration.apply(shift, pts), cube, registration.IcpSettings(lock=("tx", "rz")))
+    t = reg.transform
+    assert abs(t[0, 3]) < 1e-4  # x not corrected (only the rotations about the centroid move it, by nm)
+    assert t[1, 3] == pytest.approx(0.4, abs=0.005) and t[2, 3] == pytest.approx(-0.3, abs=0.005)
+    assert abs(Rotation.from_matrix(t[:3, :3]).as_rotvec()[2]) < 1e-8
+    with pytest.raises(InspectionInputError):
+        registration.IcpSettings(lock=("bogus",))
+
+
+def test_datum_321_maps_measured_datums_onto_the_nominal():
+    rng = np.random.default_rng(4)
+    error = actual.placement_error(rng, 0.3, 0.2)
+    a = np.c_[rng.uniform(-40, 40, (500, 2)), np.full(500, 50.0)]
+    b = np.c_[np.full(500, -50.0), rng.uniform(-40, 40, (500, 2))]
+    c = np.c_[rng.uniform(-40, 40, 500), np.full(500, -50.0), rng.uniform(-40, 40, 500)]
+    measured = [registration.apply(error, p) for p in (a, b, c)]
+    nominal = [((0, 0, 50.0), np.array([0, 0, 1.0])), ((-50.0, 0, 0), np.array([-1.0, 0, 0])),
+               ((0, -50.0, 0), np.array([0, -1.0, 0]))]  # fmt: skip
+    correction = registration.datum_frame(measured, nominal)
+    assert np.allclose(correction @ error, np.eye(4), atol=1e-9)
