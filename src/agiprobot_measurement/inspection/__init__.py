@@ -4,7 +4,9 @@ decisions and a report; plus actual parts with analytic truth and their simulate
 Modules: ``spec`` (the spec file: faces, features, alignment), ``registration`` (prealignment, robust ICP with
 locked DOFs, 3-2-1 datums), ``deviation`` (closest points, signed distances, masks, patch statistics),
 ``fitting`` (LS plane/circle/sphere/cylinder, minimum-zone flatness), ``features`` (the spec's features
-evaluated), ``decision`` (ISO 14253-1 rules), ``pipeline`` (the facade :func:`inspect_cloud`), ``report`` (JSON,
+evaluated), ``decision`` (ISO 14253-1 rules), ``pipeline`` (the facade :func:`inspect_cloud`), ``request`` (one
+inspection from files or points to its report: :func:`run_inspection`, used by the CLI and the ROS action),
+``cli`` (the command line's work), ``report`` (JSON,
 HTML, PNG, coloured PLY, written atomically), ``actual`` (deviated parts with truth), ``simulate`` (scanning
 them with the PhoXi and laser simulators), ``errors``.
 """
@@ -19,6 +21,7 @@ from agiprobot_measurement.inspection.errors import (
 )
 from agiprobot_measurement.inspection.pipeline import STAGES, InspectionResult, inspect_cloud
 from agiprobot_measurement.inspection.registration import IcpSettings, Registration, icp
+from agiprobot_measurement.inspection.request import InspectionRequest, run_inspection
 from agiprobot_measurement.inspection.spec import InspectionSpec, load_spec, parse_spec
 
 __all__ = [
@@ -31,6 +34,7 @@ __all__ = [
     "IcpSettings",
     "InspectionInputError",
     "InspectionInternalError",
+    "InspectionRequest",
     "InspectionResult",
     "InspectionSpec",
     "Registration",
@@ -41,4 +45,5 @@ __all__ = [
     "inspect_cloud",
     "load_spec",
     "parse_spec",
+    "run_inspection",
 ]

@@ -41,6 +41,7 @@ __all__ = [
     "arrow",
     "candidate_markers",
     "clear",
+    "deviation_markers",
     "frustum_marker",
     "frustum_marker_array",
     "ik_markers",
@@ -307,6 +308,27 @@ def voxel_markers(
         marker.colors = [ColorRGBA(r, g, b, 1.0) for r, g, b in _height_colors(centres[:, 2]).tolist()]
     else:
         marker.color = ColorRGBA(*rgba)
+    markers.markers.append(marker)
+    return markers
+
+
+def deviation_markers(
+    points_m: np.ndarray, rgb: np.ndarray, header: Header, point_m: float = 0.002, max_points: int = MAX_CUBES
+) -> MarkerArray:
+    """The inspected points (K, 3, world m) as one POINTS marker in namespace ``deviations``, each in its colour
+    ``rgb`` (K, 3, uint8: the report's colour map), thinned evenly to ``max_points``."""
+    points = np.asarray(points_m, dtype=float).reshape(-1, 3)
+    colours = np.asarray(rgb, dtype=float).reshape(-1, 3) / 255.0
+    if len(points) > max_points:
+        keep = slice(None, None, int(np.ceil(len(points) / max_points)))
+        points, colours = points[keep], colours[keep]
+    markers = MarkerArray(markers=[clear(header)])
+    marker = Marker(header=header, ns="deviations", id=0, type=Marker.POINTS, action=Marker.ADD)
+    marker.pose.orientation.w = 1.0
+    marker.scale.x = marker.scale.y = float(point_m)
+    marker.color = ColorRGBA(1.0, 1.0, 1.0, 1.0)
+    marker.points = [Point(*p) for p in points.tolist()]
+    marker.colors = [ColorRGBA(r, g, b, 1.0) for r, g, b in colours.tolist()]
     markers.markers.append(marker)
     return markers
 
