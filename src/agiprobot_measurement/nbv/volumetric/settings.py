@@ -195,6 +195,12 @@ class PlanningSettings:
     surprise_distance_m: float = 0.15
     surprise_angle_rad: float = math.radians(25.0)
     realised_streak: int = 3
+    #: ours: below this best predicted new surface (mm^2), and whenever the frontier predicts none, the view of the
+    #: global sphere that sees the most never-observed space next to the seen surface is weighed too (0: only when
+    #: the frontier predicts none)
+    coverage_fallback_below_mm2: float = 300.0
+    coverage_fallback_reach_vox: int = 3  # "next to": within this many planning voxels of a full voxel
+    tour: dict = field(default_factory=dict)  # ours_tour's settings (policies.tour.TourSettings)
 
     @classmethod
     def from_mapping(cls, values: dict) -> PlanningSettings:
@@ -210,6 +216,9 @@ class PlanningSettings:
             "surprise_distance_m": ("surprise_distance_m", number),
             "surprise_angle_deg": ("surprise_angle_rad", _degrees),
             "realised_streak": ("realised_streak", _whole()),
+            "coverage_fallback_below_mm2": ("coverage_fallback_below_mm2", non_negative),
+            "coverage_fallback_reach_vox": ("coverage_fallback_reach_vox", _whole(1, 20)),
+            "tour": ("tour", _mapping),
         }
         return cls(**_parse(values, "planning", rules))
 
