@@ -79,7 +79,7 @@ def _comb(rng) -> np.ndarray:
     angle = rng.uniform(0, 2 * math.pi)
     c, s = math.cos(angle), math.sin(angle)
     p = np.asarray(pts) @ np.array([[c, s], [-s, c]])
-    return (*p, cx, cy)
+    return p + np.array([cx, cy])
 
 
 def _spiral(rng) -> np.ndarray:
@@ -95,7 +95,7 @@ def _spiral(rng) -> np.ndarray:
     a = t + rng.uniform(0, 2 * math.pi)
     outer = np.column_stack([(r + thick_s / 2) * np.cos(a), (r + thick_s / 2) * np.sin(a)])
     inner = np.column_stack([(r - thick_s / 2) * np.cos(a), (r - thick_s / 2) * np.sin(a)])
-    return (*np.vstack([outer, inner[::-1]]), cx, cy)
+    return np.vstack([outer, inner[::-1]]) + np.array([cx, cy])
 
 
 def _poly(rng) -> np.ndarray:

@@ -198,7 +198,7 @@ class PlanningSettings:
     #: ours: below this best predicted new surface (mm^2), and whenever the frontier predicts none, the view of the
     #: global sphere that sees the most never-observed space next to the seen surface is weighed too (0: only when
     #: the frontier predicts none)
-    coverage_fallback_below_mm2: float = 300.0
+    coverage_fallback_below_mm2: float = 100.0
     coverage_fallback_reach_vox: int = 3  # "next to": within this many planning voxels of a full voxel
     tour: dict = field(default_factory=dict)  # ours_tour's settings (policies.tour.TourSettings)
 

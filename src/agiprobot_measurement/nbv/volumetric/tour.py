@@ -34,11 +34,13 @@ CostFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
 def greedy_cover(sets: np.ndarray, weights: np.ndarray, cover_share: float = 0.9, max_views: int = 8,
-                 first: list[int] | None = None) -> list[int]:  # fmt: skip
+                 first: list[int] | None = None, min_marginal_share: float = 0.0) -> list[int]:  # fmt: skip
     """Indices of the views picked: ``sets`` (V, M) bool (view v sees element m), ``weights`` (V,) >= 0 the views'
     own predicted gains; a view's marginal value is its weight x the share of its elements not yet covered. The
     views of ``first`` are taken first (the sticky plan), then the best marginal ones until the picked views cover
-    ``cover_share`` of the union or ``max_views`` are picked or nothing is left to gain."""
+    ``cover_share`` of the union or ``max_views`` are picked or nothing is left to gain, or the best marginal value
+    falls below ``min_marginal_share`` of the first greedy pick's (a plan of the views worth visiting, not of every
+    sliver)."""
     sets = np.asarray(sets, dtype=bool)
     weights = np.asarray(weights, dtype=float)
     if sets.ndim != 2 or len(weights) != len(sets):
@@ -54,13 +56,15 @@ def greedy_cover(sets: np.ndarray, weights: np.ndarray, cover_share: float = 0.9
         if len(picked) < max_views and v not in picked:
             picked.append(int(v))
             covered |= sets[v]
+    top = None
     while len(picked) < max_views and (total == 0 or covered.sum() < cover_share * total):
         fresh = (sets & ~covered).sum(axis=1)
         value = weights * fresh / size
         value[picked] = -1.0
         best = int(np.argmax(value))
-        if value[best] <= 0:
+        if value[best] <= 0 or (top is not None and value[best] < min_marginal_share * top):
             break
+        top = value[best] if top is None else top
         picked.append(best)
         covered |= sets[best]
     return picked

@@ -62,11 +62,13 @@ class OursPolicy(Policy):
         share_seen = float(np.clip(1.0 - expected_area_m2 / self.first_expected_area_m2, 0.0, 1.0))
         return share_seen**self.cost_schedule_power
 
-    def choose(self, q):
+    def scored_pool(self, q):
+        """(candidates, stats, feasible indices, expected gain, expected new area (m^2), utilities) of the pool at
+        joints ``q``, the pool remembered with its utilities; the candidates are None when none is feasible."""
         c = self.context
         cands, stats = self.feasible_pool(q)
         if cands is None:
-            return self.coverage_fallback(q, stats)
+            return None, stats, None, None, None, None
         idx = np.nonzero(cands.feasible)[0]
         exp_gain, exp_area = expected_surface(c.planning_map, cands.poses[idx], c.view_model, self.model)
         terms = {"expected_surface": exp_gain}
@@ -80,7 +82,15 @@ class OursPolicy(Policy):
         factor = self.cost_factor(float(exp_area.max()))
         utilities = score * np.exp(-c.cost_weight * factor * cost)
         self.remember(cands, utilities)
-        if not np.any(exp_area > 0):
+        return cands, stats, idx, exp_gain, exp_area, utilities
+
+    def choose(self, q):
+        return self.choose_from(q, *self.scored_pool(q))
+
+    def choose_from(self, q, cands, stats, idx, exp_gain, exp_area, utilities):
+        """Ours' choice from a scored pool (:meth:`scored_pool`), the coverage fallback where the predicted surface
+        runs out."""
+        if cands is None or not np.any(exp_area > 0):
             return self.coverage_fallback(q, stats)
         if float(exp_area.max()) * 1e6 < self.fallback_below_mm2:
             # little predicted surface left: a view that sees never-observed space next to the surface may see more
