@@ -64,6 +64,12 @@ def oracle_views(truth: GroundTruth, time_limit_s: float = 20.0) -> dict:
     return out
 
 
+def _observable_matrix(truth: GroundTruth):
+    """The visibility matrix (observable points x poses, CSC), or None when either is empty."""
+    matrix = truth.visibility.matrix.tocsc()[truth.observable].tocsc()
+    return None if matrix.shape[0] == 0 or matrix.shape[1] == 0 else matrix
+
+
 #: coverage levels the truth-aware tour oracle plans for
 TOUR_LEVELS = (0.90, 0.95, 0.98)
 
@@ -75,12 +81,10 @@ def oracle_tour_curve(truth: GroundTruth, levels=TOUR_LEVELS, max_views: int = 1
     :func:`~agiprobot_measurement.nbv.volumetric.tour.order_tour`). Returns [(coverage reached, path rad), ...]
     sorted by coverage, each path the shortest of the tours reaching at least that coverage (the same shape as
     :func:`oracle_path_curve`'s, so a level is looked up the same way)."""
-    st = truth.station
-    vis = truth.visibility
-    matrix = vis.matrix.tocsc()[truth.observable].tocsc()
-    n = matrix.shape[0]
-    if n == 0 or matrix.shape[1] == 0:
+    matrix = _observable_matrix(truth)
+    if matrix is None:
         return []
+    st, vis = truth.station, truth.visibility
     dense = np.asarray(matrix.todense(), dtype=bool).T  # (poses, points)
     home = np.asarray(st.home_rad, dtype=float)
     checker = st.collision_checker(with_part=True)
@@ -112,12 +116,11 @@ def oracle_path_curve(truth: GroundTruth, per_rad_offset_rad: float | None = Non
     plus that offset. Poses are solved nearest the joints of the step before (the ground truth's own solution where
     that one collides). A bound, not a plan: the moves are straight (no detour around obstacles) and the gains
     exact. Returns [(coverage, path rad), ...] per view."""
-    st = truth.station
-    vis = truth.visibility
-    matrix = vis.matrix.tocsc()[truth.observable].tocsc()
-    n = matrix.shape[0]
-    if n == 0 or matrix.shape[1] == 0:
+    matrix = _observable_matrix(truth)
+    if matrix is None:
         return []
+    st, vis = truth.station, truth.visibility
+    n = matrix.shape[0]
     rows = matrix.tocsr()
     covered = np.zeros(n, dtype=bool)
     q = np.asarray(st.home_rad, dtype=float)

@@ -24,48 +24,18 @@ the tail a greedy planner shuttles between the sides of the part. So:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
-from agiprobot_measurement.common.config import number, whole
-from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.nbv.volumetric.gains import predicted_normals
 from agiprobot_measurement.nbv.volumetric.policies.base import FALLBACKS, ViewChoice
 from agiprobot_measurement.nbv.volumetric.policies.ours import OursPolicy
 from agiprobot_measurement.nbv.volumetric.tour import TourPlan, greedy_cover, order_tour
 
-__all__ = ["TourPolicy", "TourSettings", "coverage_sets"]
+__all__ = ["TourPolicy", "coverage_sets"]
 
 #: at most this many predicted-surface elements per plan (a random subset beyond)
 MAX_ELEMENTS = 4000
-
-
-@dataclass(frozen=True)
-class TourSettings:
-    """``planning.tour`` of config/nbv.yaml (see the module docstring)."""
-
-    min_greedy_views: int = 3
-    max_plan_views: int = 8
-    cover_share: float = 0.9
-    keep_share: float = 0.5
-    min_marginal_share: float = 0.3
-    max_branches: int = 4
-
-    @classmethod
-    def from_mapping(cls, values: dict | None) -> TourSettings:
-        values = dict(values or {})
-        unknown = sorted(set(values) - set(cls.__dataclass_fields__))
-        if unknown:
-            raise InputError(f"planning.tour: unknown key(s) {unknown}; known: {', '.join(cls.__dataclass_fields__)}")
-        out = {}
-        for key, value in values.items():
-            where = f"planning.tour.{key}"
-            if key in ("min_greedy_views", "max_plan_views", "max_branches"):
-                out[key] = whole(value, where, 1, 64)
-            else:
-                out[key] = number(value, where, 0.0, 1.0)
-        return cls(**out)
 
 
 def coverage_sets(poses: np.ndarray, elements_m: np.ndarray, normals: np.ndarray, view_model) -> np.ndarray:
@@ -95,7 +65,7 @@ class TourPolicy(OursPolicy):
 
     def __init__(self, context, planning):
         super().__init__(context, planning)
-        self.tour = TourSettings.from_mapping(planning.tour)
+        self.tour = planning.tour
         self.plan = TourPlan()
         self.planned_views = 0
         self.last_phase = "greedy"
