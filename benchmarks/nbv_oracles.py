@@ -71,16 +71,17 @@ def _observable_matrix(truth: GroundTruth):
 
 
 #: coverage levels the truth-aware tour oracle plans for
-TOUR_LEVELS = (0.90, 0.95, 0.98)
+TOUR_LEVELS = (0.90, 0.95, 0.98, 1.0)
 
 
 def oracle_tour_curve(truth: GroundTruth, levels=TOUR_LEVELS, max_views: int = 14) -> list:
     """The truth-aware tour bound: per level, the greedy partial set cover of the observable points until the
-    level (at most ``max_views`` poses), visited in the shortest open tour from the home pose over the poses'
-    collision-free IK branches (straight L1 joint distance; exact for small plans,
+    level (at most ``max_views`` poses; 1.0: all of them, or what that many poses reach), visited in the shortest
+    open tour from the home pose over the poses' collision-free IK branches (straight L1 joint distance; exact for small plans,
     :func:`~agiprobot_measurement.nbv.volumetric.tour.order_tour`). Returns [(coverage reached, path rad), ...]
     sorted by coverage, each path the shortest of the tours reaching at least that coverage (the same shape as
-    :func:`oracle_path_curve`'s, so a level is looked up the same way)."""
+    :func:`oracle_path_curve`'s, so a level is looked up the same way). A bound at these levels only: between
+    them the next level's tour counts."""
     matrix = _observable_matrix(truth)
     if matrix is None:
         return []
