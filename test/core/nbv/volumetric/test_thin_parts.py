@@ -26,7 +26,7 @@ def test_a_plate_thinner_than_a_voxel_keeps_its_points_on_the_fixture():
 
 
 def test_ours_does_not_quit_early_on_a_thin_plate():
-    station = SimulatedNBVStation("plate_1", "mm", None, pixel_step=8)  # 219 x 91 x 4 mm, generated, held out
+    station = SimulatedNBVStation("plate_1", "mm", None, pixel_step=8)  # 219 x 91 x 4 mm, generated
     truth = GroundTruth(station, spacing_m=0.003, directions=100)
     request = ReconstructionRequest.with_config_defaults(gain="ours", max_views=5, seed=0)
     run = simulate(station, request, truth, chamfer=False)
