@@ -568,21 +568,25 @@ class _Engine:
         return reason
 
     def _reacquire_sweep(self) -> str:
-        """One sweep round the known body (see ``RunConfig.reacquire_sweeps``): sources on a ring at the standoff
-        beyond the body's known radius (and, where that ring measures nothing, one half the radius nearer), the
-        laser through the centre of the known full cells, either camera side; a view is taken only where the
+        """One sweep round the known body (see ``RunConfig.reacquire_sweeps``): per direction, sources on rings at the
+        standoff beyond the known cells' radius (and half that radius nearer) round the known cells' centre, then
+        round the scene centre, the laser through the ring's centre, either camera side, until one measures; a view is taken only where the
         laser's first cell that is not known empty is unknown (otherwise it could only return a seen cell). Every
         hit that leaves growth points starts an expansion."""
         rf, cfg = self.rf, self.cfg
+        # rings round the known cells' centre and round the scene centre (where the a-priori search expects the
+        # body), each reaching the known cells: with only a spike tip known, the first ring lies inside the body
         full = np.argwhere(self.m == FULL).astype(float)
-        centre = full.mean(axis=0)
-        radius = float(np.sqrt(((full - centre) ** 2).sum(axis=1).max()))
+        rings = []
+        for centre in (full.mean(axis=0), (np.array(self.shape, dtype=float) - 1) / 2):
+            radius = float(np.sqrt(((full - centre) ** 2).sum(axis=1).max()))
+            rings += [(centre, radius), (centre, 0.5 * radius)]
         reach = float(self.shape[0] + self.shape[1])
         reason = "growth_points_exhausted"
         self.outcomes["reacquire: sweep"] += 1
         for psi in np.arange(0.0, 360.0, cfg.reacquire_step_deg):
             u = np.array([math.cos(math.radians(psi)), math.sin(math.radians(psi))])
-            for ring in (radius, 0.5 * radius):
+            for centre, ring in rings:
                 src = centre + (ring + rf.standoff_cells) * u
                 if not (0 <= src[0] <= self.shape[0] - 1 and 0 <= src[1] <= self.shape[1] - 1):
                     continue
