@@ -7,7 +7,7 @@ GUI ?= 0
 
 BENCH_OUT ?= $(ROOT)/bench_results
 BENCH_ARGS ?=
-BENCHES := planning parts part-family scan-lines scale set-cover metrology motion kinematics collision nbv3d nbv-map nbv2d mild calibration phoxi scanner real-cell acceptance inspection
+BENCHES := planning parts part-family scan-lines scale set-cover metrology motion kinematics collision nbv3d nbv-heldout nbv-map nbv2d nbv2d-heldout mild calibration phoxi scanner real-cell acceptance inspection
 
 .PHONY: setup demo demo-station test lint format pytest rostest bench $(addprefix bench-,$(BENCHES)) fuzz clean
 
@@ -77,11 +77,17 @@ bench-collision: setup
 bench-nbv3d: setup
 	$(call run_bench,nbv3d,benchmarks.nbv3d.loop,--json "$(BENCH_OUT)/nbv3d.json")
 
+bench-nbv-heldout: setup
+	$(call run_bench,nbv-heldout,benchmarks.nbv3d.loop,--set evaluation --methods ours ours_tour rear_side_voxel proximity_count random oracle --seeds 3 --random-seeds 3 --max-views 20 --pixel-step 4 --json "$(BENCH_OUT)/nbv-heldout.json")
+
 bench-nbv-map: setup
 	$(call run_bench,nbv-map,benchmarks.nbv3d.map,--json "$(BENCH_OUT)/nbv-map.json")
 
 bench-nbv2d: setup
 	$(call run_bench,nbv2d,benchmarks.nbv2d,--json "$(BENCH_OUT)/nbv2d.json")
+
+bench-nbv2d-heldout: setup
+	$(call run_bench,nbv2d-heldout,benchmarks.nbv2d,--set all --scripts fullpix stratpix --json "$(BENCH_OUT)/nbv2d-heldout.json")
 
 bench-mild: setup
 	$(call run_bench,mild,benchmarks.mild,)

@@ -11,6 +11,13 @@ the D0, path and section 7.1 targets use the noise-free runs:
     python -m benchmarks.nbv2d --objects u_shape --baselines long --aims centre --noisy off   # a subset
     python -m benchmarks.nbv2d --short 40 --long 250 --noise 0.3 --json /tmp/nbv2d.json --table /tmp/nbv2d.txt
     python -m benchmarks.nbv2d --scripts fullpix stratpix --s2-orbit-budget none --json /tmp/b.json   # full orbit
+    python -m benchmarks.nbv2d --set evaluation --scripts fullpix stratpix --baselines long   # generated bodies
+    python -m benchmarks.nbv2d --objects star5 --scripts fullpix stratpix --baselines long --noisy off
+
+``--set tuning|evaluation|all`` runs the generated bodies of :mod:`agiprobot_measurement.nbv.planar.families` (stars,
+combs, spirals, random polygons, blobs; the evaluation half was never used to tune the planner) instead of the six
+substitutes; with ``--set all`` the held-out (evaluation) figures are printed first. The targets that compare scripts
+object by object (path, section 7.1) are defined on the six substitutes only.
 
 Lengths in cells (1 cell = 1 mm); ``--short`` / ``--long`` are RFlength values, the standoff is kept.
 """
@@ -18,6 +25,7 @@ Lengths in cells (1 cell = 1 mm); ``--short`` / ``--long`` are RFlength values, 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -26,8 +34,9 @@ from pathlib import Path
 from agiprobot_measurement.common.files import atomic_write_text
 from agiprobot_measurement.nbv.planar.errors import NbvInputError
 from agiprobot_measurement.nbv.planar.evaluation import coverage, measurable_boundary, plannable_boundary, summarize
+from agiprobot_measurement.nbv.planar.families import FAMILY_SETS, family_bodies, make_body
 from agiprobot_measurement.nbv.planar.loop import run
-from agiprobot_measurement.nbv.planar.objects import OBJECT_NAMES, make_object
+from agiprobot_measurement.nbv.planar.objects import OBJECT_NAMES
 from agiprobot_measurement.nbv.planar.range_finder import RangeFinder2D
 from agiprobot_measurement.nbv.planar.run_config import RunConfig
 from agiprobot_measurement.nbv.planar.strategies import SCRIPTS
@@ -50,7 +59,7 @@ TARGETS = CONDITIONS.mapping("targets")
 def _one(job):
     obj, script, length, aim, noise, seed, baseline, extra = job
     rf = RangeFinder2D.from_config().with_length(length)
-    truth = make_object(obj)
+    truth = make_body(obj)
     result = run(truth, rf, RunConfig(script=script, aim=aim, noise_sigma_cells=noise, seed=seed, **extra))
     # the denominator: the boundary cells that a view planned onto the cell with this aim can see (the report's
     # section 7.1: cells beyond that are reached by no planned view); the any-ray figure is kept next to it
@@ -192,7 +201,19 @@ def run_options(items) -> dict:
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--objects", nargs="+", default=list(OBJECT_NAMES), choices=OBJECT_NAMES)
+    p.add_argument(
+        "--objects",
+        nargs="+",
+        default=None,
+        choices=[*OBJECT_NAMES, "star5", *family_bodies("all")],
+        help="the six substitutes by default",
+    )
+    p.add_argument(
+        "--set",
+        default=None,
+        choices=FAMILY_SETS,
+        help="the generated bodies of this half instead of --objects (evaluation = held out)",
+    )
     p.add_argument("--scripts", nargs="+", default=list(SCRIPTS), choices=SCRIPTS)
     p.add_argument("--short", type=float, default=DEFAULTS["short"], help="short RFlength in cells (%(default)g)")
     p.add_argument("--long", type=float, default=DEFAULTS["long"], help="long RFlength in cells (%(default)g)")
@@ -231,6 +252,15 @@ def main(argv=None) -> int:
     except NbvInputError as exc:
         p.error(str(exc))
 
+    if args.set is not None and args.objects is not None:
+        p.error("--set and --objects exclude each other")
+    if args.set is not None:
+        # the held-out half first
+        args.objects = family_bodies("evaluation") + (family_bodies("tuning") if args.set == "all" else [])
+        if args.set == "tuning":
+            args.objects = family_bodies("tuning")
+    elif args.objects is None:
+        args.objects = list(OBJECT_NAMES)
     jobs = []
     noises = {"both": (0.0, args.noise), "off": (0.0,), "only": (args.noise,)}[args.noisy]
     for baseline, length in (("short", args.short), ("long", args.long)):
@@ -264,8 +294,19 @@ def main(argv=None) -> int:
             f"{r['run_time_s']:5.1f}  {r['termination']}"
         )
     lines.append(f"\n{len(rows)} runs in {wall:.0f} s wall ({args.jobs} processes)\n")
-    checks = target_checks(rows)
-    lines.append(format_targets(checks))
+    if args.set is None:
+        checks = target_checks(rows)
+        lines.append(format_targets(checks))
+    else:  # the held-out half first; the tuning half's figures beside them, not the targets
+        checks = []
+        for half in ("evaluation", "tuning"):
+            names = set(family_bodies(half))
+            group = [r for r in rows if r["object"] in names]
+            if group:
+                lines.append(f"targets on the {half} bodies ({'held out' if half == 'evaluation' else 'tuning'}):")
+                half_checks = target_checks(group)
+                lines.append(format_targets(half_checks))
+                checks += [dataclasses.replace(c, name=f"[{half}] {c.name}") for c in half_checks]
     print("\n".join(lines))
     if args.table is not None:
         atomic_write_text(args.table, "\n".join(lines) + "\n", make_parents=True)

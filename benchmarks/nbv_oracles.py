@@ -4,7 +4,7 @@
 :class:`~agiprobot_measurement.nbv.simulation.ground_truth.GroundTruth` over its feasible poses with the project's
 :func:`~agiprobot_measurement.planning.cover.solve.solve_set_cover` (the lower bound on views) and gives the greedy
 max-coverage order for the 90 / 95 % counts; :func:`oracle_path_curve` the coverage over the straight joint path of
-a planner that knows the truth; :class:`GainQuality` scores each gain's choice against the truly best view.
+a greedy planner that knows the truth, :func:`oracle_tour_curve` that of a set cover visited in the shortest tour; :class:`GainQuality` scores each gain's choice against the truly best view.
 """
 
 from __future__ import annotations
@@ -14,10 +14,11 @@ import numpy as np
 from agiprobot_measurement.nbv.simulation.ground_truth import GroundTruth, views_to
 from agiprobot_measurement.nbv.volumetric.gains import ExpectedSurfaceModel, expected_surface
 from agiprobot_measurement.nbv.volumetric.policies.base import weighted_score
+from agiprobot_measurement.nbv.volumetric.tour import greedy_cover, order_tour
 from agiprobot_measurement.planning.cover.solve import solve_set_cover
 from agiprobot_measurement.sensors.phoxi.renderer import RayCaster, SceneGeometry
 
-__all__ = ["ORACLE_PATH_PLANNERS", "GainQuality", "oracle_path_curve", "oracle_views"]
+__all__ = ["ORACLE_PATH_PLANNERS", "GainQuality", "oracle_path_curve", "oracle_tour_curve", "oracle_views"]
 
 
 def oracle_views(truth: GroundTruth, time_limit_s: float = 20.0) -> dict:
@@ -59,7 +60,50 @@ def oracle_views(truth: GroundTruth, time_limit_s: float = 20.0) -> dict:
     out["path_curves"] = {
         name: oracle_path_curve(truth, per_rad_offset_rad=offset) for name, offset in ORACLE_PATH_PLANNERS.items()
     }
+    out["path_curves"]["tour"] = oracle_tour_curve(truth)
     return out
+
+
+def _observable_matrix(truth: GroundTruth):
+    """The visibility matrix (observable points x poses, CSC), or None when either is empty."""
+    matrix = truth.visibility.matrix.tocsc()[truth.observable].tocsc()
+    return None if matrix.shape[0] == 0 or matrix.shape[1] == 0 else matrix
+
+
+#: coverage levels the truth-aware tour oracle plans for
+TOUR_LEVELS = (0.90, 0.95, 0.98, 1.0)
+
+
+def oracle_tour_curve(truth: GroundTruth, levels=TOUR_LEVELS, max_views: int = 14) -> list:
+    """The truth-aware tour bound: per level, the greedy partial set cover of the observable points until the
+    level (at most ``max_views`` poses; 1.0: all of them, or what that many poses reach), visited in the shortest
+    open tour from the home pose over the poses' collision-free IK branches (straight L1 joint distance; exact for small plans,
+    :func:`~agiprobot_measurement.nbv.volumetric.tour.order_tour`). Returns [(coverage reached, path rad), ...]
+    sorted by coverage, each path the shortest of the tours reaching at least that coverage (the same shape as
+    :func:`oracle_path_curve`'s, so a level is looked up the same way). A bound at these levels only: between
+    them the next level's tour counts."""
+    matrix = _observable_matrix(truth)
+    if matrix is None:
+        return []
+    st, vis = truth.station, truth.visibility
+    dense = np.asarray(matrix.todense(), dtype=bool).T  # (poses, points)
+    home = np.asarray(st.home_rad, dtype=float)
+    checker = st.collision_checker(with_part=True)
+    points = []
+    for level in levels:
+        picked = greedy_cover(dense, dense.sum(axis=1).astype(float), cover_share=level, max_views=max_views)
+        if not picked:
+            continue
+        solutions, valid = st.ik.solve_all(vis.poses[picked], home)
+        branches = []
+        for k, pose_index in enumerate(picked):
+            mine = solutions[k][valid[k]]
+            mine = mine[checker.check_states(mine)] if len(mine) else mine
+            branches.append(mine if len(mine) else vis.joints[pose_index][None])
+        path, _, _ = order_tour(home, branches, lambda q, qs: np.abs(np.atleast_2d(qs) - q).sum(axis=1))
+        points.append((float(dense[picked].any(axis=0).mean()), float(path)))
+    points.sort()
+    return [(c, min(p for c2, p in points if c2 >= c)) for c, _ in points]
 
 
 #: the truth-aware path planners of :func:`oracle_path_curve`: name -> per_rad_offset_rad (None: coverage first)
@@ -73,12 +117,11 @@ def oracle_path_curve(truth: GroundTruth, per_rad_offset_rad: float | None = Non
     plus that offset. Poses are solved nearest the joints of the step before (the ground truth's own solution where
     that one collides). A bound, not a plan: the moves are straight (no detour around obstacles) and the gains
     exact. Returns [(coverage, path rad), ...] per view."""
-    st = truth.station
-    vis = truth.visibility
-    matrix = vis.matrix.tocsc()[truth.observable].tocsc()
-    n = matrix.shape[0]
-    if n == 0 or matrix.shape[1] == 0:
+    matrix = _observable_matrix(truth)
+    if matrix is None:
         return []
+    st, vis = truth.station, truth.visibility
+    n = matrix.shape[0]
     rows = matrix.tocsr()
     covered = np.zeros(n, dtype=bool)
     q = np.asarray(st.home_rad, dtype=float)

@@ -31,7 +31,11 @@ from agiprobot_measurement.nbv.planar.errors import NbvInputError
 def _parse(argv):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     src = p.add_mutually_exclusive_group(required=True)
-    src.add_argument("--object", help="rectangle, disc, rotated_rect, triangle, l_shape, u_shape, or all")
+    src.add_argument(
+        "--object",
+        help="rectangle, disc, rotated_rect, triangle, l_shape, u_shape, all, star5, or a generated body "
+        "(star_0 .. star_5, comb_k, spiral_k, poly_k, blob_k)",
+    )
     src.add_argument("--object-image", type=Path, help="a body as an image (dark = body) or a .npy mask")
     p.add_argument("--script", required=True, help="circpix, fullpix or stratpix")
     p.add_argument("--rf-length", type=float, default=None, help="laser-camera distance RFlength in cells "
@@ -75,6 +79,7 @@ def _main(argv=None) -> int:
             plannable_boundary,
             summarize,
         )
+        from agiprobot_measurement.nbv.planar.families import make_body
         from agiprobot_measurement.nbv.planar.loop import run
         from agiprobot_measurement.nbv.planar.objects import OBJECT_NAMES, load_object_file, make_object
         from agiprobot_measurement.nbv.planar.painting import paint_rf
@@ -103,7 +108,7 @@ def _main(argv=None) -> int:
         elif args.object == "all":
             bodies = [(n, make_object(n)) for n in OBJECT_NAMES]
         else:
-            bodies = [(args.object, make_object(args.object))]
+            bodies = [(args.object, make_body(args.object))]
         stem_of = {
             name: f"{name}_{cfg.script}_{cfg.aim}_L{rf.rf_length_cells:.0f}_n{cfg.noise_sigma_cells:g}_s{cfg.seed}"
             for name, _ in bodies

@@ -1,14 +1,15 @@
 #!/usr/bin/env python3
 """Reconstruct a part on the simulated station by next-best-view planning (no roscore needed).
 
-The part (a mesh file in --units, a STEP file in the unit it declares, or a procedural shape: u_channel, cup,
-two_towers, l_bracket, torus; read and checked as plan_measurement.py reads parts, 10 mm to 2 m across) is placed on
+The part (a mesh file in --units, a STEP file in the unit it declares, a procedural shape: u_channel, cup,
+two_towers, l_bracket, torus, or a generated part: shape_k, boolean_k, plate_k, blob_k, mech_k with k = 0..7; read and checked as plan_measurement.py reads parts, 10 mm to 2 m across) is placed on
 the fixture, hidden from the planner, and scanned by the simulated PhoXi (model S, noise on) on the UR10e's flange,
 view after view, by the same loop as the ROS node (src/agiprobot_measurement/nbv/reconstruction.py).
 
 examples:
   reconstruct.py ../shared/parts/objectA_wuerfel.stl --units mm --out /tmp/cube
   reconstruct.py cup --method random --max-views 8 --out /tmp/cup --summary /tmp/cup.json --pixel-step 4
+  reconstruct.py plate_1 --method ours_tour --max-views 12 --out /tmp/plate --pixel-step 4
   reconstruct.py ../shared/parts/fandisk.obj --units m --extent 0.2 --method hemisphere12 --out /tmp/fan
 
 outputs in --out: cloud.ply (fused points, world frame), map.npz (+ map.bt with an OctoMap binding), mesh.ply

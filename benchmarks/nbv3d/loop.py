@@ -21,7 +21,17 @@ examples (python -m benchmarks.nbv3d ...):
   --gain-quality --objects all --max-views 10 --compare-weights proximity_count=1,report=0.3
 
 Objects: cube, cylinder, featuretype, fandisk, angle_block, idler_riser, plate_holes (shared parts), u_channel,
-cup, two_towers, l_bracket, torus (procedural), or a mesh path (mm); "all" = every named one.
+cup, two_towers, l_bracket, torus (procedural), or a mesh path (mm); "all" = every named one. ``--set
+evaluation|tuning|all`` takes the generated parts of agiprobot_measurement.nbv.simulation.families3d instead (the
+evaluation half was never used to tune anything; with ``all`` it is run and reported first), e.g.
+  --set evaluation --methods ours ours_tour rear_side_voxel proximity_count random oracle --seeds 3 \
+      --random-seeds 3 --max-views 20 --pixel-step 4 --json /tmp/heldout.json
+
+Besides the targets of the original 12 objects, ``comparisons`` holds for ours and ours_tour, against the best
+volumetric metric (and ours_tour against ours): the joint path, the motion seconds and the time (planning + motion
++ capture + fusion) until both runs of a pair first reach 0.90, 0.95 and the pair's lower final coverage, as the
+ratio, mean over the run pairs, median over the objects; and per method the medians of C(4), AUC(10), N95, the
+times to 0.90 / 0.95, planning per view and self-termination.
 """
 
 from __future__ import annotations
@@ -36,7 +46,8 @@ from pathlib import Path
 
 import numpy as np
 
-from agiprobot_measurement.errors import InputError
+from agiprobot_measurement.errors import AgiprobotError, InputError
+from agiprobot_measurement.nbv.simulation.families3d import FAMILY_SETS, family_parts, is_family_part
 from agiprobot_measurement.nbv.simulation.ground_truth import GroundTruth, auc, simulate, views_to
 from agiprobot_measurement.nbv.simulation.station3d import SimulatedNBVStation
 from agiprobot_measurement.nbv.volumetric.gain_names import GAIN_NAMES
@@ -63,7 +74,7 @@ def resolve_object(name: str):
         if not path.is_file():
             raise InputError(f"object {name}: {path} not found")
         return str(path), units, extent
-    if name in SHAPE_NAMES:
+    if name in SHAPE_NAMES or is_family_part(name):
         return name, "mm", None
     path = Path(name)
     if path.is_file():
@@ -187,7 +198,13 @@ def main(argv=None) -> int:
         epilog=__doc__.split("\n\n", 1)[1],
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--objects", nargs="+", default=list(DEFAULTS["objects"]))
+    parser.add_argument("--objects", nargs="+", default=None, help=f"default: {' '.join(DEFAULTS['objects'])}")
+    parser.add_argument(
+        "--set",
+        default=None,
+        choices=FAMILY_SETS,
+        help="the generated parts of this half instead of --objects (evaluation = held out; all = both, held out first)",
+    )
     parser.add_argument("--methods", nargs="+", default=list(DEFAULTS["methods"]))
     parser.add_argument("--max-views", type=int, default=DEFAULTS["max_views"])
     parser.add_argument("--random-seeds", type=int, default=DEFAULTS["random_seeds"])
@@ -299,7 +316,15 @@ def config_overrides(options: list[str], config: dict) -> dict:
 
 def _setup(args):
     """(objects, their specs, the config with the command line's overrides, ours' request overrides)."""
-    objects = [*PARTS, *SHAPE_NAMES] if args.objects == ["all"] else args.objects
+    if args.set is not None and args.objects is not None:
+        raise InputError("--set and --objects exclude each other")
+    if args.set is not None:
+        objects = family_parts("evaluation") + (family_parts("tuning") if args.set == "all" else [])
+        if args.set == "tuning":
+            objects = family_parts("tuning")
+    else:
+        objects = args.objects or list(DEFAULTS["objects"])
+        objects = [*PARTS, *SHAPE_NAMES] if objects == ["all"] else objects
     ours_options = ours_overrides(args.ours_option)
     weights = ours_weights(args.ours_weight)
     config = load_nbv_config()
@@ -357,7 +382,7 @@ def run(args) -> int:
         if m != "oracle" and m not in METHODS:
             raise InputError(f"unknown method {m!r}; known: {', '.join([*METHODS, 'oracle'])}")
     objects, specs, config, ours_options, options = _setup(args)
-    results = {"max_views": args.max_views, "pixel_step": args.pixel_step, **options, "objects": {}}
+    results = {"max_views": args.max_views, "pixel_step": args.pixel_step, **options, "set": args.set, "objects": {}}
     for name, (part, units, extent) in zip(objects, specs, strict=True):
         t = time.perf_counter()
         station = SimulatedNBVStation(part, units, extent, seed=args.seed, pixel_step=args.pixel_step, config=config)
@@ -385,15 +410,20 @@ def run(args) -> int:
                 continue
             seeds = range(args.random_seeds) if method == "random" else range(args.seed, args.seed + args.seeds)
             runs, budget_runs = [], []
-            budget = method == "ours" and not args.no_budget_run
+            budget = method in ("ours", "ours_tour") and not args.no_budget_run
             for seed in seeds:
                 overrides = {"gain": method, "max_views": args.max_views, "seed": seed}
                 if method in VOLUMETRIC:
                     overrides["cost_weight"] = 0.0  # rpg's default
-                if method == "ours":
+                if method in ("ours", "ours_tour"):
                     overrides.update(ours_options)
                 request = ReconstructionRequest.with_config_defaults(**overrides)
-                summary = simulate(station, request, truth, chamfer=not args.no_chamfer, budget_run=budget)
+                try:
+                    summary = simulate(station, request, truth, chamfer=not args.no_chamfer, budget_run=budget)
+                except AgiprobotError as exc:  # e.g. a motion the time parameterisation refuses: noted, not fatal
+                    entry.setdefault("failed_runs", []).append({"method": method, "seed": seed, "error": str(exc)})
+                    print(f"[{name}] {method} seed {seed}: FAILED {exc}", file=sys.stderr)
+                    continue
                 if budget:
                     budget_runs.append(summary)
                     summary = self_terminated(summary)
@@ -404,6 +434,8 @@ def run(args) -> int:
                     f"{summary['wall_time_s']:.0f} s",
                     file=sys.stderr,
                 )
+            if not runs:
+                continue
             entry["methods"][method] = {"summary": aggregate(runs, args.max_views), "runs": runs}
             if budget_runs:
                 entry["methods"][method + "@budget"] = {
@@ -412,9 +444,9 @@ def run(args) -> int:
                 }
         results["objects"][name] = entry
         if args.json:  # after every object, so that a long run cut short keeps what it measured
-            results["targets"] = targets(results)
+            finish(results)
             write_json(args.json, results)
-    results["targets"] = targets(results)
+    finish(results)
     print_table(results)
     if args.json:
         write_json(args.json, results)
@@ -434,11 +466,137 @@ def merge(args) -> int:
             continue
         for obj, entry in data["objects"].items():
             results["objects"].setdefault(obj, entry)["methods"].update(entry["methods"])
-    results["targets"] = targets(results)
+    finish(results)
     print_table(results)
     if args.json:
         write_json(args.json, results)
     return 0
+
+
+#: the planners compared at fixed coverage levels (each against the best volumetric metric; ours_tour also against ours)
+COMPARED = ("ours", "ours_tour")
+LEVELS = (0.90, 0.95, "final")
+
+
+def finish(results: dict) -> None:
+    """The targets and the comparisons, over all objects and, for generated parts, per half (held out first)."""
+    results["targets"] = targets(results)
+    results["comparisons"] = comparisons(results)
+    halves = {}
+    for half in ("evaluation", "tuning"):
+        names = set(family_parts(half))
+        part = {**results, "objects": {o: e for o, e in results["objects"].items() if o in names}}
+        if part["objects"]:
+            halves[half] = {"targets": targets(part), "comparisons": comparisons(part)}
+    results["by_set"] = halves
+
+
+def level_cost(run: dict, level: float) -> dict | None:
+    """Joint path (rad), motion (s) and time (planning + motion + capture + fusion, s) of a run until its coverage
+    first reaches ``level``; None if it never does."""
+    path = motion = total = 0.0
+    for v in run.get("view_log", []):
+        path += float(v["joint_path_rad"])
+        motion += float(v["motion_s"])
+        total += sum(float(v.get(k) or 0.0) for k in ("planning_s", "motion_s", "capture_s", "integrate_s"))
+        if v.get("coverage") is not None and v["coverage"] >= level - 1e-9:
+            return {"path_rad": path, "motion_s": motion, "time_s": total}
+    return None
+
+
+def comparisons(results: dict) -> dict:
+    """Ratios at fixed coverage levels and per-method medians (see the module docstring)."""
+    objects = {obj: e["methods"] for obj, e in results["objects"].items()}
+    tg = targets(results) if objects else {}
+    best = tg.get("best_volumetric_auc10_metric")
+    out: dict = {"reference": best, "ratios": {}, "methods": {}}
+    pairs = [(p, best) for p in COMPARED if best] + [("ours_tour", "ours")]
+    for a_name, b_name in pairs:
+        key = f"{a_name}/{b_name}"
+        per_object = {}
+        for obj, m in objects.items():
+            if a_name not in m or b_name not in m:
+                continue
+            a_runs, b_runs = m[a_name]["runs"], m[b_name]["runs"]
+            row = {}
+            for level in LEVELS:
+                ratios = {"path_rad": [], "motion_s": [], "time_s": []}
+                for a, b in zip(a_runs, b_runs * len(a_runs), strict=False):
+                    lv = min(a.get("coverage") or 0.0, b.get("coverage") or 0.0) if level == "final" else level
+                    ca, cb = level_cost(a, lv), level_cost(b, lv)
+                    if ca is None or cb is None:
+                        continue
+                    for k in ratios:
+                        if cb[k] > 0:
+                            ratios[k].append(ca[k] / cb[k])
+                for k, values in ratios.items():
+                    if values:
+                        row[f"{k}@{level}"] = float(np.mean(values))
+            per_object[obj] = row
+        keys = sorted({k for r in per_object.values() for k in r})
+        out["ratios"][key] = {
+            "median": {k: float(np.median([r[k] for r in per_object.values() if k in r])) for k in keys},
+            "objects_compared": {k: sum(k in r for r in per_object.values()) for k in keys},
+            "per_object": per_object,
+        }
+    methods = sorted({name for m in objects.values() for name in m if name != "oracle"})
+    for name in methods:
+        out["methods"][name] = method_medians([m[name] for m in objects.values() if name in m])
+    return out
+
+
+def _median(values):
+    values = [v for v in values if v is not None]
+    return float(np.median(values)) if values else None
+
+
+def _to_level(rows: list, level: float, key: str):
+    """Median over the objects of the mean over runs of ``key`` until ``level`` (a run that never reaches it: inf)."""
+    per = []
+    for row in rows:
+        costs = [level_cost(r, level) for r in row["runs"]]
+        per.append(math.inf if any(c is None for c in costs) else float(np.mean([c[key] for c in costs])))
+    return float(np.median(per)) if per else None
+
+
+def method_medians(rows: list) -> dict:
+    """One method's medians over the objects (``rows``: its per-object entries with summary and runs)."""
+    runs = [r for row in rows for r in row["runs"]]
+    losses = [
+        (r.get("budget_final_coverage") or 0.0) - (r.get("coverage") or 0.0)
+        for r in runs
+        if "budget_final_coverage" in r
+    ]
+    stopped = [r["termination_reason"] in ("gain_below_threshold", "frontier_exhausted") for r in runs]
+    return {
+        "objects": len(rows),
+        "runs": len(runs),
+        "c4": _median([row["summary"]["c4"] for row in rows]),
+        "auc10": _median([row["summary"]["auc10"] for row in rows]),
+        "final": _median([row["summary"]["final_coverage"] for row in rows]),
+        "n95": _median([math.inf if row["summary"]["n95"] is None else row["summary"]["n95"] for row in rows]),
+        "time_to_090_s": _to_level(rows, 0.90, "time_s"),
+        "time_to_095_s": _to_level(rows, 0.95, "time_s"),
+        "motion_to_095_s": _to_level(rows, 0.95, "motion_s"),
+        "path_to_095_rad": _to_level(rows, 0.95, "path_rad"),
+        "planning_median_s": _median([p for r in runs for p in r["planning_s_per_view"]]),
+        "self_terminated": float(np.mean(stopped)) if stopped else None,
+        "stop_loss_max": max(losses or [0.0]),
+        "stop_loss_median": _median(losses or [0.0]),
+    }
+
+
+def print_comparisons(title: str, comp: dict) -> None:
+    print(f"== {title}: per method, median over the objects (reference metric: {comp.get('reference')})")
+    cols = ("c4", "auc10", "final", "n95", "time_to_090_s", "time_to_095_s", "motion_to_095_s", "path_to_095_rad",
+            "planning_median_s", "self_terminated", "stop_loss_max")  # fmt: skip
+    print(f"{'method':<18} " + " ".join(f"{c[:13]:>13}" for c in cols))
+    for name, row in comp.get("methods", {}).items():
+        print(f"{name:<18} " + " ".join(f"{fmt(row.get(c), '.3f'):>13}" for c in cols))
+    for key, r in comp.get("ratios", {}).items():
+        med = r["median"]
+        n = r["objects_compared"]
+        print(f"   {key}: " + ", ".join(f"{k} {v:.3f} ({n[k]} obj)" for k, v in med.items()))
 
 
 def targets(results: dict) -> dict:
@@ -615,6 +773,13 @@ def print_table(results: dict) -> None:
     medians = tg.get("median", {})
     if medians:
         print("median over objects: " + ", ".join(f"{k} {v:.3f}" for k, v in medians.items() if v is not None))
+    halves = results.get("by_set") or {}
+    for half in ("evaluation", "tuning"):
+        if half in halves:
+            label = "held-out (evaluation) parts" if half == "evaluation" else "tuning parts (not the targets)"
+            print_comparisons(label, halves[half]["comparisons"])
+    if not halves and results.get("comparisons"):
+        print_comparisons("all objects", results["comparisons"])
 
 
 if __name__ == "__main__":

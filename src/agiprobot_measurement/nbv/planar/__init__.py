@@ -19,6 +19,7 @@ Modules (imported on demand; this file stays light):
 - :mod:`.run_config` the parameters of one run;
 - :mod:`.loop` initial search, the scripts and their termination;
 - :mod:`.objects` the six substitute bodies and bodies from images;
+- :mod:`.families` the generated bodies (stars, combs, spirals, polygons, blobs) with a tuning and a held-out half;
 - :mod:`.evaluation` the measurable boundary (brute force) and the run metrics;
 - :mod:`.painting` the ``paintRF`` picture;
 - :mod:`.errors` :class:`~.errors.NbvInputError`, an :class:`~agiprobot_measurement.errors.InputError`.

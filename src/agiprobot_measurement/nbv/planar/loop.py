@@ -555,7 +555,60 @@ class _Engine:
 
     def expand(self, first_hit) -> str:
         """Expand growth points until they are exhausted; with depth noise, then reopen the marked candidates and
-        expand again, while a pass adds full cells (``noise_reopen_passes``)."""
+        expand again, while a pass adds full cells (``noise_reopen_passes``); then, while full cells border unknown
+        ones, sweep round the body for a new hit and expand from it (``reacquire_sweeps``)."""
+        reason = self._expand_with_reopening(first_hit)
+        for _ in range(self.cfg.reacquire_sweeps):
+            if reason != "growth_points_exhausted":
+                break
+            full_before = int(np.count_nonzero(self.m == FULL))
+            reason = self._reacquire_sweep()
+            if int(np.count_nonzero(self.m == FULL)) <= full_before:
+                break
+        return reason
+
+    def _reacquire_sweep(self) -> str:
+        """One sweep round the known body (see ``RunConfig.reacquire_sweeps``): per direction, sources on rings at the
+        standoff beyond the known cells' radius (and half that radius nearer) round the known cells' centre, then
+        round the scene centre, the laser through the ring's centre, either camera side, until one measures; a view is taken only where the
+        laser's first cell that is not known empty is unknown (otherwise it could only return a seen cell). Every
+        hit that leaves growth points starts an expansion."""
+        rf, cfg = self.rf, self.cfg
+        # rings round the known cells' centre and round the scene centre (where the a-priori search expects the
+        # body), each reaching the known cells: with only a spike tip known, the first ring lies inside the body
+        full = np.argwhere(self.m == FULL).astype(float)
+        rings = []
+        for centre in (full.mean(axis=0), (np.array(self.shape, dtype=float) - 1) / 2):
+            radius = float(np.sqrt(((full - centre) ** 2).sum(axis=1).max()))
+            rings += [(centre, radius), (centre, 0.5 * radius)]
+        reach = float(self.shape[0] + self.shape[1])
+        reason = "growth_points_exhausted"
+        self.outcomes["reacquire: sweep"] += 1
+        for psi in np.arange(0.0, 360.0, cfg.reacquire_step_deg):
+            u = np.array([math.cos(math.radians(psi)), math.sin(math.radians(psi))])
+            for centre, ring in rings:
+                src = centre + (ring + rf.standoff_cells) * u
+                if not (0 <= src[0] <= self.shape[0] - 1 and 0 <= src[1] <= self.shape[1] - 1):
+                    continue
+                bi, bj = first_blocking(self.m != EMPTY, src, src - reach * u)
+                if bi < 0 or self.m[bi, bj] != UNKNOWN:
+                    continue
+                hit = None
+                for side in (1, -1):
+                    _, hit, _ = self.measure(rf.pose_through(src, centre, side), None, None)
+                    if hit is not None:
+                        break
+                if hit is None:
+                    continue
+                if len(self.growth_points()):
+                    self.outcomes["reacquire: new contour"] += 1
+                    reason = self._expand_with_reopening(hit)
+                    if reason != "growth_points_exhausted":
+                        return reason
+                break
+        return reason
+
+    def _expand_with_reopening(self, first_hit) -> str:
         reason = self._expand_pass(first_hit)
         if self.cfg.noise_sigma_cells <= 0:
             return reason

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 from agiprobot_measurement.common.config import ConfigError, non_negative, positive
@@ -75,6 +76,13 @@ class RunConfig:
     # marks of the cells still unknown are cleared with the forbidden configurations, and the expansion runs again,
     # while a pass adds full cells, at most this many times (0: the report's single pass)
     noise_reopen_passes: int = 8
+    # once the growth points are exhausted while full cells still border unknown ones (the contour chain broke at an
+    # acute apex, or edge-midpoint aiming lost the contour after one feature), the body is searched again from all
+    # round: sources on rings around the known body, the laser through its centre, measured only where the laser's
+    # first cell that is not known empty is unknown; a new hit starts a new expansion. At most this many sweeps
+    # (0: the report's single expansion), in steps of ``reacquire_step_deg``
+    reacquire_sweeps: int = 6
+    reacquire_step_deg: float = 5.0
     # fullpix: after a strategy finds no view, one that planned before may plan again (see ``_Engine.resolve``)
     retry_planned_strategies: bool = True
     # strategy 0 may take a view whose first not-known-empty cell behind cc is not known full when no view has a
@@ -142,6 +150,10 @@ class RunConfig:
             raise NbvInputError(f"circ_d0_max_unknown_cells must be >= 0, got {self.circ_d0_max_unknown_cells!r}")
         if int(self.noise_reopen_passes) < 0:
             raise NbvInputError(f"noise_reopen_passes must be >= 0, got {self.noise_reopen_passes!r}")
+        if int(self.reacquire_sweeps) < 0:
+            raise NbvInputError(f"reacquire_sweeps must be >= 0, got {self.reacquire_sweeps!r}")
+        if not (math.isfinite(self.reacquire_step_deg) and 0.5 <= self.reacquire_step_deg <= 90.0):
+            raise NbvInputError(f"reacquire_step_deg must be in [0.5, 90], got {self.reacquire_step_deg!r}")
         for name in ("contour_points", "max_switches_per_candidate", "max_measurements_per_candidate", "circ_max_laps"):
             if int(getattr(self, name)) < 1:
                 raise NbvInputError(f"{name} must be >= 1, got {getattr(self, name)!r}")

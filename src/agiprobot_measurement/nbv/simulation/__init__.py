@@ -13,5 +13,6 @@ Modules (imported on demand):
   the true scene, and the camera that renders PhoXi frames;
 - :mod:`.ground_truth` the observable surface, the coverage and Chamfer metrics and :func:`~.ground_truth.simulate`,
   one reconstruction with its summary;
-- :mod:`.objects3d` the procedural concave test bodies.
+- :mod:`.objects3d` the procedural concave test bodies;
+- :mod:`.families3d` the generated parts (five families, 40 parts) with a tuning and a held-out half.
 """

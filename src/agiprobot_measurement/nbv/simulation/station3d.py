@@ -23,6 +23,7 @@ from agiprobot_measurement._paths import PACKAGE_ROOT
 from agiprobot_measurement.common.limits import LIMITS, check_count, check_file_size, excerpt
 from agiprobot_measurement.common.units import UNIT_SCALES_TO_M
 from agiprobot_measurement.errors import InputError
+from agiprobot_measurement.nbv.simulation.families3d import is_family_part, make_family_part
 from agiprobot_measurement.nbv.simulation.objects3d import SHAPES, make_shape
 from agiprobot_measurement.nbv.volumetric.interfaces import CapturedView, MotionError
 from agiprobot_measurement.nbv.volumetric.station3d import HOUSING_LINK, NBVStation
@@ -41,7 +42,7 @@ __all__ = ["SimulatedNBVStation", "SimulatedPhoXiCamera", "SimulatedRobot", "loa
 def load_part_mesh(part, units: str = "mm", largest_extent_m: float | None = None):
     """A part as a ``trimesh.Trimesh`` in metres: a mesh path (STL, OBJ, PLY, OFF...) in ``units`` or a STEP file
     (in the unit it declares), a Trimesh (already in ``units``) or the name of a procedural shape of
-    :mod:`.objects3d` (mm); ``largest_extent_m`` rescales it so that its largest bounding-box edge has that length.
+    :mod:`.objects3d` or a generated part of :mod:`.families3d` (mm); ``largest_extent_m`` rescales it so that its largest bounding-box edge has that length.
 
     Files are read by the planner's :func:`~agiprobot_measurement.planning.part_loading.load_part`, so the two tools
     accept and refuse the same files. Raises :class:`InputError` for a missing, oversized, empty, degenerate or
@@ -56,6 +57,9 @@ def load_part_mesh(part, units: str = "mm", largest_extent_m: float | None = Non
         mesh.apply_scale(UNIT_SCALES_TO_M[units])
     elif isinstance(part, str) and part in SHAPES:
         mesh = make_shape(part)  # mm
+        mesh.apply_scale(UNIT_SCALES_TO_M["mm"])
+    elif is_family_part(part):
+        mesh = make_family_part(part)  # mm
         mesh.apply_scale(UNIT_SCALES_TO_M["mm"])
     else:
         mesh = _read_part_file(part, units)

@@ -16,7 +16,8 @@ Modules (imported on demand; this file stays light):
 - :mod:`.request` the request of one reconstruction; :mod:`.results` its view records, result and progress;
 - :mod:`.reconstruction` the loop and its collaborators' assembly; :mod:`.stopping` the gain-based stopping rule;
   :mod:`.novelty` the surface a frame added; :mod:`.outputs` the files of a run;
-- :mod:`.policies` the view-selection policies over a narrow context, chosen by name;
+- :mod:`.policies` the view-selection policies over a narrow context, chosen by name; :mod:`.tour` the tour
+  planner's pieces (partial set cover, open tour over views x IK branches, the sticky plan);
 - :mod:`.voxel_map` the log-odds voxel map (OctoMap sensor model), its labels, growth voxels, candidates, occlusion
   plane, predicted surface and exports, with :mod:`.map_parts` (raw points, static surface samples),
   :mod:`.pooling` (coarse copies) and :mod:`.raycast3d` (its numba kernels);

@@ -61,6 +61,7 @@ __all__ = [
     "evaluate_views",
     "expected_surface",
     "expected_surface_fields",
+    "predicted_normals",
     "utility",
 ]
 
@@ -263,6 +264,12 @@ def _gain_fields(grid: VoxelMap, max_dist_m: float):
         )
 
     return grid._cached(("gain_fields", float(max_dist_m)), compute)
+
+
+def predicted_normals(grid: VoxelMap) -> np.ndarray:
+    """(n_voxels, 3) per flat voxel index: the fused normal on full voxels, the predicted surface's on growth voxels
+    and their unknown neighbours, zero elsewhere (the gain kernel's own input, cached on the map)."""
+    return _gain_fields(grid, 10.0 * grid.resolution_m)[5]
 
 
 def evaluate_views(

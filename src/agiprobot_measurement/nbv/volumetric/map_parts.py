@@ -89,14 +89,19 @@ def _clip_polygon_to_box(poly: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np
     return poly
 
 
-def surface_samples_in_box(triangles: np.ndarray, lo, hi, spacing_m: float) -> np.ndarray:
-    """Points no farther than ``spacing_m`` apart on the parts of triangles (T, 3, 3) inside the box (m)."""
+def surface_samples_in_box(triangles: np.ndarray, lo, hi, spacing_m: float, inset_m: float = 0.0) -> np.ndarray:
+    """Points no farther than ``spacing_m`` apart on the parts of triangles (T, 3, 3) inside the box (m), moved
+    ``inset_m`` against each triangle's normal (into a body whose faces wind outwards)."""
     tri_lo = triangles.min(axis=1)
     tri_hi = triangles.max(axis=1)
     near = np.all((tri_hi >= lo) & (tri_lo <= hi), axis=1)
     chunks = []
     for tri in triangles[near]:
-        poly = _clip_polygon_to_box(np.asarray(tri, dtype=float), lo, hi)
+        tri = np.asarray(tri, dtype=float)
+        normal = np.cross(tri[1] - tri[0], tri[2] - tri[0])  # of the triangle: a clipped sliver's is unreliable
+        length = float(np.linalg.norm(normal))
+        inset = normal * (inset_m / length) if length > 0 else np.zeros(3)
+        poly = _clip_polygon_to_box(tri, lo, hi)
         for k in range(1, len(poly) - 1):
             a, b, c = poly[0], poly[k], poly[k + 1]
             n = max(1, math.ceil(max(np.linalg.norm(b - a), np.linalg.norm(c - a), np.linalg.norm(c - b)) / spacing_m))
@@ -104,5 +109,5 @@ def surface_samples_in_box(triangles: np.ndarray, lo, hi, spacing_m: float) -> n
             keep = (i + j) <= n
             u = i[keep, None] / n
             v = j[keep, None] / n
-            chunks.append(a + (b - a) * u + (c - a) * v)
+            chunks.append(a + (b - a) * u + (c - a) * v - inset)
     return np.vstack(chunks) if chunks else np.zeros((0, 3))

@@ -18,7 +18,17 @@ from agiprobot_measurement.nbv.volumetric.station3d import load_nbv_config
 __all__ = ["CANDIDATE_SOURCES", "MAX_ROI_EDGE_M", "MAX_VIEWS", "METHODS", "ReconstructionRequest"]
 
 #: the selection methods (``ReconstructionRequest.gain``), each a policy of the registry
-METHODS = ("ours", *GAIN_NAMES, "random", "hemisphere", "hemisphere6", "hemisphere12", "hemisphere24", "report3d")
+METHODS = (
+    "ours",
+    "ours_tour",
+    *GAIN_NAMES,
+    "random",
+    "hemisphere",
+    "hemisphere6",
+    "hemisphere12",
+    "hemisphere24",
+    "report3d",
+)
 #: candidate sources; "random" and "hemisphere_fixed" (the action's names) select those baselines
 CANDIDATE_SOURCES = ("frontier+sphere", "frontier", "sphere", "random", "hemisphere_fixed")
 #: the largest ROI edge the loop accepts (m): the UR10e's reach around a part on the fixture

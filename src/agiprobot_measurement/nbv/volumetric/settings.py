@@ -30,6 +30,7 @@ __all__ = [
     "PlanningSettings",
     "RoiSettings",
     "SimulationSettings",
+    "TourSettings",
 ]
 
 #: how ours applies its motion weight lambda over a run (``planning.cost_schedule``)
@@ -179,6 +180,35 @@ class CandidateSettings:
 
 
 @dataclass(frozen=True)
+class TourSettings:
+    """``planning.tour``: ours_tour's receding-horizon plan (see :mod:`.policies.touring`): greedy views first, the
+    plan's size and covered share, the share of its planned gain a view must keep to stay in the plan, the smallest
+    marginal value (share of the first pick's) worth a stop, and the IK branches per view."""
+
+    min_greedy_views: int = 3
+    max_plan_views: int = 8
+    cover_share: float = 0.9
+    keep_share: float = 0.5
+    min_marginal_share: float = 0.3
+    max_branches: int = 4
+
+    @classmethod
+    def from_mapping(cls, values: dict) -> TourSettings:
+        def share(value, where):
+            return number(value, where, 0.0, 1.0)
+
+        rules = {
+            "min_greedy_views": ("min_greedy_views", _whole(0, 64)),
+            "max_plan_views": ("max_plan_views", _whole(1, 64)),
+            "cover_share": ("cover_share", share),
+            "keep_share": ("keep_share", share),
+            "min_marginal_share": ("min_marginal_share", share),
+            "max_branches": ("max_branches", _whole(1, 8)),
+        }
+        return cls(**_parse(values, "planning.tour", rules))
+
+
+@dataclass(frozen=True)
 class PlanningSettings:
     """``planning``: ours' score and motion weight (``cost_schedule_power``: (1 - A / A1)^power, a higher power lets
     the motion count later in the run; ``cost_joint_path_s_per_rad``: seconds of motion cost per rad of straight
@@ -195,6 +225,12 @@ class PlanningSettings:
     surprise_distance_m: float = 0.15
     surprise_angle_rad: float = math.radians(25.0)
     realised_streak: int = 3
+    #: ours: below this best predicted new surface (mm^2), and whenever the frontier predicts none, the view of the
+    #: global sphere that sees the most never-observed space next to the seen surface is weighed too (0: only when
+    #: the frontier predicts none)
+    coverage_fallback_below_mm2: float = 100.0
+    coverage_fallback_reach_vox: int = 3  # "next to": within this many planning voxels of a full voxel
+    tour: TourSettings = field(default_factory=TourSettings)
 
     @classmethod
     def from_mapping(cls, values: dict) -> PlanningSettings:
@@ -210,6 +246,9 @@ class PlanningSettings:
             "surprise_distance_m": ("surprise_distance_m", number),
             "surprise_angle_deg": ("surprise_angle_rad", _degrees),
             "realised_streak": ("realised_streak", _whole()),
+            "coverage_fallback_below_mm2": ("coverage_fallback_below_mm2", non_negative),
+            "coverage_fallback_reach_vox": ("coverage_fallback_reach_vox", _whole(1, 20)),
+            "tour": ("tour", lambda value, where: TourSettings.from_mapping(_mapping(value, where))),
         }
         return cls(**_parse(values, "planning", rules))
 

@@ -86,8 +86,11 @@ class MapConfig:
     ``resolution_m`` is the output / coverage grid, ``planning_resolution_m`` the coarse grid :meth:`VoxelMap.coarse`
     returns for candidates and gains. ``free_below`` / ``occupied_above`` bound the unknown band (see the module
     docstring for why the default is SCVP's ``[0.45, 0.65]`` and not rpg's ``[0.2, 0.8]``). Points closer than
-    ``static_margin_m`` to static geometry are dropped (voxel approximation: within ``ceil(margin / resolution)``
-    voxels, Chebyshev). ``max_voxels`` bounds memory (about :data:`BYTES_PER_VOXEL` bytes per voxel).
+    ``static_margin_m`` to static geometry are dropped: a point in a static voxel, or in the band of
+    ``ceil(margin / resolution)`` voxels (Chebyshev) around them whose distance to the static mesh along one of
+    the six axis directions is below the margin (so a part thinner than a voxel that lies on the fixture keeps its
+    points: a 4 mm plate vanished into the 5 mm planning map's band, and the frontier rule then quit after the
+    first view). ``max_voxels`` bounds memory (about :data:`BYTES_PER_VOXEL` bytes per voxel).
     """
 
     resolution_m: float = 0.002
@@ -195,6 +198,7 @@ class VoxelMap:
         self.normal_sum = np.zeros((*shape, 3), dtype=np.float32)
         self.raw = RawPoints()
         self._static_near = np.zeros(shape, dtype=bool)
+        self._static_mesh = None  # the a-priori scene (trimesh), for the exact margin test
         self._mark = np.zeros(n_vox, dtype=np.uint8)
         self._version = 0
         self._cache: dict = {}
@@ -265,7 +269,9 @@ class VoxelMap:
         if len(mesh_world.faces):
             lo = self.origin_m - res
             hi = self.origin_m + np.asarray(self.shape) * res + res
-            samples = surface_samples_in_box(mesh_world.vertices[mesh_world.faces], lo, hi, 0.5 * res)
+            # samples moved a micrometre into the body: a face on a voxel boundary (the fixture's top, on the ROI's
+            # grid) marks the voxel below it, not the free one above
+            samples = surface_samples_in_box(mesh_world.vertices[mesh_world.faces], lo, hi, 0.5 * res, inset_m=1e-6)
             if len(samples):
                 idx = self.world_to_index(samples)
                 idx = idx[self.in_grid(idx)]
@@ -276,7 +282,31 @@ class VoxelMap:
             for body in bodies:
                 if body.is_watertight:
                     static |= self._inside_by_columns(body)
+        self._static_mesh = mesh_world if len(mesh_world.faces) else None
         self._apply_static(static)
+
+    def _near_static_mesh(self, points: np.ndarray) -> np.ndarray:
+        """(N,) whether static geometry lies within ``static_margin_m`` of each point along one of the six axis
+        directions (Embree ray casts through trimesh)."""
+        near = np.zeros(len(points), dtype=bool)
+        mesh = self._static_mesh
+        margin = self.config.static_margin_m
+        if mesh is None or not len(points) or margin <= 0:
+            return near
+        for axis in range(3):
+            for sign in (1.0, -1.0):
+                d = np.zeros(3)
+                d[axis] = sign
+                left = np.flatnonzero(~near)
+                if not len(left):
+                    return near
+                loc, ray, _ = mesh.ray.intersects_location(
+                    points[left], np.tile(d, (len(left), 1)), multiple_hits=False
+                )
+                if len(ray):
+                    dist = np.linalg.norm(loc - points[left][ray], axis=1)
+                    near[left[ray[dist < margin]]] = True
+        return near
 
     def _inside_by_columns(self, mesh) -> np.ndarray:
         """Voxels whose centre is inside a watertight mesh: one +z ray per (x, y) column, parity of the crossings
@@ -365,7 +395,11 @@ class VoxelMap:
         end_flat = np.full(len(points), -1, dtype=np.int64)
         end_flat[inside] = self.flat_index(idx[inside])
         near_static = np.zeros(len(points), dtype=bool)
-        near_static[inside] = self._static_near.reshape(-1)[end_flat[inside]]
+        band = np.zeros(len(points), dtype=bool)
+        near_static[inside] = self.static.reshape(-1)[end_flat[inside]]
+        band[inside] = self._static_near.reshape(-1)[end_flat[inside]] & ~near_static[inside]
+        if band.any():
+            near_static[band] = self._near_static_mesh(points[band])
         kept = inside & ~near_static
         nx, ny, nz = self.shape
         args = (
@@ -569,6 +603,7 @@ class VoxelMap:
         config = replace(self.config, resolution_m=res_c)
         out = VoxelMap(self.roi_min_m, self.roi_max_m, config)
         out.raw = self.raw
+        out._static_mesh = self._static_mesh
         if abs(res_c - self.resolution_m) < 1e-12 and out.shape == self.shape:
             out.log_odds[...] = self.log_odds
             out.observed[...] = self.observed

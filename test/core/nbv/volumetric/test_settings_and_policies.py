@@ -19,6 +19,7 @@ def test_the_configuration_reads_into_typed_settings():
     assert settings.planning.surprise_angle_rad == pytest.approx(math.radians(25.0))
     assert settings.candidates.cone_angles_rad == pytest.approx((0.0, math.radians(20.0), math.radians(40.0)))
     assert settings.request["gain"] == "ours"
+    assert settings.planning.tour.max_plan_views == 8 and settings.planning.coverage_fallback_reach_vox == 3
 
 
 def test_missing_entries_take_the_loops_defaults():
@@ -39,6 +40,8 @@ def test_missing_entries_take_the_loops_defaults():
         ({"planning": {"gain_rays": [32]}}, r"planning\.gain_rays"),
         ({"roi": {"max_object_size_m": [0.2, 0.2]}}, r"roi\.max_object_size_m"),
         ({"motion": []}, r"motion: expected a mapping"),
+        ({"planning": {"tour": {"max_plan_view": 8}}}, r"planning\.tour\.max_plan_view: unknown key"),
+        ({"planning": {"tour": {"keep_share": 1.5}}}, r"planning\.tour\.keep_share"),
     ],
 )
 def test_unknown_keys_and_bad_values_are_named(config, named):

@@ -7,6 +7,7 @@ Modules:
 
 - :mod:`.base` the context, the shared pool and ranking, the motion-time estimate;
 - :mod:`.ours` ours: a weighted sum of PhoXi-aware gains discounted by the motion;
+- :mod:`.touring` ours_tour: ours' opening, then a receding-horizon tour over the predicted surface;
 - :mod:`.metrics` one volumetric metric with rpg's utility;
 - :mod:`.baselines` random, fixed hemisphere, the report's strategy in 3D;
 - :mod:`.registry` the policies by method name.

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.nbv.volumetric.gain_names import GAIN_NAMES
-from agiprobot_measurement.nbv.volumetric.gains import ExpectedSurfaceModel, expected_surface
+from agiprobot_measurement.nbv.volumetric.gains import ExpectedSurfaceModel, evaluate_views, expected_surface
 from agiprobot_measurement.nbv.volumetric.policies.base import Policy, PolicyContext, weighted_score
 from agiprobot_measurement.nbv.volumetric.settings import PlanningSettings
 
@@ -43,6 +45,8 @@ class OursPolicy(Policy):
         self.cost_schedule_power = planning.cost_schedule_power
         self.cost_s_per_rad = planning.cost_joint_path_s_per_rad
         self.first_expected_area_m2 = None
+        self.fallback_below_mm2 = planning.coverage_fallback_below_mm2
+        self.fallback_reach_vox = planning.coverage_fallback_reach_vox
 
     def cost_factor(self, expected_area_m2: float) -> float:
         """The share of lambda applied now. ``constant``: 1. ``remaining_surface``: 1 - A / A1, with A the most
@@ -58,11 +62,13 @@ class OursPolicy(Policy):
         share_seen = float(np.clip(1.0 - expected_area_m2 / self.first_expected_area_m2, 0.0, 1.0))
         return share_seen**self.cost_schedule_power
 
-    def choose(self, q):
+    def scored_pool(self, q):
+        """(candidates, stats, feasible indices, expected gain, expected new area (m^2), utilities) of the pool at
+        joints ``q``, the pool remembered with its utilities; the candidates are None when none is feasible."""
         c = self.context
         cands, stats = self.feasible_pool(q)
         if cands is None:
-            return None, "frontier_exhausted", stats
+            return None, stats, None, None, None, None
         idx = np.nonzero(cands.feasible)[0]
         exp_gain, exp_area = expected_surface(c.planning_map, cands.poses[idx], c.view_model, self.model)
         terms = {"expected_surface": exp_gain}
@@ -76,12 +82,58 @@ class OursPolicy(Policy):
         factor = self.cost_factor(float(exp_area.max()))
         utilities = score * np.exp(-c.cost_weight * factor * cost)
         self.remember(cands, utilities)
-        if not np.any(exp_area > 0):
-            return None, "frontier_exhausted", stats
+        return cands, stats, idx, exp_gain, exp_area, utilities
+
+    def choose(self, q):
+        return self.choose_from(q, *self.scored_pool(q))
+
+    def choose_from(self, q, cands, stats, idx, exp_gain, exp_area, utilities):
+        """Ours' choice from a scored pool (:meth:`scored_pool`), the coverage fallback where the predicted surface
+        runs out."""
+        if cands is None or not np.any(exp_area > 0):
+            return self.coverage_fallback(q, stats)
+        if float(exp_area.max()) * 1e6 < self.fallback_below_mm2:
+            # little predicted surface left: a view that sees never-observed space next to the surface may see more
+            other = self.coverage_fallback(q, dict(stats))
+            if other[0] is not None and other[0].remaining_area_m2 > float(exp_area.max()):
+                return other
         choice, fallbacks = self.ranked(cands, idx, exp_gain, utilities, exp_area)
         # the stopping rule looks at the predicted surface left for any candidate, not at the chosen view only
         for option in (choice, *fallbacks):
             option.remaining_area_m2 = float(exp_area.max())
             option.remaining_gain = float(exp_gain.max())
+        stats["fallbacks"] = fallbacks
+        return choice, "", stats
+
+    def coverage_fallback(self, q, stats: dict):
+        """The view of the global sphere that sees the most never-observed space next to the seen surface (rpg's
+        proximity count within ``planning.coverage_fallback_reach_vox`` voxels of a full voxel, discounted by the
+        motion as the score), or (None, "frontier_exhausted", stats) when no reachable view sees any. A thin or
+        flat part has no predicted surface along its rim (thinner than a planning voxel) although views from low
+        elevations would still see it. Its expected new area is the counted voxels x resolution^2 (weights
+        ``reach - d`` average about half the reach), so the stopping rule (too little expected or realised new
+        surface, surprises made tabu) still ends the run."""
+        c = self.context
+        cands, _ = self.pool(q, sources="sphere")
+        stats = {**stats, **self.stats(cands)}
+        if not cands.feasible.any():
+            self.remember(cands, None)
+            return None, "frontier_exhausted", stats
+        idx = np.nonzero(cands.feasible)[0]
+        res = float(c.planning_map.resolution_m)
+        reach = self.fallback_reach_vox * res
+        gains = evaluate_views(c.planning_map, cands.poses[idx], c.view_model, gain="proximity_count",
+                               proximity_max_dist_m=reach)  # fmt: skip
+        proximity = np.asarray(gains.gain, dtype=float)
+        area = proximity / (0.5 * reach) * res * res
+        utilities = proximity * np.exp(-c.cost_weight * c.motion_cost(q, cands.joints[idx]))
+        self.remember(cands, utilities)
+        if not np.any(area > 0):
+            return None, "frontier_exhausted", stats
+        choice, fallbacks = self.ranked(cands, idx, proximity, utilities, area)
+        for option in (choice, *fallbacks):
+            option.source = "coverage_fallback"
+            option.remaining_area_m2 = float(area.max())
+            option.remaining_gain = math.inf  # not comparable with the predicted-surface gain of the first view
         stats["fallbacks"] = fallbacks
         return choice, "", stats

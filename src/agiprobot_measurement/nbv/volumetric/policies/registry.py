@@ -10,6 +10,7 @@ from agiprobot_measurement.nbv.volumetric.policies.base import Policy, PolicyCon
 from agiprobot_measurement.nbv.volumetric.policies.baselines import HemispherePolicy, RandomPolicy, Report3DPolicy
 from agiprobot_measurement.nbv.volumetric.policies.metrics import MetricPolicy
 from agiprobot_measurement.nbv.volumetric.policies.ours import OursPolicy
+from agiprobot_measurement.nbv.volumetric.policies.touring import TourPolicy
 from agiprobot_measurement.nbv.volumetric.settings import PlanningSettings
 
 __all__ = ["POLICIES", "make_policy"]
@@ -17,6 +18,7 @@ __all__ = ["POLICIES", "make_policy"]
 #: method name -> factory(context, planning settings)
 POLICIES: dict[str, Callable[[PolicyContext, PlanningSettings], Policy]] = {
     "ours": OursPolicy,
+    "ours_tour": TourPolicy,
     **{name: (lambda context, planning, name=name: MetricPolicy(context, name)) for name in GAIN_NAMES},
     "random": lambda context, planning: RandomPolicy(context),
     "hemisphere": lambda context, planning: HemispherePolicy(context, 12),
