@@ -376,6 +376,14 @@ class CollisionChecker:
             self._rebuild()
         self.part_name = name
 
+    def part_trees(self) -> tuple[tuple[fcl.CollisionObject, ...], np.ndarray] | None:
+        """The part's FCL objects (one per tree, metres) and its pose, None without a part: for a check that shifts
+        the part (the placement check) without building its trees again; it must put the pose back."""
+        if self.part_name is None or self.part_name not in self._objects:
+            return None
+        part = self._objects[self.part_name]
+        return part.pieces, part.pose
+
     def set_part_placement(self, part: PartPlacement) -> None:
         """Load the part of a scene file (mesh file, unit, pose)."""
         self.set_part(_load_mesh(part.mesh), pose=part.pose, name=part.name, scale_to_m=part.scale_to_m)

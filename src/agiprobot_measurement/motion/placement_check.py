@@ -112,10 +112,11 @@ def clearing_shift_mm(
 _AXES = ((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, 1.0), (0.0, 0.0, -1.0))
 
 
-def find_overlaps(mesh_mm, scene, skip: tuple[str, ...] = ()) -> tuple[list[Overlap], float | None]:
+def find_overlaps(mesh_mm, scene, skip: tuple[str, ...] = (), part_objects=None) -> tuple[list[Overlap], float | None]:
     """The scene objects the part (mesh in world mm) overlaps by more than contact, and the lift along world
-    +z (mm) that clears all of them together (None when nothing overlaps)."""
-    part = _part_objects(mesh_mm)
+    +z (mm) that clears all of them together (None when nothing overlaps). ``part_objects``: the part's FCL objects
+    (world metres, identity pose) when they exist already; they are left shifted."""
+    part = list(part_objects) if part_objects is not None else _part_objects(mesh_mm)
     overlaps = []
     for obstacle in scene.objects:
         if obstacle.name in skip:
@@ -139,9 +140,19 @@ def find_overlaps(mesh_mm, scene, skip: tuple[str, ...] = ()) -> tuple[list[Over
 
 def check_placement(mesh_mm, scene, collision=None, start_state=None, where: str = "part") -> None:
     """Raise :class:`PlacementError` when the placed part (mesh in world mm) overlaps a scene object, or the
-    robot at ``start_state`` (rad; with ``collision``, a CollisionChecker that holds the part). Resting on a
-    surface (contact within :data:`CONTACT_TOLERANCE_MM`) is fine."""
-    overlaps, lift = find_overlaps(mesh_mm, scene)
+    robot at ``start_state`` (rad; with ``collision``, a CollisionChecker that holds the part: the same mesh in metres
+    at the identity pose, as the planning loads it, whose trees the search then reuses). Resting on a surface
+    (contact within :data:`CONTACT_TOLERANCE_MM`) is fine."""
+    trees = collision.part_trees() if collision is not None else None
+    if trees is not None and np.allclose(trees[1], np.eye(4)):
+        # the checker's own trees of the part (the same mesh in metres): shifted by the search, then put back
+        try:
+            overlaps, lift = find_overlaps(mesh_mm, scene, part_objects=trees[0])
+        finally:
+            for tree in trees[0]:
+                tree.setTransform(fcl.Transform())
+    else:
+        overlaps, lift = find_overlaps(mesh_mm, scene)
     robot_hits = []
     if collision is not None and start_state is not None and collision.part_name is not None:
         robot_hits = sorted(

@@ -62,6 +62,11 @@ MAX_POINT_VIEWS_PER_ROUND = 2000
 SUBSTITUTES_PER_VIEW = 20
 #: scan lines verified in one batched call (:func:`verify_mechanics_batch`); the deadline is checked between them
 VERIFY_CHUNK = 256
+#: the IP time limit (s) of the fallback solve over verified views when the deadline has passed
+LATE_IP_TIME_S = 0.3
+#: before the deadline, a batch holds only the lines the time left allows at the measured time per line (at least
+#: this many; the first batch this many, to measure it): a batch that starts just before the deadline ends soon after
+MIN_VERIFY_CHUNK = 16
 #: the candidate pool takes at most this many of a solve's most likely columns (or four times the batch)
 POOL_LIKELY_COLUMNS = 6000
 
@@ -98,6 +103,7 @@ class CoverLoop:
     provided: set = field(default_factory=set)
     set_cover_time: float = 0.0
     verified_count: int = 0
+    line_s: float | None = None  # measured verification time per scan line (s), None before the first batch
     only_verified: bool = False
     result: SetCoverResult | None = None
     chosen: list = field(default_factory=list)
@@ -127,14 +133,25 @@ class CoverLoop:
         return max(len(self.views), 0 if candidates is None else len(candidates.poses))
 
     def _verify(self, views: list, *, until_deadline: bool = True) -> None:
-        """Verify the unverified ``views`` in batches of :data:`VERIFY_CHUNK`; with ``until_deadline`` only while
-        the deadline has not come (the batch started before it is finished)."""
+        """Verify the unverified ``views`` in batches of up to :data:`VERIFY_CHUNK`; with ``until_deadline`` only
+        while the deadline has not come, in batches that fit the time left (the batch started before it is
+        finished)."""
         todo = [v for v in dict.fromkeys(views) if v.mechanics_verified is False]
-        for begin in range(0, len(todo), VERIFY_CHUNK):
-            if until_deadline and time.perf_counter() >= self.deadline:
-                break
-            part = todo[begin : begin + VERIFY_CHUNK]
+        begin = 0
+        while begin < len(todo):
+            size = VERIFY_CHUNK
+            if until_deadline and math.isfinite(self.deadline):
+                left_s = self.deadline - time.perf_counter()
+                if left_s <= 0.0:
+                    break
+                fits = MIN_VERIFY_CHUNK if self.line_s is None else int(left_s / max(self.line_s, 1e-6))
+                size = min(VERIFY_CHUNK, max(MIN_VERIFY_CHUNK, fits))
+            part = todo[begin : begin + size]
+            begin += len(part)
+            started = time.perf_counter()
             verify_mechanics_batch(self.run, self.tools, part, time_parameterize=not self.defer_trajectories)
+            per_line = (time.perf_counter() - started) / len(part)
+            self.line_s = per_line if self.line_s is None else 0.5 * (self.line_s + per_line)
             self.verified_count += len(part)
             done = min(1.0, self.verified_count / (self.verified_count + 10))
             self.tools.report("mechanics", done, f"verified {self.verified_count} scan lines")
@@ -168,7 +185,8 @@ class CoverLoop:
         round_s = LARGE_ROUND_IP_TIME_S if self.n_candidates >= LARGE_PROBLEM_VIEWS else ROUND_IP_TIME_S
         limit = min(self.time_limit_s, FULL_ROUND_IP_TIME_S if columns.size == len(views) else round_s)
         if math.isfinite(remaining):
-            limit = max(1.0, min(limit, 0.5 * remaining))
+            # past the deadline the fallback's cover of verified views (a small programme) gets a short solve
+            limit = max(1.0 if remaining > 0.0 else LATE_IP_TIME_S, min(limit, 0.5 * remaining))
         sub = matrix if columns.size == len(views) else matrix[:, columns]
         if self.settled is not None and not self.only_verified:
             result, self.settled = self.settled, None
@@ -287,8 +305,9 @@ class CoverLoop:
         )  # fmt: skip
         # views without a free start at either end of their line are settled for the whole batch at once
         self.verified_count += screen_scan_lines(self.run, self.tools, batch)
-        # the picked views first, whatever the time; the likely ones only while there is time
-        self._verify(batch[: len(pending)], until_deadline=False)
+        # the picked views first, whatever the time in the first round (a plan comes out however short the time);
+        # later rounds' picks and the likely ones only while there is time
+        self._verify(batch[: len(pending)], until_deadline=round_index > 0)
         self._verify(batch[len(pending) :])
         if all(v.mechanics_verified is True and v.mechanics_valid for v in chosen):
             still = np.zeros(result.covered.size, dtype=bool)
