@@ -10,7 +10,7 @@ import functools
 
 import numpy as np
 
-__all__ = ["TRACK_EXACT", "follow_branches", "follow_paths", "track_paths"]
+__all__ = ["TRACK_EXACT", "follow_branches", "follow_paths", "kernels_loaded", "track_paths"]
 
 #: the stop code of :func:`track_paths` for a path it cannot settle: the caller checks it with every IK branch
 TRACK_EXACT = 5
@@ -31,6 +31,12 @@ def follow_paths(solutions, valid, offsets, starts, jump_threshold, lower, upper
 def track_paths(poses, offsets, starts, shoulder_gap, pre, axes, tip, lower, upper, jump_threshold, margin):
     """Many paths followed by Newton steps from state to state; see :func:`_track_paths`."""
     return _compiled_track()(poses, offsets, starts, shoulder_gap, pre, axes, tip, lower, upper, jump_threshold, margin)
+
+
+def kernels_loaded() -> bool:
+    """Whether the batched path kernels (:func:`track_paths`, :func:`follow_paths`) are compiled or loaded from
+    numba's cache in this process: their first call costs seconds, which a caller near a deadline may not have."""
+    return all(factory.cache_info().currsize and factory().signatures for factory in (_compiled_track, _compiled_paths))
 
 
 @functools.cache

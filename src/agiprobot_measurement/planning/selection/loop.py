@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse
 
+from agiprobot_measurement.motion.cartesian_kernels import kernels_loaded
 from agiprobot_measurement.planning.cover.solve import SOLVER_TYPES, SetCoverResult, solve_set_cover
 from agiprobot_measurement.planning.errors import PlanningError, PlanningInputError
 from agiprobot_measurement.planning.run import PlanningRun, PlanningTools
@@ -62,6 +63,9 @@ MAX_POINT_VIEWS_PER_ROUND = 2000
 SUBSTITUTES_PER_VIEW = 20
 #: scan lines verified in one batched call (:func:`verify_mechanics_batch`); the deadline is checked between them
 VERIFY_CHUNK = 256
+#: what loading the compiled path kernels may cost in a process (s): a verification batch that would load them is
+#: not started with less time left
+KERNEL_LOAD_S = 3.0
 #: the IP time limit (s) of the fallback solve over verified views when the deadline has passed
 LATE_IP_TIME_S = 0.3
 #: before the deadline, a batch holds only the lines the time left allows at the measured time per line (at least
@@ -144,12 +148,17 @@ class CoverLoop:
                 left_s = self.deadline - time.perf_counter()
                 if left_s <= 0.0:
                     break
+                if left_s < KERNEL_LOAD_S and not kernels_loaded():
+                    break  # the compiled path kernels would load first: seconds this verification does not have
                 fits = MIN_VERIFY_CHUNK if self.line_s is None else int(left_s / max(self.line_s, 1e-6))
                 size = min(VERIFY_CHUNK, max(MIN_VERIFY_CHUNK, fits))
             part = todo[begin : begin + size]
             begin += len(part)
             started = time.perf_counter()
-            verify_mechanics_batch(self.run, self.tools, part, time_parameterize=not self.defer_trajectories)
+            deadline = self.deadline if until_deadline and math.isfinite(self.deadline) else None
+            verify_mechanics_batch(
+                self.run, self.tools, part, time_parameterize=not self.defer_trajectories, deadline=deadline
+            )
             per_line = (time.perf_counter() - started) / len(part)
             self.line_s = per_line if self.line_s is None else 0.5 * (self.line_s + per_line)
             self.verified_count += len(part)

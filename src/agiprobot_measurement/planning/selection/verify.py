@@ -37,6 +37,12 @@ def column_range(run: PlanningRun, view: ViewPoint):
     return int(run.measurability.indptr[j]), int(run.measurability.indptr[j + 1])
 
 
+#: OMPL time (s) for a connection from the current state to a scan line's start while verifying
+CONNECT_S = 1.0
+#: ... and the least it gets when a deadline is near or past
+MIN_CONNECT_S = 0.05
+
+
 def verify_mechanics(
     run: PlanningRun,
     tools: PlanningTools,
@@ -59,7 +65,7 @@ def verify_mechanics(
             collision=tools.collision,
             preferred_state=tools.preferred_state,
             scan_speed_mm_s=tools.scan_speed_mm_s,
-            connect_from_current=lambda q: tools.connect(tools.current_state, q, planning_time_s=1.0),
+            connect_from_current=lambda q: tools.connect(tools.current_state, q, planning_time_s=CONNECT_S),
         )
         return _record_check(run, tools, view, path, time_parameterize)
     finally:
@@ -92,15 +98,27 @@ def _record_check(run: PlanningRun, tools: PlanningTools, view: ViewPoint, path,
 
 
 def verify_mechanics_batch(
-    run: PlanningRun, tools: PlanningTools, views, settings: dict | None = None, time_parameterize: bool = True
+    run: PlanningRun,
+    tools: PlanningTools,
+    views,
+    settings: dict | None = None,
+    time_parameterize: bool = True,
+    deadline: float | None = None,
 ) -> list[bool]:
     """:func:`verify_mechanics` for many views at once (:func:`check_scan_lines`: batched IK, compiled branch
     walks, one collision check per attempt round); the same verdicts and the same changes to the views and the
-    run's coverage store. Returns each view's validity."""
+    run's coverage store. Returns each view's validity. ``deadline`` (a ``time.perf_counter()`` value): a
+    connection from the current state gets the time left before it (at least :data:`MIN_CONNECT_S`, at most
+    :data:`CONNECT_S`), not the full :data:`CONNECT_S`."""
     views = list(views)
     if not views:
         return []
     started = time.perf_counter()
+
+    def connect_from_current(q):
+        budget = CONNECT_S if deadline is None else min(CONNECT_S, max(MIN_CONNECT_S, deadline - time.perf_counter()))
+        return tools.connect(tools.current_state, q, planning_time_s=budget)
+
     try:
         paths = check_scan_lines(
             views,
@@ -109,7 +127,7 @@ def verify_mechanics_batch(
             collision=tools.collision,
             preferred_state=tools.preferred_state,
             scan_speed_mm_s=tools.scan_speed_mm_s,
-            connect_from_current=lambda q: tools.connect(tools.current_state, q, planning_time_s=1.0),
+            connect_from_current=connect_from_current,
         )
         return [_record_check(run, tools, v, p, time_parameterize) for v, p in zip(views, paths, strict=True)]
     finally:
