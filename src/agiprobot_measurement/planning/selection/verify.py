@@ -43,6 +43,24 @@ CONNECT_S = 1.0
 MIN_CONNECT_S = 0.05
 
 
+def _check_arguments(run: PlanningRun, tools: PlanningTools, settings: dict | None, deadline: float | None = None):
+    """The scan-line check's settings and collaborators; a connection from the current state gets :data:`CONNECT_S`,
+    or with a ``deadline`` the time left before it (at least :data:`MIN_CONNECT_S`)."""
+
+    def connect_from_current(q):
+        budget = CONNECT_S if deadline is None else min(CONNECT_S, max(MIN_CONNECT_S, deadline - time.perf_counter()))
+        return tools.connect(tools.current_state, q, planning_time_s=budget)
+
+    return {
+        "settings": settings or run.mechanics,
+        "ik": tools.ik,
+        "collision": tools.collision,
+        "preferred_state": tools.preferred_state,
+        "scan_speed_mm_s": tools.scan_speed_mm_s,
+        "connect_from_current": connect_from_current,
+    }
+
+
 def verify_mechanics(
     run: PlanningRun,
     tools: PlanningTools,
@@ -58,15 +76,7 @@ def verify_mechanics(
     """
     started = time.perf_counter()
     try:
-        path = check_scan_line(
-            view,
-            settings or run.mechanics,
-            ik=tools.ik,
-            collision=tools.collision,
-            preferred_state=tools.preferred_state,
-            scan_speed_mm_s=tools.scan_speed_mm_s,
-            connect_from_current=lambda q: tools.connect(tools.current_state, q, planning_time_s=CONNECT_S),
-        )
+        path = check_scan_line(view, **_check_arguments(run, tools, settings))
         return _record_check(run, tools, view, path, time_parameterize)
     finally:
         run.add_time("mechanics", time.perf_counter() - started)
@@ -114,21 +124,8 @@ def verify_mechanics_batch(
     if not views:
         return []
     started = time.perf_counter()
-
-    def connect_from_current(q):
-        budget = CONNECT_S if deadline is None else min(CONNECT_S, max(MIN_CONNECT_S, deadline - time.perf_counter()))
-        return tools.connect(tools.current_state, q, planning_time_s=budget)
-
     try:
-        paths = check_scan_lines(
-            views,
-            settings or run.mechanics,
-            ik=tools.ik,
-            collision=tools.collision,
-            preferred_state=tools.preferred_state,
-            scan_speed_mm_s=tools.scan_speed_mm_s,
-            connect_from_current=connect_from_current,
-        )
+        paths = check_scan_lines(views, **_check_arguments(run, tools, settings, deadline))
         return [_record_check(run, tools, v, p, time_parameterize) for v, p in zip(views, paths, strict=True)]
     finally:
         run.add_time("mechanics", time.perf_counter() - started)
