@@ -108,12 +108,19 @@ class PointCloudStitcherTest(unittest.TestCase):
         local = (points * 1000.0 - self.face[:3, 3]) @ self.face[:3, :3]
         self.assertLess(float(np.max(np.abs(local[:, 2]))), ON_PLANE_MM)
         self.assertTrue(np.all(np.abs(local[:, :2]) < PLATE_SIZE_MM[0] / 2.0))
-        # the original's latched PointCloud carries the (thinned) cloud
+        # the original's latched PointCloud carries the (thinned) cloud: the one published at the switch-off (while
+        # stitching it is published at 1 Hz with what had come so far)
         deadline = time.monotonic() + 5.0
-        while (self.stitched is None or not self.stitched.points) and time.monotonic() < deadline:
+        while time.monotonic() < deadline and (
+            self.stitched is None or not self.stitched.points or self.stitched.header.stamp.to_sec() < before_off
+        ):
             time.sleep(0.05)
         self.assertEqual(self.stitched.header.frame_id, "world")
-        self.assertGreater(len(self.stitched.points), 100)
+        # the robot stands: every profile lies on one line of about 100 mm, about 100 voxels of 1 mm once thinned
+        thinned = np.array([(p.x, p.y, p.z) for p in self.stitched.points])
+        self.assertGreater(len(thinned), 50)
+        local = (thinned * 1000.0 - self.face[:3, 3]) @ self.face[:3, :3]
+        self.assertLess(float(np.max(np.abs(local[:, 2]))), ON_PLANE_MM)
 
     def test_3_clear_and_off_stitch_nothing(self):
         reply = self.clear()
