@@ -195,7 +195,7 @@ class CoverLoop:
         limit = min(self.time_limit_s, FULL_ROUND_IP_TIME_S if columns.size == len(views) else round_s)
         if math.isfinite(remaining):
             # past the deadline the fallback's cover of verified views (a small programme) gets a short solve
-            limit = max(1.0 if remaining > 0.0 else LATE_IP_TIME_S, min(limit, 0.5 * remaining))
+            limit = max(min(1.0, max(remaining, LATE_IP_TIME_S)), min(limit, 0.5 * remaining))
         sub = matrix if columns.size == len(views) else matrix[:, columns]
         if self.settled is not None and not self.only_verified:
             result, self.settled = self.settled, None
@@ -312,7 +312,10 @@ class CoverLoop:
             "set cover round %d: %d of %d columns, %d chosen, %d pending, %d to verify (%s)",
             round_index + 1, step.columns.size, len(views), len(chosen), len(pending), len(batch), result.message,
         )  # fmt: skip
-        # views without a free start at either end of their line are settled for the whole batch at once
+        # views without a free start at either end of their line are settled for the whole batch at once (after
+        # the first round only while there is time: screening a round's batch costs up to seconds)
+        if round_index > 0 and time.perf_counter() >= self.deadline:
+            return
         self.verified_count += screen_scan_lines(self.run, self.tools, batch)
         # the picked views first, whatever the time in the first round (a plan comes out however short the time);
         # later rounds' picks and the likely ones only while there is time
