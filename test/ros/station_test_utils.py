@@ -1,5 +1,7 @@
 """Helpers shared by the rostest nodes of the station."""
 
+import threading
+
 import numpy as np
 import rospy
 from sensor_msgs.msg import JointState
@@ -33,8 +35,38 @@ def quick_goal(solver_type: str = "IP_basic", **overrides) -> PlanMeasurementGoa
     return goal
 
 
-def current_positions(timeout_s=20.0):  # a new subscriber may need seconds to connect on a loaded machine
-    msg = rospy.wait_for_message("/joint_states", JointState, timeout=timeout_s)
+class _JointStates:
+    """One subscriber to /joint_states for the whole test process: a subscriber per call had to connect anew each
+    time, which took more than 20 s once on a loaded machine."""
+
+    def __init__(self):
+        self.condition = threading.Condition()
+        self.received = 0
+        self.latest = None
+        self.subscriber = rospy.Subscriber("/joint_states", JointState, self._on_message, queue_size=1)
+
+    def _on_message(self, msg):
+        with self.condition:
+            self.latest, self.received = msg, self.received + 1
+            self.condition.notify_all()
+
+    def next_message(self, timeout_s):
+        """The first message received after this call."""
+        with self.condition:
+            seen = self.received
+            if not self.condition.wait_for(lambda: self.received > seen, timeout=timeout_s):
+                raise rospy.ROSException(f"no message on /joint_states within {timeout_s} s")
+            return self.latest
+
+
+_JOINT_STATES = []
+
+
+def current_positions(timeout_s=20.0):
+    """The joint positions (rad, JOINTS order) of the next /joint_states message."""
+    if not _JOINT_STATES:
+        _JOINT_STATES.append(_JointStates())
+    msg = _JOINT_STATES[0].next_message(timeout_s)
     by_name = dict(zip(msg.name, msg.position, strict=True))
     return np.array([by_name[n] for n in JOINTS])
 
