@@ -90,8 +90,9 @@ START_TOLERANCE_RAD = DEFAULT_TOLERANCES.start_rad
 EXECUTORS = {"follow_joint_trajectory": FJT_ACTION, "moveit": MOVEIT_ACTION}
 #: how long an unasked PREEMPTED waits for the program topic to tell why (s)
 PREEMPT_REASON_WAIT_S = 0.5
-#: once one of the driver's state topics tells why, how long to wait for the other (s)
-SECOND_TOPIC_WAIT_S = 0.1
+#: once one of the driver's state topics tells why, how long to wait for the other (s): a protective stop changes
+#: both, on two connections whose order and delay a loaded machine does not keep; the wait ends as soon as both tell
+SECOND_TOPIC_WAIT_S = 0.5
 #: how long a cancelled goal may take to end (s): the UR holds within stop_trajectory_duration 0.5 s
 CANCEL_WAIT_S = 2.0
 #: after a cancel or a stop the robot counts as standing once no joint moved more than STILL_RAD (rad) for
@@ -190,17 +191,33 @@ class RobotProgramWatch:
         while not reason and time.monotonic() < deadline:
             time.sleep(0.01)
             reason = self.stop_reason()
-        if reason:
-            # the program and the safety topic travel on different connections too: the other one may follow
-            time.sleep(min(SECOND_TOPIC_WAIT_S, max(deadline - time.monotonic(), 0.0)))
-            reason = self.stop_reason()
-        return reason
+        return self.settled_reason(reason)
+
+    def settled_reason(self, reason: str, timeout_s: float = SECOND_TOPIC_WAIT_S) -> str:
+        """``reason`` (a :meth:`stop_reason`) once the other state topic had up to ``timeout_s`` to follow: the
+        program and the safety topic travel on different connections, and a protective stop changes both. Returns
+        as soon as both tell (a safety stop always stops the program; a plain program stop waits the whole time)."""
+        if not reason:
+            return reason
+        deadline = time.monotonic() + timeout_s
+        while not self._both_known() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        return self.stop_reason()
+
+    def _both_known(self) -> bool:
+        with self._lock:
+            running, safety = self._running, self._safety
+        return running is False and self._safety_stopped(safety)
+
+    @staticmethod
+    def _safety_stopped(safety: int | None) -> bool:
+        return safety is not None and SafetyMode is not None and safety not in (SafetyMode.NORMAL, SafetyMode.REDUCED)
 
     def stop_reason(self) -> str:
         with self._lock:
             running, safety = self._running, self._safety
         reasons = []
-        if safety is not None and SafetyMode is not None and safety not in (SafetyMode.NORMAL, SafetyMode.REDUCED):
+        if self._safety_stopped(safety):
             names = code_names(SafetyMode)
             reasons.append(
                 f"the robot is in safety mode {names.get(safety, safety)}"
@@ -312,11 +329,14 @@ class RobotMotionClient:
                 raise ControllerLost(problem)
             stopped = self.stop_reason()
             if stopped:  # the controller preempts too; the reason is known here, and at once
+                stopped = self.program.settled_reason(stopped)
                 self._cancel_and_wait()
                 raise RobotStopped(f"{self.action}: stopped during the trajectory: {stopped}")
         result, state = self.client.get_result(), self.client.get_state()
         stopped = self.stop_reason()
-        if not stopped and state == GoalStatus.PREEMPTED and not self._cancel_sent and self.program is not None:
+        if stopped:
+            stopped = self.program.settled_reason(stopped)
+        elif state == GoalStatus.PREEMPTED and not self._cancel_sent and self.program is not None:
             stopped = self.program.wait_stop_reason(PREEMPT_REASON_WAIT_S)
         outcome = GoalOutcome(
             state=state,

@@ -2,6 +2,7 @@
 (no roscore: a scripted action client stands for actionlib)."""
 
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -234,6 +235,28 @@ def test_a_program_that_stops_ends_the_wait_at_once_and_cancels():
     with pytest.raises(RobotStopped, match="robot program stopped"):
         _client(FollowJointTrajectoryClient, action, NAMED["home"], watch).execute(_move())
     assert action.cancels == 1 and action.polls == 2
+
+
+def test_a_protective_stop_names_both_topics_whichever_arrives_first():
+    # a protective stop changes the program and the safety topic; under load the program topic may come well before
+    # the safety one: the reason waits for the second (but returns as soon as both tell)
+    pytest.importorskip("ur_dashboard_msgs.msg")
+    for first, second in ((("_running", False), ("_safety", 3)), (("_safety", 3), ("_running", False))):
+        watch = _watch(True, 1)
+
+        def stop(poll, watch=watch, first=first, second=second):
+            if poll == 2:
+                setattr(watch, *first)
+                threading.Timer(0.25, lambda: setattr(watch, *second)).start()
+
+        # the topic seen while the goal runs, or the controller's PREEMPTED first and the topic with the result
+        for state, steps in ((GoalStatus.ACTIVE, 10**6), (GoalStatus.PREEMPTED, 1)):
+            watch._running, watch._safety = True, 1
+            action = _ScriptedAction(state, FollowJointTrajectoryResult(error_code=0), steps=steps, on_poll=stop)
+            started = time.monotonic()
+            with pytest.raises(RobotStopped, match=r"PROTECTIVE_STOP.*robot program stopped"):
+                _client(FollowJointTrajectoryClient, action, NAMED["home"], watch).execute(_move())
+            assert time.monotonic() - started < robot_client.SECOND_TOPIC_WAIT_S + 0.2
 
 
 def test_a_stopped_program_refuses_before_sending():

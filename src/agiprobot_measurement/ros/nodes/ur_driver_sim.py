@@ -45,7 +45,9 @@ controller configuration's joint list, checked against ~robot_config's joints).
 
 from __future__ import annotations
 
+import functools
 import threading
+from collections.abc import Callable
 
 import actionlib
 import numpy as np
@@ -215,6 +217,8 @@ class UrDriverSimNode:
         if settings.servoj_lookahead_time < 0:
             raise ConfigError("~servoj_lookahead_time must not be negative")
         self.lock = threading.RLock()
+        #: goal results and feedback to send once no lock is held (see :meth:`deliver`)
+        self.outbox: list[Callable[[], None]] = []
         self.controller = JointTrajectoryController(
             initial,
             joint_names=self.joint_names,
@@ -300,6 +304,7 @@ class UrDriverSimNode:
                     scaling = self.controller.speed_scaling
                     if tick % monitor_every == 0:
                         self.send_feedback(snapshot, now)
+                self.deliver()
                 self.publish(snapshot, scaling, now, tick % state_every == 0)
                 tick += 1
                 rate.sleep()
@@ -336,50 +341,62 @@ class UrDriverSimNode:
         return desired, actual, error
 
     def send_feedback(self, snapshot: ControllerState, now: rospy.Time) -> None:
+        """Queues the active goal's feedback (called with the lock held; :meth:`deliver` sends it)."""
         goal_id = snapshot.goal_id
         if goal_id in self.handles:
             feedback = FollowJointTrajectoryFeedback()
             feedback.header.stamp = now
             feedback.joint_names = list(snapshot.joint_names)
             feedback.desired, feedback.actual, feedback.error = self._points(snapshot)
-            self.handles[goal_id].publish_feedback(feedback)
+            self.outbox.append(functools.partial(self.handles[goal_id].publish_feedback, feedback))
         elif goal_id in self.aliases:
             alias = self.aliases[goal_id]
             progress = snapshot.time_from_start_s / alias.duration_s if alias.duration_s > 0 else 1.0
-            alias.handle.publish_feedback(
-                ExecuteJointTrajectoryFeedback(
-                    progress=float(min(progress, 1.0)), time_from_start=snapshot.time_from_start_s
-                )
+            feedback = ExecuteJointTrajectoryFeedback(
+                progress=float(min(progress, 1.0)), time_from_start=snapshot.time_from_start_s
             )
+            self.outbox.append(functools.partial(alias.handle.publish_feedback, feedback))
 
     def finish(self, ended: list[GoalOutcome]) -> None:
-        """Sends the results of the goals that ended (called with the lock held)."""
+        """Queues the results of the goals that ended (called with the lock held; :meth:`deliver` sends them)."""
         for outcome in ended:
             if outcome.goal_id in self.handles:
                 handle = self.handles.pop(outcome.goal_id)
                 result = FollowJointTrajectoryResult(error_code=int(outcome.code), error_string=outcome.text)
                 if outcome.end is GoalEnd.SUCCEEDED:
-                    handle.set_succeeded(result)
+                    self.outbox.append(functools.partial(handle.set_succeeded, result))
                 elif outcome.end is GoalEnd.ABORTED:
                     rospy.logwarn("ur_driver_sim: goal aborted: %s", outcome.text)
-                    handle.set_aborted(result, outcome.text)
+                    self.outbox.append(functools.partial(handle.set_aborted, result, outcome.text))
                 else:
-                    handle.set_canceled(result)
+                    self.outbox.append(functools.partial(handle.set_canceled, result))
             elif outcome.goal_id in self.aliases:
                 self._finish_alias(self.aliases.pop(outcome.goal_id), outcome)
 
     def _finish_alias(self, alias: _Alias, outcome: GoalOutcome) -> None:
         if outcome.end is GoalEnd.SUCCEEDED:
-            alias.handle.set_succeeded(ExecuteJointTrajectoryResult(success=True, error=""))
+            self.outbox.append(
+                functools.partial(alias.handle.set_succeeded, ExecuteJointTrajectoryResult(success=True, error=""))
+            )
             return
         if outcome.end is GoalEnd.ABORTED:
             text = f"trajectory aborted: {outcome.text}"
-            alias.handle.set_aborted(ExecuteJointTrajectoryResult(success=False, error=text), text)
-            return
-        elapsed = rospy.Time.now().to_sec() - alias.started_s
-        stopped_at = np.round(self.controller.positions(), 4).tolist()
-        text = f"cancelled after {elapsed:.2f} s of {alias.duration_s:.2f} s; stopped at {stopped_at}"
-        alias.handle.set_canceled(ExecuteJointTrajectoryResult(success=False, error=text), text)
+            send = alias.handle.set_aborted
+        else:
+            elapsed = rospy.Time.now().to_sec() - alias.started_s
+            stopped_at = np.round(self.controller.positions(), 4).tolist()
+            text = f"cancelled after {elapsed:.2f} s of {alias.duration_s:.2f} s; stopped at {stopped_at}"
+            send = alias.handle.set_canceled
+        self.outbox.append(functools.partial(send, ExecuteJointTrajectoryResult(success=False, error=text), text))
+
+    def deliver(self) -> None:
+        """Sends the queued results and feedback, holding no lock of this node: actionlib calls the goal and cancel
+        callbacks with its server's lock held, and they take this node's lock; sending a result takes the server's
+        lock, so with this node's lock held it would close the cycle (a deadlock that froze the control loop)."""
+        with self.lock:
+            pending, self.outbox = self.outbox, []
+        for send in pending:
+            send()
 
     # ------------------------------------------------------------------------------------ FollowJointTrajectory
     def on_goal(self, handle) -> None:
