@@ -3,13 +3,14 @@ per-device errors they imply.
 
 A configuration holds switchable blocks per scanner (see ``config/error_models/realistic.yaml``):
 
-* PhoXi: ``calibration`` (render with the true camera/projector, reconstruct with the nominal ones, scaled to the
-  maker's calibration accuracy), ``fixed_pattern`` (a static low-pass noise field per device), ``material``
-  (dark / saturated points invalid, specular share per scene object), ``edges`` (mixed pixels at depth jumps),
-  ``interreflection`` (single bounce off specular surfaces: wrongly decoded points in concave regions);
+* PhoXi: ``calibration`` (render with the true camera/projector, reconstruct with the nominal ones, plus a local
+  residual of the decoded projector column; the two share the maker's calibration accuracy), ``fixed_pattern``
+  (a static low-pass noise field per device), ``material`` (dark / saturated points invalid, specular share per
+  scene object), ``edges`` (mixed pixels at depth jumps), ``interreflection`` (single bounce off specular surfaces: wrongly decoded points in concave regions);
 * laser: ``calibration`` (true vs nominal triangulation angle, baseline, detector and lateral scale, scaled to a
-  linearity envelope), ``noise`` (measurement noise apart from the planning ``u``: depth and incidence law,
-  static speckle and temporal parts), ``material``, ``edges`` and ``pose_chain`` (true robot, hand-eye, latency).
+  linearity envelope), ``noise`` (measurement noise apart from the planning ``u``: the datasheet z resolution as
+  the temporal part, the speckle law of Dorsch et al. as the static part, both growing with incidence),
+  ``material``, ``edges`` and ``pose_chain`` (true robot, hand-eye, latency).
 
 ``ideal`` switches everything off (the simulators' former behaviour). Per-device errors are drawn from a seed
 derived from the device serial (:func:`device_seed`), so one device keeps its errors across frames and runs.
@@ -263,8 +264,9 @@ def _projector_residual(model, rng, correlation_deg: float, modes: int = 64) -> 
     half = tuple(math.tan(math.radians(a) / 2.0) for a in model.projector_fov_deg)
     corr = math.tan(math.radians(max(correlation_deg, 1e-3)))
     shape = tuple(max(8, math.ceil(8.0 * h / corr) + 1) for h in (half[1], half[0]))
-    rows, cols = np.meshgrid(np.linspace(-half[1], half[1], shape[0]), np.linspace(-half[0], half[0], shape[1]),
-                             indexing="ij")
+    rows, cols = np.meshgrid(
+        np.linspace(-half[1], half[1], shape[0]), np.linspace(-half[0], half[0], shape[1]), indexing="ij"
+    )
     freq = rng.normal(size=(modes, 2)) / corr  # Gaussian spectrum: correlation exp(-d^2 / (2 corr^2))
     phase = rng.uniform(0.0, 2.0 * math.pi, modes)
     grid = np.zeros(shape)
