@@ -3,13 +3,14 @@ per-device errors they imply.
 
 A configuration holds switchable blocks per scanner (see ``config/error_models/realistic.yaml``):
 
-* PhoXi: ``calibration`` (render with the true camera/projector, reconstruct with the nominal ones, scaled to the
-  maker's calibration accuracy), ``fixed_pattern`` (a static low-pass noise field per device), ``material``
-  (dark / saturated points invalid, specular share per scene object), ``edges`` (mixed pixels at depth jumps),
-  ``interreflection`` (single bounce off specular surfaces: wrongly decoded points in concave regions);
+* PhoXi: ``calibration`` (render with the true camera/projector, reconstruct with the nominal ones, plus a local
+  residual of the decoded projector column; the two share the maker's calibration accuracy), ``fixed_pattern``
+  (a static low-pass noise field per device), ``material`` (dark / saturated points invalid, specular share per
+  scene object), ``edges`` (mixed pixels at depth jumps), ``interreflection`` (single bounce off specular surfaces: wrongly decoded points in concave regions);
 * laser: ``calibration`` (true vs nominal triangulation angle, baseline, detector and lateral scale, scaled to a
-  linearity envelope), ``noise`` (measurement noise apart from the planning ``u``: depth and incidence law,
-  static speckle and temporal parts), ``material``, ``edges`` and ``pose_chain`` (true robot, hand-eye, latency).
+  linearity envelope), ``noise`` (measurement noise apart from the planning ``u``: the datasheet z resolution as
+  the temporal part, the speckle law of Dorsch et al. as the static part, both growing with incidence),
+  ``material``, ``edges`` and ``pose_chain`` (true robot, hand-eye, latency).
 
 ``ideal`` switches everything off (the simulators' former behaviour). Per-device errors are drawn from a seed
 derived from the device serial (:func:`device_seed`), so one device keeps its errors across frames and runs.
@@ -37,6 +38,7 @@ __all__ = [
     "LaserErrors",
     "PhoxiCalibration",
     "PhoxiErrors",
+    "ProjectorResidual",
     "device_seed",
     "load_error_model",
     "value_noise",
@@ -91,6 +93,8 @@ _PHOXI_BLOCKS = {
         "radial_k1": 2.0e-4,
         "projector_position_mm": 0.05,
         "projector_angle_deg": 0.005,
+        "decoding_share": 0.7,
+        "decoding_correlation_deg": 4.0,
     },
     "fixed_pattern": {"share": 0.3, "correlation_px": 10.0},
     "material": {
@@ -114,7 +118,9 @@ _LASER_BLOCKS = {
         "sigma_mm": 0.012,
         "depth_exponent": 2.0,
         "incidence_exponent": 1.5,
-        "speckle_share": 0.6,
+        "wavelength_nm": 658.0,
+        "speckle_contrast": 1.0,
+        "aperture_sin": 0.03,
         "speckle_correlation_mm": 0.1,
     },
     "material": {
@@ -127,8 +133,8 @@ _LASER_BLOCKS = {
     },
     "edges": {"jump_mm": 1.0, "probability": 0.5},
     "pose_chain": {
-        "robot_residual_scale": 0.1,
-        "repeatability_mm": 0.02,
+        "robot_residual_scale": 0.18,
+        "repeatability_mm": 0.014,
         "hand_eye_translation_mm": 0.1,
         "hand_eye_rotation_deg": 0.02,
         "latency_s": 0.002,
@@ -206,6 +212,11 @@ class PhoxiCalibration:
     projector_pose: np.ndarray  # (4, 4), true
     accuracy_mm: float
     scale: float
+    decoding: ProjectorResidual | None = None  # the decoded projector column's local residual
+
+    def reconstruct(self, nominal_rays, true_points, nominal_projector) -> np.ndarray:
+        """:func:`reconstruct_depth` with this device's true projector and decoding residual."""
+        return reconstruct_depth(nominal_rays, true_points, nominal_projector, self.projector_pose, self.decoding)
 
     def true_rays(self, intrinsics, nominal_width: int) -> np.ndarray:
         """(N, 3) float32 rays (z = 1) of the true camera for every pixel of ``intrinsics`` (row-major)."""
@@ -221,6 +232,50 @@ class PhoxiCalibration:
         return np.ascontiguousarray(rays, dtype=np.float32)
 
 
+@dataclass(frozen=True)
+class ProjectorResidual:
+    """The local residual of the decoded projector coordinate: what the projector's column -> plane mapping (the
+    pattern decoding and the projection optics) does that the low-order calibration model does not capture. A
+    smooth random field of the column offset (tan units) over the projector's field, on a regular grid over
+    [-half_tan[0], half_tan[0]] x [-half_tan[1], half_tan[1]] (column, row), interpolated bilinearly."""
+
+    grid: np.ndarray  # (rows, columns) column offsets, tan units
+    half_tan: tuple[float, float]
+
+    def offset(self, column: np.ndarray, row: np.ndarray) -> np.ndarray:
+        rows, cols = self.grid.shape
+        x = np.clip((column / self.half_tan[0] + 1.0) * 0.5 * (cols - 1), 0.0, cols - 1.000001)
+        y = np.clip((row / self.half_tan[1] + 1.0) * 0.5 * (rows - 1), 0.0, rows - 1.000001)
+        i, j = y.astype(np.int64), x.astype(np.int64)
+        fy, fx = y - i, x - j
+        g = self.grid
+        top = g[i, j] * (1.0 - fx) + g[i, j + 1] * fx
+        bottom = g[i + 1, j] * (1.0 - fx) + g[i + 1, j + 1] * fx
+        return top * (1.0 - fy) + bottom * fy
+
+    def scaled(self, factor: float) -> ProjectorResidual:
+        return ProjectorResidual(self.grid * factor, self.half_tan)
+
+
+def _projector_residual(model, rng, correlation_deg: float, modes: int = 64) -> ProjectorResidual:
+    """A unit-RMS (in tan units, before scaling) smooth random field over the projector's field: a sum of random
+    Fourier modes with a Gaussian spectrum of correlation length ``correlation_deg``, sampled on a grid a
+    quarter of that length apart."""
+    half = tuple(math.tan(math.radians(a) / 2.0) for a in model.projector_fov_deg)
+    corr = math.tan(math.radians(max(correlation_deg, 1e-3)))
+    shape = tuple(max(8, math.ceil(8.0 * h / corr) + 1) for h in (half[1], half[0]))
+    rows, cols = np.meshgrid(
+        np.linspace(-half[1], half[1], shape[0]), np.linspace(-half[0], half[0], shape[1]), indexing="ij"
+    )
+    freq = rng.normal(size=(modes, 2)) / corr  # Gaussian spectrum: correlation exp(-d^2 / (2 corr^2))
+    phase = rng.uniform(0.0, 2.0 * math.pi, modes)
+    grid = np.zeros(shape)
+    for k in range(modes):  # a few dozen modes over a small grid: the loop is over modes, not points
+        grid += np.cos(freq[k, 0] * cols + freq[k, 1] * rows + phase[k])
+    grid *= math.sqrt(2.0 / modes)
+    return ProjectorResidual(grid / max(float(np.sqrt(np.mean(grid * grid))), 1e-12), half)
+
+
 def _undistort(xd: np.ndarray, yd: np.ndarray, k1: float, iterations: int = 3):
     """Invert x_d = x_u (1 + k1 r_u^2) by fixed-point iteration (k1 is tiny)."""
     xu, yu = xd.copy(), yd.copy()
@@ -230,16 +285,20 @@ def _undistort(xd: np.ndarray, yd: np.ndarray, k1: float, iterations: int = 3):
     return xu, yu
 
 
-def reconstruct_depth(nominal_rays, true_points, nominal_projector, true_projector) -> np.ndarray:
+def reconstruct_depth(nominal_rays, true_points, nominal_projector, true_projector, decoding=None) -> np.ndarray:
     """Structured-light reconstruction: depth (same unit as the points, camera z) at which each nominal pixel ray
     meets the nominal projector's plane of the projector column that the true projector lit ``true_points`` with
-    (camera frame; rays z = 1; projector poses camera <- projector, metres or the points' unit)."""
+    (camera frame; rays z = 1; projector poses camera <- projector, metres or the points' unit); ``decoding``
+    (a :class:`ProjectorResidual`) shifts the decoded column."""
     # written out per component: BLAS matmuls of (N, 3) x (3, 3) cost far more than they bring
     rt, tt = true_projector[:3, :3], true_projector[:3, 3]
     px, py, pz = (true_points[:, k] - tt[k] for k in range(3))
     x_p = px * rt[0, 0] + py * rt[1, 0] + pz * rt[2, 0]  # projector-frame coordinates (R^T (p - t))
     z_p = px * rt[0, 2] + py * rt[1, 2] + pz * rt[2, 2]
     column = x_p / z_p
+    if decoding is not None:
+        y_p = px * rt[0, 1] + py * rt[1, 1] + pz * rt[2, 1]
+        column = column + decoding.offset(column, y_p / z_p)
     rn, tn = nominal_projector[:3, :3], nominal_projector[:3, 3]
     rx, ry, rz = (nominal_rays[:, k] for k in range(3))
     ray_x = rx * rn[0, 0] + ry * rn[1, 0] + rz * rn[2, 0]  # R^T r
@@ -259,22 +318,25 @@ def _phoxi_calibration(model, serial: str, settings: dict) -> PhoxiCalibration:
         "pos": rng.normal(size=3) * settings["projector_position_mm"] / 1000.0,
         "ang": rng.normal(size=3) * math.radians(settings["projector_angle_deg"]),
     }
+    share = float(settings["decoding_share"])
+    unit_residual = _projector_residual(model, rng, settings["decoding_correlation_deg"]) if share > 0.0 else None
     nominal = model.projector_pose()
     intr = model.intrinsics()
 
-    def build(scale: float) -> PhoxiCalibration:
+    def build(scale: float, decoding_scale: float = 0.0) -> PhoxiCalibration:
         rot = _rotvec(draw["ang"] * scale)
         true = nominal.copy()
         true[:3, :3] = rot @ nominal[:3, :3]
         true[:3, 3] = nominal[:3, 3] + draw["pos"] * scale
+        decoding = unit_residual.scaled(decoding_scale) if unit_residual is not None and decoding_scale else None
         return PhoxiCalibration(
-            1.0 + draw["focal"] * scale, draw["pp"] * scale, draw["k1"] * scale, true, accuracy, scale
+            1.0 + draw["focal"] * scale, draw["pp"] * scale, draw["k1"] * scale, true, accuracy, scale, decoding
         )
 
     def rms(cal: PhoxiCalibration) -> float:
         # fronto-parallel planes over the scanning range, a grid of pixels over the image
-        u = np.linspace(0, intr.width - 1, 33)
-        v = np.linspace(0, intr.height - 1, 25)
+        u = np.linspace(0, intr.width - 1, 65)
+        v = np.linspace(0, intr.height - 1, 49)
         uu, vv = np.meshgrid(u, v)
         f = intr.fx * cal.focal_scale
         xd = (uu - intr.cx - cal.principal_offset_px[0]) / f
@@ -285,19 +347,28 @@ def _phoxi_calibration(model, serial: str, settings: dict) -> PhoxiCalibration:
         nominal_rays = nominal_rays.reshape(-1, 3)
         errors = []
         for depth in np.linspace(*model.scanning_range_mm, 5) / 1000.0:
-            measured = reconstruct_depth(nominal_rays, true_rays * depth, nominal, cal.projector_pose)
+            measured = cal.reconstruct(nominal_rays, true_rays * depth, nominal)
             errors.append((measured - depth) * 1000.0)
         return float(np.sqrt(np.mean(np.square(errors))))
 
+    def scaled(make, target: float) -> float:
+        scale = 1.0
+        for _ in range(3):  # the error is nearly linear in the draw: converges in two steps
+            current = rms(make(scale))
+            if current <= 0.0:
+                break
+            scale *= target / current
+        return scale
+
     if accuracy <= 0.0:
         return build(0.0)
-    scale = 1.0
-    for _ in range(3):  # the error is nearly linear in the draw: converges in two steps
-        current = rms(build(scale))
-        if current <= 0.0:
-            break
-        scale *= accuracy / current
-    return build(scale)
+    # the accuracy budget (an RMS over planes) split in variance between the low-order optics and the local
+    # decoding residual: share^2 of it to the residual, the rest to the optics (the two are uncorrelated)
+    global_scale = scaled(build, accuracy * math.sqrt(max(1.0 - share * share, 0.0)))
+    if unit_residual is None:
+        return build(global_scale)
+    decoding_scale = scaled(lambda s: build(0.0, s), accuracy * share)
+    return build(global_scale, decoding_scale)
 
 
 def _rotvec(v: np.ndarray) -> np.ndarray:
@@ -489,6 +560,8 @@ class LaserErrors(_DeviceErrors):
         self.calibration = laser_calibration(sensor, self.serial, cal) if cal else None
         self.noise = settings.get("noise")
         self.pose_chain = settings.get("pose_chain")
+        #: emitter -> detector distance (mm), the triangulation baseline of the speckle law
+        self.baseline_mm = math.tan(sensor.alpha) * sensor.optimal_standoff
         self.speckle_seed = device_seed(self.serial, "speckle")
         rng = np.random.default_rng(device_seed(self.serial, "hand-eye"))
         self.hand_eye_error = np.eye(4)
@@ -508,12 +581,29 @@ class LaserErrors(_DeviceErrors):
             return None
         return cls(sensor, serial or error_model.laser_serial, error_model.laser)
 
-    def sigma_mm(self, z_mm: np.ndarray, cos_incidence: np.ndarray, optimal_standoff_mm: float) -> np.ndarray:
-        """Measurement noise (1 sigma along the laser ray, mm) at depths ``z_mm`` and incidence cosines."""
+    def noise_parts_mm(
+        self, z_mm: np.ndarray, cos_incidence: np.ndarray, optimal_standoff_mm: float
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(temporal, static speckle) 1-sigma noise along the laser ray (mm) at depths ``z_mm`` and incidence
+        cosines. Temporal: the datasheet z resolution ``sigma_mm`` at the optimal standoff, (z / z_opt)^
+        depth_exponent (a detector-plane error mapped through the triangulation). Speckle (Dorsch, Haeusler and
+        Herrmann 1994): C lambda / (2 pi sin u_obs sin theta) with sin u_obs = a / L and sin theta = b / L (L the
+        distance detector -> point, b the baseline, a the aperture radius set by ``aperture_sin`` at the optimal
+        standoff): it grows as L^2 = z^2 + b^2, not as z^2. Both grow with incidence as 1 / cos^incidence_exponent."""
         n = self.noise
-        cos_i = np.maximum(np.abs(cos_incidence), 0.05)
-        return (
-            n["sigma_mm"]
-            * (np.asarray(z_mm) / optimal_standoff_mm) ** n["depth_exponent"]
-            / cos_i ** n["incidence_exponent"]
-        )
+        z = np.asarray(z_mm, dtype=float)
+        cos_i = np.maximum(np.abs(cos_incidence), 0.05) ** n["incidence_exponent"]
+        temporal = n["sigma_mm"] * (z / optimal_standoff_mm) ** n["depth_exponent"] / cos_i
+        b = self.baseline_mm
+        l_opt_sq = optimal_standoff_mm**2 + b * b
+        sin_theta_opt = b / math.sqrt(l_opt_sq)
+        speckle_opt = n["speckle_contrast"] * n["wavelength_nm"] * 1e-6 / (2.0 * math.pi * n["aperture_sin"])
+        speckle_opt /= max(sin_theta_opt, 1e-9)
+        speckle = speckle_opt * (z * z + b * b) / l_opt_sq / cos_i
+        return temporal, speckle
+
+    def sigma_mm(self, z_mm: np.ndarray, cos_incidence: np.ndarray, optimal_standoff_mm: float) -> np.ndarray:
+        """Measurement noise (1 sigma along the laser ray, mm) at depths ``z_mm`` and incidence cosines: the
+        root sum of squares of the temporal and the static speckle parts (:meth:`noise_parts_mm`)."""
+        temporal, speckle = self.noise_parts_mm(z_mm, cos_incidence, optimal_standoff_mm)
+        return np.sqrt(temporal * temporal + speckle * speckle)

@@ -75,11 +75,21 @@ def test_phoxi_calibration_error_is_scaled_to_the_makers_accuracy(realistic, nam
     intr = model.intrinsics(RESOLUTION_LOW)
     nominal = intr.pixel_rays().astype(float)[::997]
     true = cal.true_rays(intr, model.resolutions[1][0]).astype(float)[::997]
-    errors = []
-    for depth in np.linspace(*model.scanning_range_mm, 4) / 1000.0:
-        errors.append(reconstruct_depth(nominal, true * depth, model.projector_pose(), cal.projector_pose) - depth)
-    rms_mm = 1000.0 * float(np.sqrt(np.mean(np.square(errors))))
-    assert rms_mm == pytest.approx(realistic.phoxi["calibration"]["accuracy_mm"][name], rel=0.2)
+    depths = np.linspace(*model.scanning_range_mm, 4) / 1000.0
+
+    def rms_mm(reconstruct, rays) -> float:
+        errors = [reconstruct(nominal, rays * depth, model.projector_pose()) - depth for depth in depths]
+        return 1000.0 * float(np.sqrt(np.mean(np.square(errors))))
+
+    settings = realistic.phoxi["calibration"]
+    accuracy, share = settings["accuracy_mm"][name], settings["decoding_share"]
+    assert rms_mm(cal.reconstruct, true) == pytest.approx(accuracy, rel=0.2)
+    # the budget's split: the optics carry sqrt(1 - share^2) of it, the local decoding residual share of it
+    optics = replace(cal, decoding=None)
+    assert rms_mm(optics.reconstruct, true) == pytest.approx(accuracy * math.sqrt(1.0 - share**2), rel=0.2)
+    assert cal.decoding is not None
+    residual = replace(cal, projector_pose=model.projector_pose())  # a perfect camera and projector pose
+    assert rms_mm(residual.reconstruct, nominal) == pytest.approx(accuracy * share, rel=0.2)
     # the nominal calibration reconstructs exactly what the nominal geometry renders
     exact = reconstruct_depth(nominal, nominal * 0.5, model.projector_pose(), model.projector_pose())
     np.testing.assert_allclose(exact, 0.5, atol=1e-12)
@@ -170,8 +180,9 @@ def _plane(depth, tilt_deg=0.0, size=(40.0, 40.0)):
 
 def test_laser_noise_grows_with_incidence_unlike_the_planning_u(realistic, sensor):
     noise_only = realistic.with_blocks("laser", calibration=None, material=None, edges=None, pose_chain=None)
+    noise_errors = LaserErrors.create(sensor, noise_only)
     sigma = {}
-    for name, errors in (("ideal", None), ("realistic", LaserErrors.create(sensor, noise_only))):
+    for name, errors in (("ideal", None), ("realistic", noise_errors)):
         for tilt in (0.0, 40.0):
             sim = LaserLineScannerSimulator(sensor, points_per_profile=320, seed=2, errors=errors)
             mesh, _ = _plane(182.0, tilt)
@@ -179,7 +190,22 @@ def test_laser_noise_grows_with_incidence_unlike_the_planning_u(realistic, senso
             sigma[name, tilt] = evaluate_plane(points)["sigma"]
     assert sigma["ideal", 40.0] < sigma["ideal", 0.0]  # the planning figure's |s . n| factor (known, documented)
     assert sigma["realistic", 40.0] > 1.05 * sigma["realistic", 0.0]
-    assert sigma["realistic", 0.0] == pytest.approx(realistic.laser["noise"]["sigma_mm"], rel=0.25)
+    expected = float(noise_errors.sigma_mm(np.array([182.0]), np.array([1.0]), sensor.optimal_standoff)[0])
+    assert sigma["realistic", 0.0] == pytest.approx(expected, rel=0.25)
+
+
+def test_laser_speckle_follows_the_dorsch_law_and_does_not_shrink_as_z_squared(realistic, sensor):
+    errors = LaserErrors.create(sensor, realistic)
+    noise = realistic.laser["noise"]
+    z_opt = sensor.optimal_standoff
+    z = np.array([0.8 * z_opt, z_opt, 1.2 * z_opt])
+    temporal, speckle = errors.noise_parts_mm(z, np.ones(3), z_opt)
+    assert temporal[1] == pytest.approx(noise["sigma_mm"])
+    # C lambda / (2 pi sin u_obs sin(theta)) at the optimal standoff, where theta is the triangulation angle alpha
+    floor = noise["speckle_contrast"] * noise["wavelength_nm"] * 1e-6 / (2 * math.pi * noise["aperture_sin"])
+    assert speckle[1] == pytest.approx(floor / math.sin(sensor.alpha), rel=1e-6)
+    assert speckle[0] / speckle[1] > (0.8**2) * 1.02  # the baseline term keeps it above the z^2 law near the head
+    assert temporal[0] / temporal[1] == pytest.approx(0.8**2)
 
 
 def test_laser_speckle_is_static_and_the_rest_temporal(realistic, sensor):
@@ -193,8 +219,9 @@ def test_laser_speckle_is_static_and_the_rest_temporal(realistic, sensor):
         runs.append(np.concatenate([p.points_mm[:, 2] for p in _sweep(sim, mesh)]))
     residuals = [r - r.mean() for r in runs]
     correlation = float(np.corrcoef(*residuals)[0, 1])
-    share = realistic.laser["noise"]["speckle_share"]
-    assert correlation == pytest.approx(share**2, abs=0.12)
+    temporal, speckle = errors.noise_parts_mm(np.array([182.0]), np.array([1.0]), sensor.optimal_standoff)
+    static_share = float(speckle[0] ** 2 / (speckle[0] ** 2 + temporal[0] ** 2))
+    assert correlation == pytest.approx(static_share, abs=0.12)
     field = value_noise(np.random.default_rng(0).uniform(0, 10, (20000, 3)), 0.1, 7)
     assert field.std() == pytest.approx(1.0, rel=0.2)
 

@@ -220,11 +220,9 @@ class LaserLineScannerSimulator:
             baseline = np.tan(sensor.alpha) * sensor.optimal_standoff
             ranges, fan = errors.calibration.reconstruct(ranges, fan, baseline, sensor.alpha)
         if errors.noise is not None and len(hits):
-            sigma = errors.sigma_mm(z, cos_inc, sensor.optimal_standoff)
-            share = errors.noise["speckle_share"]
-            speckle = value_noise(hits, errors.noise["speckle_correlation_mm"], errors.speckle_seed)
-            temporal = self.rng.normal(0.0, 1.0, len(hits))
-            ranges = ranges + sigma * (share * speckle + np.sqrt(1.0 - share**2) * temporal)
+            temporal, speckle = errors.noise_parts_mm(z, cos_inc, sensor.optimal_standoff)
+            field = value_noise(hits, errors.noise["speckle_correlation_mm"], errors.speckle_seed)
+            ranges = ranges + speckle * field + temporal * self.rng.normal(0.0, 1.0, len(hits))
         if errors.edges is not None and len(hits):
             ranges = _mix_line_edges(
                 ranges, which, ray_index, errors.edges["jump_mm"], errors.edges["probability"], self.rng

@@ -395,8 +395,8 @@ class StructuredLightScanner:
         errors = self.errors
         if errors is not None and errors.calibration is not None and hit.any():
             # reconstructed with the nominal calibration from what the true camera and projector saw
-            measured_depth = reconstruct_depth(
-                rays[hit].astype(float), point[hit].astype(float), self.projector, errors.calibration.projector_pose
+            measured_depth = errors.calibration.reconstruct(
+                rays[hit].astype(float), point[hit].astype(float), self.projector
             )
             depth = depth.copy()
             depth[hit] = measured_depth
@@ -487,8 +487,10 @@ class StructuredLightScanner:
         if not hit.any():
             return
         calibration = self.errors.calibration
-        true_projector = self.projector if calibration is None else calibration.projector_pose
-        wrong = reconstruct_depth(job.rays[index[hit]].astype(float), a[hit], self.projector, true_projector)
+        if calibration is None:
+            wrong = reconstruct_depth(job.rays[index[hit]].astype(float), a[hit], self.projector, self.projector)
+        else:
+            wrong = calibration.reconstruct(job.rays[index[hit]].astype(float), a[hit], self.projector)
         # a depth outside the scanning range is an inconsistent code: the point is dropped rather than moved
         wrong_mm = 1000.0 * np.where(np.isfinite(wrong), wrong, 0.0)
         low, high = self.model.scanning_range_mm
