@@ -1,5 +1,7 @@
 """The simulated UR10e node maps the controller's outcomes to actionlib states and results (no roscore)."""
 
+import threading
+
 import numpy as np
 import pytest
 import rospy
@@ -71,6 +73,7 @@ def _node():
     node.check_tolerances = CheckTolerances()
     node.per_joint_tolerances = {name: (0.2, 0.1) for name in JOINTS}
     node.lock = ur_driver_sim.threading.RLock()
+    node.outbox = []
     node.controller = JointTrajectoryController(NAMED["home"], joint_names=JOINTS, now_s=CLOCK["t"])
     node.handles, node.aliases = {}, {}
     node.alphabetical = sorted(range(6), key=lambda i: JOINTS[i])
@@ -84,6 +87,7 @@ def _run(node, seconds, dt=0.01):
         with node.lock:
             node.finish(node.controller.update(CLOCK["t"]))
             node.send_feedback(node.controller.snapshot(), rospy.Time.from_sec(CLOCK["t"]))
+        node.deliver()  # as the control loop: results and feedback go out with no lock held
 
 
 def _fjt(values, times, names=None, **fields):
@@ -109,6 +113,56 @@ def test_a_goal_succeeds_with_feedback():
     np.testing.assert_allclose(last.error.positions, np.subtract(last.desired.positions, last.actual.positions))
 
 
+class _LockCheckingHandle(_Handle):
+    """Records, for every result and feedback, whether another thread could take the node's lock at that moment."""
+
+    def __init__(self, goal, lock):
+        super().__init__(goal)
+        self.lock, self.lock_free = lock, []
+
+    def _check(self):
+        got = []
+
+        def probe():
+            got.append(self.lock.acquire(timeout=1.0))
+            if got[0]:
+                self.lock.release()
+
+        thread = threading.Thread(target=probe)
+        thread.start()
+        thread.join()
+        self.lock_free.append(got[0])
+
+    def set_canceled(self, result, text=""):
+        self._check()
+        super().set_canceled(result, text)
+
+    def set_succeeded(self, result, text=""):
+        self._check()
+        super().set_succeeded(result, text)
+
+    def publish_feedback(self, feedback):
+        self._check()
+        super().publish_feedback(feedback)
+
+
+def test_results_and_feedback_go_out_with_the_node_lock_free():
+    # actionlib calls the goal and cancel callbacks holding its server's lock, and they take the node's lock: a result
+    # or feedback sent while the node's lock is held (it takes the server's lock) closes a deadlock cycle
+    node = _node()
+    first = _LockCheckingHandle(_fjt([0.2], [0.5]), node.lock)
+    node.on_goal(first)
+    _run(node, 1.0, dt=0.05)
+    second = _LockCheckingHandle(_fjt([0.0], [3.0]), node.lock)
+    node.on_goal(second)
+    _run(node, 0.2, dt=0.05)
+    node.on_cancel(second)
+    _run(node, 0.1, dt=0.05)
+    assert [c[0] for c in first.calls] == ["accepted", "succeeded"]
+    assert [c[0] for c in second.calls] == ["accepted", "canceled"]
+    assert first.lock_free and second.lock_free and all(first.lock_free + second.lock_free)
+
+
 @pytest.mark.parametrize(
     ("goal", "code"),
     [
@@ -132,8 +186,10 @@ def test_a_new_goal_preempts_and_cancel_preempts():
     node.on_goal(first)
     _run(node, 0.5)
     node.on_goal(second)
+    node.deliver()  # the control loop's next tick
     assert first.calls[-1][0] == "canceled"
     node.on_cancel(second)
+    node.deliver()
     assert second.calls[-1][0] == "canceled"
     assert second.calls[-1][1].error_code == 0
 
@@ -201,6 +257,7 @@ def test_alias_cancel_stops_where_the_robot_is():
     _run(node, 1.0)
     assert handle.calls == [("accepted",)]
     node.on_alias_cancel(handle)
+    node.deliver()
     kind, _result, text = handle.calls[-1]
     assert kind == "canceled" and text.startswith("cancelled after")
     stopped = node.controller.positions()
