@@ -288,6 +288,8 @@ def summary_rows(results: list[dict]) -> list[list[str]]:
                max, lambda v: f"{v:.0f}"),
         figure("|predicted - measured| points", [abs(r["predicted_minus_measured_points"]) for r in planned], max,
                lambda v: f"{v:.1f}"),
+        figure("candidates evaluated %", [100 * r.get("candidates_evaluated_share", 1.0) for r in planned], min,
+               lambda v: f"{v:.0f}"),
         ["time limit hit", str(sum(bool(r.get("time_limit_hit")) for r in planned)), ""],
         ["views dropped", str(sum(int(r.get("dropped_views", 0)) for r in planned)), ""],
     ]  # fmt: skip
@@ -295,19 +297,19 @@ def summary_rows(results: list[dict]) -> list[list[str]]:
 
 def part_row(r: dict) -> list[str]:
     if "error" in r:
-        return [r["part"], "FAILED", r["error"][:100]] + [""] * 7
+        return [r["part"], "FAILED", r["error"][:100]] + [""] * 8
     bound = r.get("views_lower_bound")
     return [
         r["part"], f"{r['samples']}", f"{r['time_s']['total']:.1f}", f"{r['peak_mb']:.0f}",
         f"{100 * r['verified_share']:.1f}", f"{100 * r['covered_of_executable']:.1f}",
         f"{r['views']} / {'-' if bound is None else int(np.ceil(bound - 1e-6))}",
         f"{r['predicted_minus_measured_points']:+.1f}", "yes" if r.get("time_limit_hit") else "",
-        str(r.get("dropped_views", 0)),
+        f"{100 * r.get('candidates_evaluated_share', 1.0):.0f}", str(r.get("dropped_views", 0)),
     ]  # fmt: skip
 
 
 PART_HEADER = ["part", "samples", "time s", "MB", "verified %", "cov/exec %", "views / bound", "pred-msd",
-               "time limit", "dropped"]  # fmt: skip
+               "time limit", "evaluated %", "dropped"]  # fmt: skip
 
 
 def main(argv=None) -> int:

@@ -174,6 +174,7 @@ def run_one(path: str, unit: str, tilt: str, solver: str, time_limit_s: float, s
         covered_of_executable=round(report.coverage_of_coverable, 5),
         solver_gap=report.solver_gap,
         time_limit_hit=report.time_limit_hit,
+        candidates_evaluated_share=round(report.candidates_evaluated_share, 4),
         tilt_choice=manager.parameters.get("tilt_choice", tilt),
         estimated_execution_s=round(report.estimated_execution_time_s, 2),
         scan_lines_verified=t.get("scan_lines_verified", 0),
