@@ -12,7 +12,7 @@ import functools
 
 import numpy as np
 
-__all__ = ["COMPILED_FROM_STATES", "chain_frames", "joint_frame", "register_helpers", "tip_frame"]
+__all__ = ["COMPILED_FROM_STATES", "attached_frames", "chain_frames", "joint_frame", "register_helpers", "tip_frame"]
 
 #: batches of at least this many joint states go through the compiled kernel
 COMPILED_FROM_STATES = 512
@@ -28,6 +28,37 @@ def chain_frames(q, pre, axes, tip):
         np.ascontiguousarray(axes, dtype=np.float64),
         np.ascontiguousarray(tip, dtype=np.float64),
     )
+
+
+def attached_frames(frames, anchors, offsets):
+    """(N, S, 4, 4): ``frames[:, anchors[s]] @ offsets[s]`` for each attached frame s, ``offsets[s]`` itself where
+    ``anchors[s]`` < 0 (fixed to the base); ``frames`` (N, dof, 4, 4) rigid, ``anchors`` (S,), ``offsets``
+    (S, 4, 4)."""
+    return _compiled_attached()(
+        np.ascontiguousarray(frames, dtype=np.float64),
+        np.ascontiguousarray(anchors, dtype=np.int64),
+        np.ascontiguousarray(offsets, dtype=np.float64),
+    )
+
+
+@functools.cache
+def _compiled_attached():
+    import numba  # lazily, see the module docstring
+
+    register_helpers()
+    return numba.njit(cache=True)(_attached_frames)
+
+
+def _attached_frames(frames, anchors, offsets):  # pragma: no cover - compiled
+    n, n_attached = frames.shape[0], anchors.shape[0]
+    out = np.zeros((n, n_attached, 4, 4))
+    for i in range(n):
+        for s in range(n_attached):
+            if anchors[s] < 0:
+                out[i, s] = offsets[s]
+            else:
+                tip_frame(frames[i, anchors[s]], offsets[s], out[i, s])
+    return out
 
 
 @functools.cache
