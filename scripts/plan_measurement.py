@@ -432,6 +432,8 @@ def summarise(args, manager, report, times: dict, total_s: float, outputs: dict)
     if report.solver == "IP_basic" and report.views_lower_bound is not None:
         bound = math.ceil(report.views_lower_bound - 1e-6)
         excess_text = f"{report.n_views - bound} ({report.n_views} views, LP bound {bound}; MIP gap {gap_text})"
+    elif report.solver_gap is None:
+        excess_text = "unknown (the final cover is greedy's: no bound)"
     else:
         excess_text = f"unknown (MIP gap {gap_text})"
     if report.time_limit_hit:
@@ -452,7 +454,7 @@ def summarise(args, manager, report, times: dict, total_s: float, outputs: dict)
                     if report.candidates_evaluated_share < 1.0
                     else ""
                 )
-                + f"{100.0 * report.verified_share:.1f} % of their measurable points verified; "
+                + f"{100.0 * report.verified_share:.1f} % of the measurable points verified; "
                 "raise --time-limit for a complete plan",
             )
         )

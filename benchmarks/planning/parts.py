@@ -148,6 +148,7 @@ def run_one(path: str, unit: str, tilt: str, solver: str, time_limit_s: float, s
             tilt,
             solver,
             time_limit_s=time_limit_s,
+            started_s=t0,  # the limit counts from the part's loading, as on the command line
             min_planning_time=CONDITIONS["min_planning_time_s"],
         )
     except AgiprobotError as exc:
