@@ -32,8 +32,8 @@ from agiprobot_measurement.motion.collision_config import (
     CollisionConfig,
     load_collision_config,
 )
-from agiprobot_measurement.motion.collision_kernels import segment_distances as _segment_distances
 from agiprobot_measurement.motion.collision_kernels import second_stage, sphere_candidates, sphere_candidates_numpy
+from agiprobot_measurement.motion.collision_kernels import segment_distances as _segment_distances
 from agiprobot_measurement.motion.errors import MotionInputError, UnknownObjectError
 from agiprobot_measurement.motion.kinematics import KinematicModel
 from agiprobot_measurement.motion.kinematics_kernels import COMPILED_FROM_STATES, attached_frames, chain_frames

@@ -727,7 +727,6 @@ def evaluate_streaming(
         if late and time_fit.MIN_FITTING_VIEWS < n > done_views:
             raise time_fit.DeadlineReached
 
-
     chunks = [poses[s : s + chunk] for s in starts]
     options = {"compact": bool(compact), "drop_dominated": bool(drop)}
     try:

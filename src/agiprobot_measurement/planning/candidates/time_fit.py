@@ -22,7 +22,7 @@ FIT_TIME_SHARE = 0.85
 MIN_FITTING_VIEWS = 200
 
 
-class DeadlineReached(Exception):  # noqa: N818 - control flow inside the evaluation, never raised out of it
+class DeadlineReached(Exception):  # control flow inside the evaluation, never raised out of it
     """The evaluation's deadline came before its last chunk."""
 
 
