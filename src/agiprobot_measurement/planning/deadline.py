@@ -21,8 +21,11 @@ T = TypeVar("T")
 TIME_CHECKED_STAGES = ("sampling", "metrology")
 #: the share of the time left after the sampling that the metrology may take: the rest is the set cover's, the
 #: scan-line verification's and the connection's. When its candidates do not fit, the metrology evaluates a random
-#: spread of them that does (the plan then says the time limit stopped it)
-METROLOGY_TIME_SHARE = 0.5
+#: spread of them that does (the plan then says the time limit stopped it). Tuned on the tuning half of the
+#: generated part family (400 mm parts, 60 s): 0.3 instead of 0.5 verified 99.7-100 % instead of 89.5-98 % of the
+#: measurable points (a tenth of the candidates already measures nearly every sample; the set cover's rounds need
+#: the time)
+METROLOGY_TIME_SHARE = 0.3
 
 
 @dataclass(frozen=True)

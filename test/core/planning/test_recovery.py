@@ -130,3 +130,32 @@ def test_a_scan_line_that_cannot_be_time_parameterised_is_dropped(planned, monke
         manager.run.pending_scan_paths[id(target)] = (target, path)
         verify.finish_scan_trajectories(manager.run, manager.tools(), [target])
         target.mechanics_valid = True
+
+
+def test_finishing_the_covers_scan_lines_leaves_a_refused_one_to_the_connection(planned, monkeypatch):
+    """The set cover's last step time-parameterises the deferred scan lines of its views: one the joint limits
+    refuse must not end the plan (it once did: the spline error of a 400 mm housing)."""
+    manager, chosen = planned
+    target = chosen[0]
+    path = target.get_trajectory_for_measurement().positions.copy()
+    target.set_trajectory_for_measurement(None)
+    manager.run.pending_scan_paths[id(target)] = (target, path)
+    real = verify.set_scan_trajectory
+
+    def timing(view, *args, **kwargs):
+        if view is target:
+            raise TimeParameterizationError(SPLINE_ERROR)
+        return real(view, *args, **kwargs)
+
+    monkeypatch.setattr(verify, "set_scan_trajectory", timing)
+    try:
+        verify.finish_scan_trajectories(manager.run, manager.tools(), chosen)  # raised the spline error before
+        assert target.get_trajectory_for_measurement() is None
+        ordered = manager.connect_viewpoints(chosen)
+        assert target not in ordered and ordered
+        assert "time-parameterised" in manager.dropped_views[0]["reason"]
+    finally:
+        monkeypatch.undo()
+        manager.run.pending_scan_paths[id(target)] = (target, path)
+        verify.finish_scan_trajectories(manager.run, manager.tools(), [target])
+        target.mechanics_valid = True
