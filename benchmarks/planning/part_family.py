@@ -15,6 +15,7 @@ cover's lower bound, and the predicted-vs-measured coverage gap; the evaluation 
     python -m benchmarks.planning.part_family                           # both halves, evaluation first
     python -m benchmarks.planning.part_family --half evaluation --json family.json
     python -m benchmarks.planning.part_family --list                    # the parts, their sizes and halves
+    python -m benchmarks.planning.part_family --tilt full --time-limit 180 --parts tray_80 bracket_200
     python -m benchmarks.planning.part_family --write DIR               # only write the STL files
 """
 
@@ -288,6 +289,8 @@ def summary_rows(results: list[dict]) -> list[list[str]]:
                max, lambda v: f"{v:.0f}"),
         figure("|predicted - measured| points", [abs(r["predicted_minus_measured_points"]) for r in planned], max,
                lambda v: f"{v:.1f}"),
+        figure("candidates evaluated %", [100 * r.get("candidates_evaluated_share", 1.0) for r in planned], min,
+               lambda v: f"{v:.0f}"),
         ["time limit hit", str(sum(bool(r.get("time_limit_hit")) for r in planned)), ""],
         ["views dropped", str(sum(int(r.get("dropped_views", 0)) for r in planned)), ""],
     ]  # fmt: skip
@@ -295,19 +298,19 @@ def summary_rows(results: list[dict]) -> list[list[str]]:
 
 def part_row(r: dict) -> list[str]:
     if "error" in r:
-        return [r["part"], "FAILED", r["error"][:100]] + [""] * 7
+        return [r["part"], "FAILED", r["error"][:100]] + [""] * 8
     bound = r.get("views_lower_bound")
     return [
         r["part"], f"{r['samples']}", f"{r['time_s']['total']:.1f}", f"{r['peak_mb']:.0f}",
         f"{100 * r['verified_share']:.1f}", f"{100 * r['covered_of_executable']:.1f}",
         f"{r['views']} / {'-' if bound is None else int(np.ceil(bound - 1e-6))}",
         f"{r['predicted_minus_measured_points']:+.1f}", "yes" if r.get("time_limit_hit") else "",
-        str(r.get("dropped_views", 0)),
+        f"{100 * r.get('candidates_evaluated_share', 1.0):.0f}", str(r.get("dropped_views", 0)),
     ]  # fmt: skip
 
 
 PART_HEADER = ["part", "samples", "time s", "MB", "verified %", "cov/exec %", "views / bound", "pred-msd",
-               "time limit", "dropped"]  # fmt: skip
+               "time limit", "evaluated %", "dropped"]  # fmt: skip
 
 
 def main(argv=None) -> int:
@@ -315,6 +318,12 @@ def main(argv=None) -> int:
     parser.add_argument("--half", choices=("both", *HALVES), default="both")
     parser.add_argument("--parts", nargs="*", help="part names to run (default: the half's)")
     parser.add_argument("--time-limit", type=float, default=TIME_LIMIT_S, help="whole-plan time limit per part (s)")
+    parser.add_argument(
+        "--tilt",
+        default="none",
+        choices=("none", "limited", "full", "auto"),
+        help="tilt mode (the family's targets: none within --time-limit 60, full within 180)",
+    )
     parser.add_argument("--seed", type=int, default=SEED)
     parser.add_argument("--dir", type=Path, default=RESULTS_DIR / "part_family", help="where the STL files go")
     parser.add_argument("--list", action="store_true", help="list the parts and exit")
@@ -337,10 +346,10 @@ def main(argv=None) -> int:
     paths = write_parts(args.dir, selected, args.seed)
     results = {half: [] for half in halves}
     for half in halves:  # the evaluation half first
-        print(f"{half} half (tilt none, IP_basic, time limit {args.time_limit:g} s per part):", flush=True)
+        print(f"{half} half (tilt {args.tilt}, IP_basic, time limit {args.time_limit:g} s per part):", flush=True)
         for part in [p for p in selected if p.half == half]:
-            command = child_command("benchmarks.planning.parts", "--one", paths[part.name], "mm",
-                                    "--time-limit", args.time_limit, "--seed", args.seed)  # fmt: skip
+            command = child_command("benchmarks.planning.parts", "--one", paths[part.name], "mm", "--time-limit",
+                                    args.time_limit, "--seed", args.seed, "--tilt", args.tilt)  # fmt: skip
             try:
                 result = run_json(command)
             except ChildFailed as exc:
@@ -352,7 +361,8 @@ def main(argv=None) -> int:
         print(f"\n{half} half: median and worst")
         print(format_table(["figure", "median", "worst"], summary_rows(results[half])))
     if args.json:
-        write_json(args.json, {"seed": args.seed, "time_limit_s": args.time_limit, "results": results})
+        meta = {"seed": args.seed, "time_limit_s": args.time_limit, "tilt": args.tilt}
+        write_json(args.json, {**meta, "results": results})
     return 0
 
 

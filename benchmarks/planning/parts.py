@@ -148,6 +148,7 @@ def run_one(path: str, unit: str, tilt: str, solver: str, time_limit_s: float, s
             tilt,
             solver,
             time_limit_s=time_limit_s,
+            started_s=t0,  # the limit counts from the part's loading, as on the command line
             min_planning_time=CONDITIONS["min_planning_time_s"],
         )
     except AgiprobotError as exc:
@@ -174,6 +175,7 @@ def run_one(path: str, unit: str, tilt: str, solver: str, time_limit_s: float, s
         covered_of_executable=round(report.coverage_of_coverable, 5),
         solver_gap=report.solver_gap,
         time_limit_hit=report.time_limit_hit,
+        candidates_evaluated_share=round(report.candidates_evaluated_share, 4),
         tilt_choice=manager.parameters.get("tilt_choice", tilt),
         estimated_execution_s=round(report.estimated_execution_time_s, 2),
         scan_lines_verified=t.get("scan_lines_verified", 0),

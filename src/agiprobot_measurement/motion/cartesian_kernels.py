@@ -10,6 +10,8 @@ import functools
 
 import numpy as np
 
+from agiprobot_measurement.motion.kinematics_kernels import joint_frame, register_helpers, tip_frame
+
 __all__ = ["TRACK_EXACT", "follow_branches", "follow_paths", "kernels_loaded", "track_paths"]
 
 #: the stop code of :func:`track_paths` for a path it cannot settle: the caller checks it with every IK branch
@@ -43,6 +45,7 @@ def kernels_loaded() -> bool:
 def _compiled_track():
     import numba  # lazily, see the module docstring
 
+    register_helpers()
     return numba.njit(cache=True)(_track_paths)
 
 
@@ -225,43 +228,12 @@ def _track_paths(
                     for c in range(4):
                         cur[r, c] = 1.0 if r == c else 0.0
                 for j in range(dof):
+                    joint_frame(cur, nxt, rot, pre[j], axes[j], q[j])
                     x, y, z = axes[j, 0], axes[j, 1], axes[j, 2]
-                    s, c1 = np.sin(q[j]), 1.0 - np.cos(q[j])
-                    rot[0, 0] = 1.0 - c1 * (y * y + z * z)
-                    rot[0, 1] = -s * z + c1 * x * y
-                    rot[0, 2] = s * y + c1 * x * z
-                    rot[1, 0] = s * z + c1 * x * y
-                    rot[1, 1] = 1.0 - c1 * (x * x + z * z)
-                    rot[1, 2] = -s * x + c1 * y * z
-                    rot[2, 0] = -s * y + c1 * x * z
-                    rot[2, 1] = s * x + c1 * y * z
-                    rot[2, 2] = 1.0 - c1 * (x * x + y * y)
-                    for r in range(3):
-                        for c in range(3):
-                            acc = 0.0
-                            for mm in range(3):
-                                pm = 0.0
-                                for jj in range(3):
-                                    pm += pre[j, mm, jj] * rot[jj, c]
-                                acc += cur[r, mm] * pm
-                            nxt[r, c] = acc
-                        t = cur[r, 3]
-                        for mm in range(3):
-                            t += cur[r, mm] * pre[j, mm, 3]
-                        nxt[r, 3] = t
-                    for r in range(3):
-                        for c in range(4):
-                            cur[r, c] = nxt[r, c]
                     for r in range(3):
                         origins[j, r] = cur[r, 3]
                         zaxes[j, r] = cur[r, 0] * x + cur[r, 1] * y + cur[r, 2] * z
-                # tip = cur @ tip
-                for r in range(3):
-                    for c in range(4):
-                        acc = cur[r, 3] if c == 3 else 0.0
-                        for mm in range(3):
-                            acc += cur[r, mm] * tip[mm, c]
-                        nxt[r, c] = acc
+                tip_frame(cur, tip, nxt)
                 # pose error: target - reached, rotation target R^T as sin(angle) axis
                 for r in range(3):
                     err[r] = poses[k, r, 3] - nxt[r, 3]

@@ -32,11 +32,11 @@ from agiprobot_measurement.motion.collision_config import (
     CollisionConfig,
     load_collision_config,
 )
+from agiprobot_measurement.motion.collision_kernels import second_stage, sphere_candidates, sphere_candidates_numpy
 from agiprobot_measurement.motion.collision_kernels import segment_distances as _segment_distances
-from agiprobot_measurement.motion.collision_kernels import sphere_candidates, sphere_candidates_numpy
 from agiprobot_measurement.motion.errors import MotionInputError, UnknownObjectError
 from agiprobot_measurement.motion.kinematics import KinematicModel
-from agiprobot_measurement.motion.kinematics_kernels import COMPILED_FROM_STATES, chain_frames
+from agiprobot_measurement.motion.kinematics_kernels import COMPILED_FROM_STATES, attached_frames, chain_frames
 from agiprobot_measurement.station import (
     ConfigError,
     PartPlacement,
@@ -460,6 +460,11 @@ class CollisionChecker:
         ]
         self._self_pairs = np.array(pairs, dtype=int).reshape(-1, 2)
         self._self_reach = self._own_radius[self._self_pairs].sum(axis=1) if pairs else np.zeros(0)
+        world = (self._shape_axis, self._world_extents, self._world_ball, self._world_disc)
+        world += (self._world_axis_extent, self._world_half)
+        boxes = (self._box_axes, self._box_center_flat, self._box_half, self._box_rotation, self._solid_box)
+        self_pairs = (self._self_pairs[:, 0], self._self_pairs[:, 1], self._own_half, self._self_reach)
+        self._second_stage_arrays = (world, boxes, self_pairs)
         extent = self._own_half + self._own_radius
         self._self_sphere_reach2 = extent[self._self_pairs].sum(axis=1) ** 2 if pairs else np.zeros(0)
 
@@ -472,6 +477,8 @@ class CollisionChecker:
     def shape_poses(self, q: np.ndarray) -> np.ndarray:
         """World poses (N, S, 4, 4) of the (padded) robot collision shapes for (N, dof) joint values."""
         moving = self._poser.moving_frames(q)
+        if len(q) >= COMPILED_FROM_STATES:
+            return attached_frames(moving, self._shape_anchor, self._shape_offset)
         anchors = np.where(self._static, 0, self._shape_anchor)
         poses = moving[:, anchors] @ self._shape_offset
         if np.any(self._static):
@@ -544,6 +551,9 @@ class CollisionChecker:
             centers, self._box_axes, self._box_center_flat, self._box_half_flat, self._world_bound,
             self._screened(poses) if checked is None else checked, i, j, self._self_sphere_reach2,
         )  # fmt: skip
+        if n >= COMPILED_FROM_STATES:
+            sure, env_near, pair_near = second_stage(found, close_rows, poses, *self._second_stage_arrays)
+            return sure, found[env_near], close_rows[pair_near]
         if len(self._object_list):
             state, shape, obstacle = found.T
             rows = 3 * obstacle[:, None] + np.arange(3)

@@ -83,6 +83,8 @@ class PlanningRun:
     #: share of samples with at least one reachable candidate anchor (after sampling)
     reachable_share: float | None = None
     time_limit_hit: bool = False
+    #: the share of the reachable candidates the metrology evaluated (below 1: the time limit cut it)
+    candidates_evaluated_share: float = 1.0
     revived_views: int = 0
     #: what the last candidate evaluation did (candidates, kept pairs, chunks, projection, times)
     last_stream_stats: object = None

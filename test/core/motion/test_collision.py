@@ -95,9 +95,11 @@ def test_matrix_with_typo_in_link_name_is_rejected(kinematic_model):
 
 
 # ------------------------------------------------------------------------------------------ kinematics
-def test_shape_poses_follow_the_kinematic_model(checker, kinematic_model, random_states):
-    reference = kinematic_model.link_poses_batch(random_states[:50])
-    poses = checker.shape_poses(random_states[:50])
+@pytest.mark.parametrize("count", [50, COMPILED_FROM_STATES])  # numpy, compiled
+def test_shape_poses_follow_the_kinematic_model(checker, kinematic_model, count):
+    states = np.random.default_rng(5).uniform(kinematic_model.lower, kinematic_model.upper, (count, 6))
+    reference = kinematic_model.link_poses_batch(states)
+    poses = checker.shape_poses(states)
     for s, shape in enumerate(checker.shapes):
         geometry = kinematic_model.urdf.collision[shape.link][shape.element]
         np.testing.assert_allclose(poses[:, s], reference[shape.link] @ geometry.origin, atol=1e-12)
@@ -197,6 +199,26 @@ def test_batch_equals_single_and_exhaustive(checker, random_states):
     within = checker.model.within_limits(random_states)
     exhaustive = np.array([w and not checker.colliding_pairs(q) for q, w in zip(random_states, within, strict=True)])
     np.testing.assert_array_equal(batch, exhaustive)
+
+
+def test_the_compiled_broad_phase_gives_the_numpy_candidates(checker, random_states, monkeypatch):
+    import agiprobot_measurement.motion.collision as collision
+
+    # states spread over the joint ranges and states near the first ones (close to the scene, the part, itself)
+    rng = np.random.default_rng(3)
+    near = random_states + rng.normal(0.0, 0.05, random_states.shape)
+    states = np.concatenate([random_states, near, np.tile(random_states[:50], (6, 1))])
+    assert len(states) >= COMPILED_FROM_STATES
+    poses = checker.shape_poses(states)
+    compiled = checker._broad_phase(poses)
+    monkeypatch.setattr(collision, "COMPILED_FROM_STATES", len(states) + 1)
+    plain = checker._broad_phase(poses)
+    assert plain[0].any() and len(plain[1]) and len(plain[2])  # each kind of outcome occurs
+    for got, expected in zip(compiled, plain, strict=True):
+        np.testing.assert_array_equal(got, expected)
+    batch = checker.check_states(states)
+    monkeypatch.setattr(collision, "COMPILED_FROM_STATES", COMPILED_FROM_STATES)
+    np.testing.assert_array_equal(checker.check_states(states), batch)
 
 
 def test_min_distance_sign_matches_validity(checker, random_states):

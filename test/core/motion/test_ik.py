@@ -81,6 +81,18 @@ def test_fk_matches_independent_dh_product(station, kinematic_model, ik):
             assert angle < 1e-6
 
 
+def test_the_compiled_fk_of_large_batches_matches_the_numpy_fk(kinematic_model):
+    from agiprobot_measurement.motion.kinematics_kernels import COMPILED_FROM_STATES, chain_frames
+
+    states = np.random.default_rng(2).uniform(-3, 3, (COMPILED_FROM_STATES, 6))
+    pre, axes, tip = kinematic_model.fk_segments
+    frames, tips = chain_frames(states, pre, axes, tip)
+    small = kinematic_model.fk_batch(states[:10])  # below the compiled size: the numpy product
+    np.testing.assert_allclose(tips[:10], small, atol=1e-12)
+    np.testing.assert_allclose(frames[:10, -1] @ tip, small, atol=1e-12)
+    np.testing.assert_allclose(tips[:, 3], np.broadcast_to([0.0, 0.0, 0.0, 1.0], (len(states), 4)))
+
+
 # ------------------------------------------------------------------------------------ closed form
 def test_round_trip_on_1000_reachable_poses(kinematic_model, ik, random_states):
     poses = kinematic_model.fk_batch(random_states)

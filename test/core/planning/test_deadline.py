@@ -56,3 +56,12 @@ def test_a_process_started_before_this_test_ran():
     now = time.perf_counter()
     # pytest started the interpreter and collected the tests before this one ran: the start lies well before now
     assert 0.05 < now - started < 24 * 3600.0
+
+
+def test_a_share_deadline_lies_at_that_share_of_the_time_left():
+    clock = StageClock(time.perf_counter() - 4.0, 10.0)  # 6 s left
+    before = time.perf_counter()
+    deadline = clock.share_deadline(0.5)
+    assert before + 3.0 - 0.1 < deadline < time.perf_counter() + 3.0
+    late = StageClock(time.perf_counter() - 20.0, 10.0)  # nothing left: now
+    assert late.share_deadline(0.5) <= time.perf_counter()

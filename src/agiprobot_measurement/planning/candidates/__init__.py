@@ -5,5 +5,5 @@ Public face: :func:`~.generation.generate_samples_and_viewpoints`, :class:`~.vie
 
 Modules: ``generation`` (samples, candidates, reachability, metrology, the views of a run), ``viewpoint`` (the
 viewpoint and the candidate poses), ``streaming`` (chunked metrology, dominance drops, memory projection),
-``distributed`` (the same on a Dask cluster), ``mechanics`` (anchor reachability, scan lines and their check).
+``time_fit`` (the candidates a deadline leaves time for), ``distributed`` (the same on a Dask cluster), ``mechanics`` (anchor reachability, scan lines and their check).
 """

@@ -26,6 +26,7 @@ from agiprobot_measurement.planning.candidates.viewpoint import (
     generate_viewpoint_poses,
     select_limited_tilt,
 )
+from agiprobot_measurement.planning.deadline import METROLOGY_TIME_SHARE
 from agiprobot_measurement.planning.errors import PlanningError, PlanningInputError
 from agiprobot_measurement.planning.request import WorkBudget, check_choice, check_positive, estimate_work
 from agiprobot_measurement.planning.run import PlanningRun, PlanningTools, Reserve
@@ -156,8 +157,19 @@ def generate_samples_and_viewpoints(
         executor=budget.evaluator,
         fixed_bytes=fixed,
         stats=stats,
+        deadline_s=None if run.clock is None else run.clock.share_deadline(METROLOGY_TIME_SHARE),
     )
     run.last_stream_stats = stats
+    run.candidates_evaluated_share = stats.evaluated / max(stats.candidates, 1)
+    if stats.time_limited:
+        message = (
+            f"the time limit left the metrology time for {stats.evaluated:,} of the {stats.candidates:,} reachable "
+            f"candidate viewpoints ({100 * run.candidates_evaluated_share:.0f} %"
+            + (", a random spread over the part)" if stats.time_limited == "projected" else ", the first ones)")
+            + ": the plan covers what they measure; allow more time for a complete plan"
+        )
+        LOG.warning("%s", message)
+        run.warnings.append(message)
     allowed = None
     if viewpoint_tilt_mode == "limited":
         valid_all = np.zeros(len(candidates.poses), dtype=bool)

@@ -55,6 +55,7 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
+from agiprobot_measurement.planning.candidates import time_fit
 from agiprobot_measurement.planning.request import WORKER_PROCESS_BYTES, WorkTooLarge
 from agiprobot_measurement.sensors.laser_line.model import MeasurabilityResult
 
@@ -211,6 +212,11 @@ class StreamStats:
     chunk_seconds: list | None = None
     chunk_cpu_seconds: list | None = None
     where: str = "in-process"
+    #: candidates actually evaluated (fewer than ``candidates`` when the time limit did not leave time for all)
+    #: and why: "" (all), "projected" (a random spread that the pilot projected to fit), "stopped" (the evaluation
+    #: ran into its deadline and kept the chunks done)
+    evaluated: int = 0
+    time_limited: str = ""
 
 
 @numba.njit(cache=True)
@@ -531,6 +537,7 @@ def evaluate_streaming(
     executor=None,
     fixed_bytes: float = 0.0,
     stats: StreamStats | None = None,
+    deadline_s: float | None = None,
 ) -> tuple[MeasurabilityResult, np.ndarray]:
     """Evaluate ``poses`` (V, 4, 4 mm) in chunks; return (the compact measurability of the candidates that
     measure something, their indices into ``poses``, ascending).
@@ -540,6 +547,11 @@ def evaluate_streaming(
     the budget. ``report(stage, fraction, message)`` follows the completed chunks (stage 'metrology'). ``stats``
     is filled in. Raises :class:`~agiprobot_measurement.planning.request.WorkTooLarge` when the projected store
     does not fit the budget.
+
+    ``deadline_s`` (a ``time.perf_counter()`` value, None = none): when the pilot projects that the candidates do
+    not fit before it, a fixed random spread of them that does is evaluated (spread over the whole part, not its
+    first candidates); should the evaluation still reach it, the chunks done are kept and the rest skipped.
+    ``stats.evaluated`` and ``stats.time_limited`` say so; the returned indices are into ``poses`` either way.
     """
     settings = settings or EvaluationSettings()
     stats = stats if stats is not None else StreamStats()
@@ -579,6 +591,10 @@ def evaluate_streaming(
     )
     pairs_per_view = sum(p["nnz"] for p in pilot) / pilot_n
     kept_share = sum(p["n_views"] for p in pilot) / pilot_n
+    subset = time_fit.fitting_subset(n, per_view_s / parallel, deadline_s)
+    if subset is not None:
+        poses, n = poses[subset], subset.size
+        stats.time_limited = "projected"
     stats.projected_pairs = pairs_per_view * n
     # the store's types follow the projection only, so every set-up keeps the same values
     compact = settings.compact if settings.compact is not None else stats.projected_pairs > COMPACT_ABOVE_PAIRS
@@ -707,15 +723,22 @@ def evaluate_streaming(
             )
         if report is not None:
             report("metrology", done_views / n, f"{done_views} of {n} viewpoints")
+        late = deadline_s is not None and time.perf_counter() > deadline_s
+        if late and time_fit.MIN_FITTING_VIEWS < n > done_views:
+            raise time_fit.DeadlineReached
 
     chunks = [poses[s : s + chunk] for s in starts]
     options = {"compact": bool(compact), "drop_dominated": bool(drop)}
-    if executor is None:
-        for index, part in enumerate(chunks):
-            arrived(index, *chunk_block(sensor_model, part, threshold_mm, deflection_mm, **options))
-    else:
-        executor.evaluate(sensor_model, chunks, threshold_mm, deflection_mm, arrived, **options)
+    try:
+        if executor is None:
+            for index, part in enumerate(chunks):
+                arrived(index, *chunk_block(sensor_model, part, threshold_mm, deflection_mm, **options))
+        else:
+            executor.evaluate(sensor_model, chunks, threshold_mm, deflection_mm, arrived, **options)
+    except time_fit.DeadlineReached:
+        stats.time_limited = "stopped"
     del chunks
+    stats.evaluated = min(next_index * chunk, n)  # the chunks merged into the store
     merge_started = time.perf_counter()
     result, kept = store.result()
     stats.kept_views, stats.kept_pairs = result.n_views, result.nnz
@@ -725,6 +748,10 @@ def evaluate_streaming(
         stats.reserve_index, stats.reserve_dominator = order_index[order], order_by[order]
     else:
         stats.reserve_index = stats.reserve_dominator = np.zeros(0, dtype=np.int64)
+    if subset is not None:  # back to indices into the caller's poses
+        kept, stats.reserve_index = subset[kept], subset[stats.reserve_index]
+        by = stats.reserve_dominator
+        stats.reserve_dominator = np.where(by >= 0, subset[np.maximum(by, 0)], -1)
     stats.dropped_views = int(stats.reserve_index.size)
     stats.store_bytes = result.nbytes + kept.nbytes
     stats.chunk_seconds, stats.chunk_cpu_seconds = seconds, cpu_seconds

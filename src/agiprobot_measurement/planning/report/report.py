@@ -60,6 +60,8 @@ class CoverageReport:
     dropped_views: list = field(default_factory=list)
     #: the set cover's proven lower bound of its objective (IP_basic: views; greedy: None; others: their units)
     views_lower_bound: float | None = None
+    #: the share of the reachable candidates the metrology evaluated (below 1: the time limit cut it)
+    candidates_evaluated_share: float = 1.0
 
     @property
     def coverage_of_coverable(self) -> float:
@@ -148,7 +150,8 @@ def run_report(run, views: Iterable | None = None) -> CoverageReport:
         n_coverable_metrology=int(metrology.sum()),
         n_unverified=int(unverified.sum()),
         reachable_share=run.reachable_share,
-        time_limit_hit=bool(run.time_limit_hit),
+        time_limit_hit=bool(run.time_limit_hit or run.candidates_evaluated_share < 1.0),
+        candidates_evaluated_share=float(run.candidates_evaluated_share),
         tilt_mode=str(run.parameters.get("viewpoint_tilt_mode", "")),
         warnings=list(run.warnings),
         dropped_views=[dict(d) for d in run.dropped_views],
@@ -183,6 +186,7 @@ def run_metadata(run, version: str) -> dict:
             "verified_share": round(report.verified_share, 6),
             "reachable_share": None if report.reachable_share is None else round(report.reachable_share, 4),
             "time_limit_hit": report.time_limit_hit,
+            "candidates_evaluated_share": round(report.candidates_evaluated_share, 6),
             "views": report.n_views,
             "views_lower_bound": report.views_lower_bound,
             "dropped_views": report.dropped_views,

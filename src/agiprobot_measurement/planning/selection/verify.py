@@ -8,6 +8,7 @@ import time
 
 import numpy as np
 
+from agiprobot_measurement.motion.time_parameterization import TimeParameterizationError
 from agiprobot_measurement.planning.candidates.mechanics import (
     check_scan_line,
     check_scan_lines,
@@ -153,13 +154,19 @@ def record_duration(run: PlanningRun, view: ViewPoint) -> None:
 
 
 def finish_scan_trajectories(run: PlanningRun, tools: PlanningTools, views) -> None:
-    """Time-parameterise the checked scan lines of ``views`` whose trajectory was deferred."""
+    """Time-parameterise the checked scan lines of ``views`` whose trajectory was deferred; a view whose
+    time parameterisation the joint limits refuse is left without a trajectory (the connection drops it)."""
     started = time.perf_counter()
     try:
         for view in views:
             pending = run.pending_scan_paths.get(id(view))
             if pending is not None and pending[0] is view and view.get_trajectory_for_measurement() is None:
-                set_trajectory(run, tools, view, pending[1])
+                try:
+                    set_trajectory(run, tools, view, pending[1])
+                except TimeParameterizationError:
+                    # left without a trajectory: the connection drops it with the reason and covers its points
+                    # again (no single move fails a plan)
+                    continue
                 record_duration(run, view)
     finally:
         run.add_time("mechanics", time.perf_counter() - started)

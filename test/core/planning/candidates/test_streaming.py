@@ -3,6 +3,7 @@
 import dataclasses
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -198,6 +199,44 @@ def test_dropping_dominated_candidates_keeps_the_coverage_and_a_reserve(pocket_p
     auto = StreamStats()
     evaluate_streaming(model, poses, 0.1, 500.0, stats=auto)
     assert not auto.drop_dominated and auto.dropped_views == 0
+
+
+def test_a_deadline_too_near_for_every_candidate_evaluates_a_spread_of_them(pocket_part, monkeypatch):
+    import agiprobot_measurement.planning.candidates.streaming as streaming
+    import agiprobot_measurement.planning.candidates.time_fit as time_fit
+
+    model, poses = pocket_part
+    plain, kept = evaluate_streaming(model, poses, 0.1, 500.0, settings=EvaluationSettings(drop_dominated=False))
+    everything = StreamStats()
+    far = time.perf_counter() + 3600.0
+    _, far_kept = evaluate_streaming(model, poses, 0.1, 500.0, stats=everything, deadline_s=far)
+    assert not everything.time_limited and everything.evaluated == len(poses)
+    np.testing.assert_array_equal(far_kept, kept)
+    # a deadline already past: the minimum spread, over the whole candidate range, in the caller's indices
+    monkeypatch.setattr(time_fit, "MIN_FITTING_VIEWS", len(poses) // 4)
+    stats = StreamStats()
+    some, some_kept = evaluate_streaming(
+        model, poses, 0.1, 500.0, stats=stats, settings=EvaluationSettings(drop_dominated=False),
+        deadline_s=time.perf_counter() - 1.0,
+    )  # fmt: skip
+    assert stats.time_limited == "projected" and stats.evaluated == len(poses) // 4 == stats.candidates // 4
+    assert np.all(np.diff(some_kept) > 0) and set(some_kept.tolist()) <= set(kept.tolist())
+    assert some_kept.min() < len(poses) // 4 and some_kept.max() > 3 * len(poses) // 4  # spread, not the first
+    plain_sets = dict(zip(kept.tolist(), _point_sets(plain), strict=True))
+    for index, points in zip(some_kept.tolist(), _point_sets(some), strict=True):
+        assert points == plain_sets[index]
+    # a projection that was too hopeful: the chunks done when the deadline came are kept, the rest skipped
+    monkeypatch.setattr(time_fit, "fitting_subset", lambda *args: None)
+    monkeypatch.setattr(time_fit, "MIN_FITTING_VIEWS", 0)
+    monkeypatch.setattr(streaming, "CHUNK_TARGET_S", 1e-6)
+    stopped = StreamStats()
+    first, first_kept = evaluate_streaming(
+        model, poses, 0.1, 500.0, stats=stopped, settings=EvaluationSettings(drop_dominated=False),
+        deadline_s=time.perf_counter() - 1.0,
+    )  # fmt: skip
+    assert stopped.time_limited == "stopped" and stopped.chunks > 1 and stopped.evaluated == stopped.chunk_views
+    np.testing.assert_array_equal(first_kept, kept[kept < stopped.chunk_views])
+    assert first.n_views == first_kept.size
 
 
 def test_the_budget_turns_dropping_on_before_it_refuses(pocket_part):

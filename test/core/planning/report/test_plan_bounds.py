@@ -123,6 +123,23 @@ def test_whole_plan_time_limit_is_honoured_and_the_plan_stays_executable():
         assert any("time limit" in w for w in report.warnings)
 
 
+def test_a_metrology_cut_by_the_time_limit_gives_a_plan_that_says_so(monkeypatch):
+    import agiprobot_measurement.planning.candidates.generation as generation
+
+    monkeypatch.setattr(generation, "METROLOGY_TIME_SHARE", 0.0)  # the metrology's deadline: its start
+    manager = TrajectoryManager()
+    manager.load_target_mesh(str(CUBE))
+    ordered = manager.plan(0.02, 0.1, 12, "none", "IP_basic", time_limit_s=120.0)
+    report = manager.coverage_report()
+    stats = manager.run.last_stream_stats
+    assert stats.time_limited and stats.evaluated < stats.candidates
+    assert report.time_limit_hit and report.candidates_evaluated_share == stats.evaluated / stats.candidates
+    assert any("left the metrology time for" in w for w in report.warnings)
+    # a plan, executable, of what the evaluated candidates measure
+    assert ordered and all(v.mechanics_verified and v.mechanics_valid for v in ordered)
+    assert report.n_covered > 0.5 * report.n_samples
+
+
 def test_low_reachability_warns_with_the_share():
     manager = TrajectoryManager()
     manager.load_target_mesh(str(CUBE))
