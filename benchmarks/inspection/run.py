@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 
@@ -169,10 +170,11 @@ def speed(seed: int = 0) -> dict:
         pick = rng.choice(len(points), extra, replace=False)
         points = np.vstack([points, points[pick] + rng.normal(0, 0.01, (extra, 3))])
         sigma = np.concatenate([sigma, sigma[pick]])
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     result = inspect_cloud(points, dense, case.spec, case.part.nominal_placement, sigma)
     return {"points": len(points), "faces": len(dense.faces), "time_s": time.perf_counter() - t0,
-            "stages_s": result.timings_s, "flags": result.flags}  # fmt: skip
+            "cpu_s": time.process_time() - c0, "load_average": os.getloadavg()[0], "stages_s": result.timings_s,
+            "flags": result.flags}  # fmt: skip
 
 
 def main(argv=None) -> int:
@@ -215,7 +217,8 @@ def main(argv=None) -> int:
     if args.speed:
         result["speed"] = speed()
         s = result["speed"]
-        print(f"speed: {s['points']} points vs {s['faces']} faces: {s['time_s']:.2f} s "
+        print(f"speed: {s['points']} points vs {s['faces']} faces: {s['time_s']:.2f} s wall, {s['cpu_s']:.2f} s CPU "
+              f"(all threads), load average {s['load_average']:.1f} "
               f"({', '.join(f'{k} {v:.2f}' for k, v in s['stages_s'].items())})")  # fmt: skip
     if args.json:
         with open(args.json, "w") as stream:

@@ -120,8 +120,7 @@ def _register(points, mesh, spec, placement, progress) -> tuple[Registration, np
         cp = closest_points(mesh, moved)
         sets, planes = [], []
         for name in spec.datums:
-            tri = spec.face_triangles(mesh, name)
-            on = np.isin(cp.face, tri) & (np.abs(cp.signed_mm) < spec.icp.max_distance_mm)
+            on = spec.on_face(mesh, name, cp.face) & (np.abs(cp.signed_mm) < spec.icp.max_distance_mm)
             on &= ~edge_mask(mesh, cp.closest_mm, spec.surface.edge_margin_mm)
             sets.append(moved[on])
             face = spec.faces[name]
@@ -221,7 +220,9 @@ def _peak(cp, use, pat, members, worst, s) -> tuple[float, np.ndarray]:
     points."""
     centre = pat.centre_mm[worst]
     idx = np.flatnonzero(use)
-    idx = idx[np.isin(pat.voxel_of_point[idx], members)]
+    member = np.zeros(len(pat.mean_mm), dtype=bool)
+    member[members] = True
+    idx = idx[member[pat.voxel_of_point[idx]]]
     rel = cp.closest_mm[idx] - centre
     window = s.depth_radius_mm + 1.5
     near = np.einsum("ij,ij->i", rel, rel) <= window**2
@@ -256,7 +257,7 @@ def _faces(mesh, spec, cp, use, tolerance):
     face_of_point = np.full(len(cp.face), "", dtype=object)
     stats, members = {"all": _stats(cp.signed_mm[use], tolerance)}, {}
     for name in spec.faces:
-        on = np.isin(cp.face, spec.face_triangles(mesh, name)) & use
+        on = spec.on_face(mesh, name, cp.face) & use
         face_of_point[on] = name
         members[name] = np.flatnonzero(on)
         stats[name] = _stats(cp.signed_mm[on], tolerance)
@@ -269,6 +270,6 @@ def _coverage(mesh, spec, closest_used, radius) -> dict:
     empty = no_data_mask(samples, closest_used, radius)
     result = {"all_percent": float(100 * (1 - empty.mean())), "samples": len(samples)}
     for name in spec.faces:
-        on = np.isin(face, spec.face_triangles(mesh, name))
+        on = spec.on_face(mesh, name, face)
         result[f"{name}_percent"] = float(100 * (1 - empty[on].mean())) if on.any() else 0.0
     return result

@@ -10,7 +10,7 @@ frame; rotations about the points' centroid) can be locked.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import trimesh
@@ -36,6 +36,13 @@ DOF_NAMES = ("rx", "ry", "rz", "tx", "ty", "tz")
 INNER_ITERATIONS = 8
 #: share of the points that must lie within max_distance_mm of the nominal after prealignment
 MIN_OVERLAP = 0.3
+#: coarse-to-fine: samples larger than COARSE_FACTOR x COARSE_SAMPLE points are first registered on COARSE_SAMPLE
+#: points to these tolerances (rad, mm); the full sample then refines from there (a closest-point query costs
+#: about its tree build plus its points: the coarse iterations are a fraction of the fine ones)
+COARSE_SAMPLE = 10000
+COARSE_FACTOR = 4
+COARSE_TOL_RAD = 1e-6
+COARSE_TOL_MM = 1e-4
 
 
 def apply(transform: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -115,6 +122,9 @@ def icp(points_mm: np.ndarray, mesh: trimesh.Trimesh, settings: IcpSettings = Ic
     rng = np.random.default_rng(settings.seed)
     if len(points) > settings.sample:
         points = points[rng.choice(len(points), settings.sample, replace=False)]
+    if len(points) > COARSE_FACTOR * COARSE_SAMPLE:  # coarse to fine: most iterations on a small sample
+        coarse = replace(settings, sample=COARSE_SAMPLE, tol_rad=COARSE_TOL_RAD, tol_mm=COARSE_TOL_MM)
+        transform = icp(points, mesh, coarse, transform).transform
     free = np.array([name not in settings.lock for name in DOF_NAMES])
     edges = sharp_edge_samples(mesh, max(settings.edge_margin_mm / 4, 0.05)) if settings.edge_margin_mm > 0 else None
     edge_tree = cKDTree(edges) if edges is not None and len(edges) else None

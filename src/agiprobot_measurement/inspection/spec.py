@@ -90,6 +90,12 @@ class InspectionSpec:
             )
         return np.flatnonzero(hit)
 
+    def on_face(self, mesh: trimesh.Trimesh, name: str, triangle_of_point: np.ndarray) -> np.ndarray:
+        """Per point: its (closest) triangle belongs to the named face (a lookup table, not a set search)."""
+        member = np.zeros(len(mesh.faces), dtype=bool)
+        member[self.face_triangles(mesh, name)] = True
+        return member[np.asarray(triangle_of_point, dtype=np.int64)]
+
     def check_against(self, mesh: trimesh.Trimesh) -> None:
         """Every face a feature or datum names exists on ``mesh``."""
         for name in {*self.datums, *(f for feat in self.features for f in feat.faces)}:

@@ -91,8 +91,8 @@ def test_bad_clouds_are_refused_with_a_clear_error(null_case):
 
 
 def test_report_is_complete_or_absent(tmp_path, null_case):
-    c = null_case
-    r = inspect_cloud(c.points_mm, c.nominal, c.spec, c.part.nominal_placement, c.sigma_mm)
+    c = null_case  # every fourth point: the report's files and contents do not depend on the density
+    r = inspect_cloud(c.points_mm[::4], c.nominal, c.spec, c.part.nominal_placement, c.sigma_mm[::4])
     out = write_report(r, tmp_path / "report", {"seed": 0})
     assert sorted(p.name for p in out.iterdir()) == sorted(REPORT_FILES)
     data = json.loads((out / "report.json").read_text())
