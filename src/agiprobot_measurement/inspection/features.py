@@ -23,6 +23,7 @@ from agiprobot_measurement.inspection.fitting import (
     min_zone_flatness,
     plane_basis,
 )
+from agiprobot_measurement.inspection.instrument import InstrumentUncertainty
 from agiprobot_measurement.inspection.spec import Feature
 
 __all__ = ["FeatureContext", "FeatureResult", "evaluate_feature"]
@@ -73,6 +74,8 @@ class FeatureContext:
     face_points: dict
     face_planes: dict
     registration_sigma: object  # callable(points (N, 3), normals (N, 3)) -> (N,) mm
+    instrument: InstrumentUncertainty = field(default_factory=InstrumentUncertainty)
+    registration_centre_mm: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
 def _face(ctx: FeatureContext, name: str, feature: str) -> np.ndarray:
@@ -103,7 +106,7 @@ def _flatness(feature: Feature, ctx: FeatureContext) -> FeatureResult:
     return FeatureResult(
         feature.name, "flatness",
         {"flatness_mm": value, "raw_flatness_mm": raw, "ls_rms_mm": plane.rms_mm, "filter_radius_mm": FLATNESS_FILTER_RADIUS_MM},
-        [decide("flatness", value, tol, expanded(u_f))], len(idx),
+        [decide("flatness", value, tol, expanded(u_f, ctx.instrument.form_mm))], len(idx),
         [f"minimum zone of the heights averaged within {FLATNESS_FILTER_RADIUS_MM} mm; raw (unfiltered) zone "
          "includes about 6 sigma of noise"],
     )  # fmt: skip
@@ -119,7 +122,7 @@ def _size(feature: Feature, ctx: FeatureContext) -> FeatureResult:
     n /= np.linalg.norm(n)
     value = float((pa.centroid - pb.centroid) @ n)
     nominal, tol = feature.params["nominal_mm"], feature.params["tolerance_mm"]
-    u = expanded(pa.offset_sigma_mm, pb.offset_sigma_mm)
+    u = expanded(pa.offset_sigma_mm, pb.offset_sigma_mm, ctx.instrument.length_rel * nominal)
     d = decide("size", value, nominal + tol, u, lower=nominal - tol)
     parallel = float(np.degrees(np.arccos(np.clip(-pa.normal @ pb.normal, -1, 1))))
     return FeatureResult(feature.name, "size", {"size_mm": value, "nominal_mm": nominal, "deviation_mm": value - nominal,
@@ -154,7 +157,8 @@ def _hole(feature: Feature, ctx: FeatureContext) -> FeatureResult:
     d3 = direction[0] * u + direction[1] * v
     u_reg = float(ctx.registration_sigma(centre[None], d3[None])[0])
     position = 2.0 * offset
-    decisions = [decide("position", position, p["position_tolerance_mm"], 2.0 * expanded(u_fit, u_reg))]
+    u_scale = ctx.instrument.length_rel * float(np.linalg.norm(centre - ctx.registration_centre_mm))
+    decisions = [decide("position", position, p["position_tolerance_mm"], 2.0 * expanded(u_fit, u_reg, u_scale))]
     diameter = 2.0 * fit.radius
     if "diameter_tolerance_mm" in p:
         tol = p["diameter_tolerance_mm"]

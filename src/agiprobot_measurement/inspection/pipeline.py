@@ -16,6 +16,7 @@ from agiprobot_measurement.inspection.decision import CONFORM, COVERAGE_FACTOR, 
 from agiprobot_measurement.inspection.deviation import closest_points, edge_mask, no_data_mask, patches
 from agiprobot_measurement.inspection.errors import InspectionInputError, RegistrationError
 from agiprobot_measurement.inspection.features import FeatureContext, FeatureResult, evaluate_feature
+from agiprobot_measurement.inspection.instrument import InstrumentUncertainty
 from agiprobot_measurement.inspection.registration import Registration, apply, datum_frame, icp, prealign
 from agiprobot_measurement.inspection.spec import InspectionSpec
 
@@ -132,8 +133,10 @@ def _register(points, mesh, spec, placement, progress) -> tuple[Registration, np
 
 
 def inspect_cloud(points_world_mm, nominal: trimesh.Trimesh, spec: InspectionSpec, nominal_placement=None,
-                  sigma_mm=None, progress=None) -> InspectionResult:  # fmt: skip
-    """Inspect a measured cloud (world, in the spec's unit) against the nominal mesh (CAD frame, same unit)."""
+                  sigma_mm=None, progress=None, instrument: InstrumentUncertainty | None = None) -> InspectionResult:  # fmt: skip
+    """Inspect a measured cloud (world, in the spec's unit) against the nominal mesh (CAD frame, same unit).
+    ``instrument``: the scanner's systematic terms (mm) entering every uncertainty (None: noise only)."""
+    instrument = instrument or InstrumentUncertainty()
     report = progress or (lambda stage, fraction: None)
     timings, t0 = {}, time.perf_counter()
     report("check", 0.0)
@@ -172,14 +175,14 @@ def inspect_cloud(points_world_mm, nominal: trimesh.Trimesh, spec: InspectionSpe
     timings["deviations"] = time.perf_counter() - t
     report("regions", 0.0)
     t = time.perf_counter()
-    regions, u_surface, smoothed = _regions(nominal, cp, sigma, use, reg, s)
+    regions, u_surface, smoothed = _regions(nominal, cp, sigma, use, reg, s, instrument.surface_mm)
     face_of_point, face_stats, face_points = _faces(nominal, spec, cp, use, s.tolerance_mm)
     coverage = _coverage(nominal, spec, cp.closest_mm[use], s.no_data_radius_mm)
     timings["regions"] = time.perf_counter() - t
     report("features", 0.0)
     t = time.perf_counter()
     ctx = FeatureContext(cad, sigma, ~outlier, face_points, {n: (f.point, f.normal) for n, f in spec.faces.items()},
-                         reg.displacement_sigma)  # fmt: skip
+                         reg.displacement_sigma, instrument, reg.centre_mm)  # fmt: skip
     results = [evaluate_feature(feature, ctx) for feature in spec.features]
     timings["features"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
@@ -188,7 +191,7 @@ def inspect_cloud(points_world_mm, nominal: trimesh.Trimesh, spec: InspectionSpe
                             face_stats, results, coverage, u_surface, smoothed, timings)  # fmt: skip
 
 
-def _regions(mesh, cp, sigma, use, reg, s) -> tuple[list[SurfaceRegion], float, np.ndarray]:
+def _regions(mesh, cp, sigma, use, reg, s, systematic_mm=0.0) -> tuple[list[SurfaceRegion], float, np.ndarray]:
     pat = patches(cp.closest_mm, cp.signed_mm, sigma, use, s.voxel_mm, s.patch_radius_mm)
     smoothed = np.full(len(cp.signed_mm), np.nan)
     if not len(pat.mean_mm):
@@ -199,7 +202,7 @@ def _regions(mesh, cp, sigma, use, reg, s) -> tuple[list[SurfaceRegion], float, 
     n_sum = np.stack([np.bincount(voxel, weights=normals[:, k], minlength=len(pat.count)) for k in range(3)], axis=1)
     n_sum /= np.maximum(np.linalg.norm(n_sum, axis=1, keepdims=True), 1e-12)
     u_reg = reg.displacement_sigma(pat.centre_mm, n_sum)
-    uncertainty = COVERAGE_FACTOR * np.hypot(pat.sigma_mm, u_reg)
+    uncertainty = COVERAGE_FACTOR * np.sqrt(pat.sigma_mm**2 + u_reg**2 + systematic_mm**2)
     magnitude = np.abs(pat.mean_mm)
     t = s.tolerance_mm
     flagged = magnitude >= t - uncertainty
