@@ -17,7 +17,14 @@ from agiprobot_measurement.inspection.deviation import closest_points, edge_mask
 from agiprobot_measurement.inspection.errors import InspectionInputError, RegistrationError
 from agiprobot_measurement.inspection.features import FeatureContext, FeatureResult, evaluate_feature
 from agiprobot_measurement.inspection.instrument import InstrumentUncertainty
-from agiprobot_measurement.inspection.registration import Registration, apply, datum_frame, icp, prealign
+from agiprobot_measurement.inspection.registration import (
+    Registration,
+    apply,
+    datum_frame,
+    icp,
+    prealign,
+    rps_alignment,
+)
 from agiprobot_measurement.inspection.spec import InspectionSpec
 
 __all__ = ["MIN_POINTS", "STAGES", "InspectionResult", "SurfaceRegion", "inspect_cloud"]
@@ -129,6 +136,11 @@ def _register(points, mesh, spec, placement, progress) -> tuple[Registration, np
         correction = datum_frame(sets, planes)
         reg.transform = correction @ reg.transform
         reg.method = "datum_321"
+    elif spec.alignment == "rps":
+        result = rps_alignment(apply(reg.transform, points), spec.rps_points, spec.rps_radius_mm,
+                               lock=spec.icp.lock)  # fmt: skip
+        reg.transform = result.correction @ reg.transform
+        reg.method, reg.rps = "rps", result
     return reg, reg.transform
 
 
