@@ -31,10 +31,14 @@ __all__ = ["FeatureContext", "FeatureResult", "evaluate_feature"]
 #: flatness: the face's heights are averaged within this radius (mm) before the minimum zone (noise filter)
 FLATNESS_FILTER_RADIUS_MM = 5.0
 #: hole edge ring: angular bins of the edge points
-HOLE_EDGE_BINS = 36
-#: hole wall: fewest points and smallest arc (deg) for the LS circle through the wall (else the edge ring)
+HOLE_EDGE_BINS = 90
+#: hole wall: fewest points and smallest arc (deg, in 10-deg bins holding at least WALL_BIN_POINTS points) for the
+#: LS circle through the wall (else the edge ring): a free-radius circle through a shorter arc trades its centre for
+#: its radius
 MIN_WALL_POINTS = 100
-MIN_WALL_ARC_DEG = 90.0
+MIN_WALL_ARC_DEG = 180.0
+WALL_BIN_POINTS = 3
+
 #: fewest points a feature is evaluated on
 MIN_FEATURE_POINTS = 30
 
@@ -147,7 +151,8 @@ def _hole(feature: Feature, ctx: FeatureContext) -> FeatureResult:
         fit, count = _edge_ring(feature, ctx, centre, axis, radius, height, radial, band, u, v)
         method = "edge ring"
         note = (
-            "centre and diameter from the innermost face point in each direction (edge ring): the centre is "
+            "centre and diameter from the innermost face point (upper half of the face's heights) in each of "
+            f"{HOLE_EDGE_BINS} directions (edge ring): the centre is "
             "unbiased, the diameter reads about one point spacing large"
         )
     c = np.array([(fit.centre - centre) @ u, (fit.centre - centre) @ v])
@@ -170,14 +175,19 @@ def _hole(feature: Feature, ctx: FeatureContext) -> FeatureResult:
 
 
 def _arc_deg(rel: np.ndarray, u: np.ndarray, v: np.ndarray) -> float:
-    """Angle (deg) the points span around the axis: 360 minus the largest empty gap."""
-    angles = np.sort(np.degrees(np.arctan2(rel @ v, rel @ u)))
-    gaps = np.diff(np.r_[angles, angles[0] + 360.0])
-    return float(360.0 - gaps.max())
+    """Angle (deg) the points cover around the axis: 10 deg per bin holding at least WALL_BIN_POINTS points."""
+    angles = np.degrees(np.arctan2(rel @ v, rel @ u)) + 180.0
+    counts = np.bincount(np.minimum((angles // 10.0).astype(int), 35), minlength=36)
+    return float(10.0 * np.count_nonzero(counts >= WALL_BIN_POINTS))
 
 
 def _edge_ring(feature, ctx, centre, axis, radius, height, radial, band, u, v):
-    near = ctx.usable & (np.abs(height) < band) & (radial > radius - 1.5) & (radial < radius + 3.0)
+    # the face's upper half only (heights above the median of the face around the hole): the wall's top, seen from
+    # one side, lies at the edge's radius and would read the edge short there; pushed above the face's median by
+    # the noise, only its topmost points remain
+    face = ctx.usable & (np.abs(height) < band) & (radial > radius + 1.0) & (radial < radius + 3.0)
+    level = float(np.median(height[face])) if face.any() else 0.0
+    near = ctx.usable & (height > level) & (height < band) & (radial > radius - 1.5) & (radial < radius + 3.0)
     pts = ctx.points[near]
     if len(pts) < MIN_FEATURE_POINTS:
         raise InspectionInputError(f"feature {feature.name!r}: {len(pts)} measured points around the hole, too few")
