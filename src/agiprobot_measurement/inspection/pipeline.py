@@ -72,6 +72,7 @@ class InspectionResult:
     surface_uncertainty_mm: float
     smoothed_mm: np.ndarray  # per point: the mean deviation of its patch (NaN where masked)
     timings_s: dict = field(default_factory=dict)
+    instrument: InstrumentUncertainty = field(default_factory=InstrumentUncertainty)
 
     @property
     def flags(self) -> int:
@@ -200,7 +201,7 @@ def inspect_cloud(points_world_mm, nominal: trimesh.Trimesh, spec: InspectionSpe
     timings["total"] = time.perf_counter() - t0
     report("done", 1.0)
     return InspectionResult(spec, cad, cp.signed_mm, sigma, face_of_point, edge, outlier, reg, transform, regions,
-                            face_stats, results, coverage, u_surface, smoothed, timings)  # fmt: skip
+                            face_stats, results, coverage, u_surface, smoothed, timings, instrument)  # fmt: skip
 
 
 def _regions(mesh, cp, sigma, use, reg, s, systematic_mm=0.0) -> tuple[list[SurfaceRegion], float, np.ndarray]:

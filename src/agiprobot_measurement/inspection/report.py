@@ -74,6 +74,7 @@ def report_dict(result: InspectionResult, meta: dict | None = None) -> dict:
             "locked": list(result.spec.icp.lock),
             **_rps_figures(reg),
         },
+        "instrument_systematic_1sigma": dict(result.instrument.__dict__),
         "surface": {
             "tolerance_mm": s.tolerance_mm, "patch_radius_mm": s.patch_radius_mm,
             "expanded_uncertainty_median_mm": result.surface_uncertainty_mm,

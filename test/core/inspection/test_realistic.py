@@ -76,3 +76,12 @@ def test_the_generated_dent_lies_where_the_scan_measures():
     top = points[np.abs(points[:, 2] - 50.0) < 1.0][:, :2]
     for probe in np.vstack([centre[:2], probes]):
         assert np.min(np.linalg.norm(top - probe, axis=1)) < 1.0
+
+
+def test_the_command_line_names_the_instrument_as_model_and_scanner():
+    from agiprobot_measurement.inspection.cli import _instrument
+
+    assert _instrument(None) is None
+    assert _instrument("realistic:phoxi_S") == load_instrument("realistic", "phoxi_S")
+    with pytest.raises(InspectionInputError, match="ERROR_MODEL:SCANNER"):
+        _instrument("realistic")
