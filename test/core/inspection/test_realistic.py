@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from agiprobot_measurement.inspection import cases, deviation, instrument
+from agiprobot_measurement.inspection.cli import _instrument
 from agiprobot_measurement.inspection.decision import COVERAGE_FACTOR
 from agiprobot_measurement.inspection.errors import InspectionInputError
 from agiprobot_measurement.inspection.instrument import InstrumentUncertainty, load_instrument
@@ -79,8 +80,6 @@ def test_the_generated_dent_lies_where_the_scan_measures():
 
 
 def test_the_command_line_names_the_instrument_as_model_and_scanner():
-    from agiprobot_measurement.inspection.cli import _instrument
-
     assert _instrument(None) is None
     assert _instrument("realistic:phoxi_S") == load_instrument("realistic", "phoxi_S")
     with pytest.raises(InspectionInputError, match="ERROR_MODEL:SCANNER"):
