@@ -98,9 +98,8 @@ def _flatness(feature: Feature, ctx: FeatureContext) -> FeatureResult:
     h = plane.heights(pts)
     voxel = FLATNESS_FILTER_RADIUS_MM / 2
     pat = patches(flat, h, ctx.sigma[idx], np.ones(len(idx), dtype=bool), voxel, FLATNESS_FILTER_RADIUS_MM)
-    filtered = (
-        plane.centroid + pat.centre_mm[:, :1] * u + pat.centre_mm[:, 1:2] * v + pat.mean_mm[:, None] * plane.normal
-    )
+    heights = _local_linear(flat[:, :2], h, pat)
+    filtered = plane.centroid + pat.centre_mm[:, :1] * u + pat.centre_mm[:, 1:2] * v + heights[:, None] * plane.normal
     value = min_zone_flatness(filtered, plane.normal)
     raw = min_zone_flatness(pts, plane.normal)
     sigma_f = float(np.median(pat.sigma_mm))
@@ -111,9 +110,29 @@ def _flatness(feature: Feature, ctx: FeatureContext) -> FeatureResult:
         feature.name, "flatness",
         {"flatness_mm": value, "raw_flatness_mm": raw, "ls_rms_mm": plane.rms_mm, "filter_radius_mm": FLATNESS_FILTER_RADIUS_MM},
         [decide("flatness", value, tol, expanded(u_f, ctx.instrument.form_mm))], len(idx),
-        [f"minimum zone of the heights averaged within {FLATNESS_FILTER_RADIUS_MM} mm; raw (unfiltered) zone "
+        [f"minimum zone of the heights filtered by local LS planes within {FLATNESS_FILTER_RADIUS_MM} mm; raw "
+         "(unfiltered) zone "
          "includes about 6 sigma of noise"],
     )  # fmt: skip
+
+
+def _local_linear(xy: np.ndarray, h: np.ndarray, pat) -> np.ndarray:
+    """Per patch, the height at its voxel's centroid from an LS plane through the patch's points (a local linear
+    filter): a patch mean at the face's border averages one side only and reads a sloped face's height short there,
+    a local plane does not. The patch mean where the points do not determine a plane."""
+    x, y = xy[:, 0], xy[:, 1]
+    voxel = pat.voxel_of_point
+    m = len(pat.mean_mm)
+    moments = np.stack([np.bincount(voxel, weights=w, minlength=m)
+                        for w in (np.ones_like(x), x, y, x * x, x * y, y * y, h, x * h, y * h)], axis=1)  # fmt: skip
+    s = pat.neighbours.tocsr() @ moments
+    normal = np.stack([s[:, [0, 1, 2]], s[:, [1, 3, 4]], s[:, [2, 4, 5]]], axis=1)
+    rhs = s[:, 6:9]
+    out = pat.mean_mm.copy()
+    ok = np.linalg.cond(normal) < 1e10
+    coef = np.linalg.solve(normal[ok], rhs[ok][:, :, None])[:, :, 0]
+    out[ok] = coef[:, 0] + coef[:, 1] * pat.centre_mm[ok, 0] + coef[:, 2] * pat.centre_mm[ok, 1]
+    return out
 
 
 def _size(feature: Feature, ctx: FeatureContext) -> FeatureResult:
