@@ -55,6 +55,15 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--sigma", type=float, default=None, help="noise sigma of every point (cloud unit)")
     parser.add_argument("--demo", default=None, help="CASE[:MAGNITUDE[:SEED]] simulated part with truth")
     parser.add_argument("--sensor", default="phoxi", choices=("phoxi", "phoxi_low", "laser"), help="for --demo")
+    parser.add_argument(
+        "--error-model", default="ideal", help="for --demo: the scanners' error model (ideal, realistic)"
+    )
+    parser.add_argument(
+        "--instrument",
+        default=None,
+        help="the scanner's systematic uncertainty terms: ERROR_MODEL:SCANNER, e.g. realistic:phoxi_S "
+        "(config/inspection/instruments.yaml; --demo takes its error model's by default)",
+    )
     parser.add_argument("--overwrite", action="store_true")
     return parser.parse_args(argv)
 

@@ -8,7 +8,8 @@ evaluated), ``decision`` (ISO 14253-1 rules), ``pipeline`` (the facade :func:`in
 inspection from files or points to its report: :func:`run_inspection`, used by the CLI and the ROS action),
 ``cli`` (the command line's work), ``report`` (JSON,
 HTML, PNG, coloured PLY, written atomically), ``actual`` (deviated parts with truth), ``simulate`` (scanning
-them with the PhoXi and laser simulators), ``errors``.
+them with the PhoXi and laser simulators under a named sensor error model), ``instrument`` (the scanner's
+systematic uncertainty terms per error model), ``errors``.
 """
 
 from agiprobot_measurement.inspection.actual import ActualPart
@@ -19,6 +20,7 @@ from agiprobot_measurement.inspection.errors import (
     RegistrationError,
     SpecError,
 )
+from agiprobot_measurement.inspection.instrument import InstrumentUncertainty, load_instrument
 from agiprobot_measurement.inspection.pipeline import STAGES, InspectionResult, inspect_cloud
 from agiprobot_measurement.inspection.registration import IcpSettings, Registration, icp
 from agiprobot_measurement.inspection.request import InspectionRequest, run_inspection
@@ -37,12 +39,14 @@ __all__ = [
     "InspectionRequest",
     "InspectionResult",
     "InspectionSpec",
+    "InstrumentUncertainty",
     "Registration",
     "RegistrationError",
     "SpecError",
     "decide",
     "icp",
     "inspect_cloud",
+    "load_instrument",
     "load_spec",
     "parse_spec",
     "run_inspection",

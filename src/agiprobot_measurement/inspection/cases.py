@@ -12,13 +12,14 @@ from dataclasses import dataclass
 
 import numpy as np
 import trimesh
+from scipy.spatial import cKDTree
 
 from agiprobot_measurement._paths import CONFIG_DIR
 from agiprobot_measurement.inspection import actual, simulate
 from agiprobot_measurement.inspection.errors import InspectionInputError
 from agiprobot_measurement.inspection.spec import InspectionSpec, load_spec
 
-__all__ = ["CASES", "SENSORS", "Case", "build_case", "spec_path"]
+__all__ = ["CASES", "SENSORS", "Case", "build_case", "device_serial", "spec_path"]
 
 CASES = ("null", "dent", "hole", "warp", "scale")
 SENSORS = ("phoxi", "phoxi_low", "laser")
@@ -34,6 +35,7 @@ class Case:
     magnitude: float
     seed: int
     sensor: str
+    error_model: str | None
     part: actual.ActualPart
     points_mm: np.ndarray
     sigma_mm: np.ndarray
@@ -52,10 +54,12 @@ def spec_path(name: str):
     return CONFIG_DIR / "inspection" / f"{name}.yaml"
 
 
-def _part(case: str, magnitude: float, rng: np.random.Generator) -> tuple[actual.ActualPart, str]:
+def _part(case: str, magnitude: float, rng: np.random.Generator, dent_centre=None) -> tuple[actual.ActualPart, str]:
     if case in ("null", "dent"):
-        centre = np.r_[rng.uniform(-30.0, 30.0, 2), 50.0]
-        return actual.dented(actual.cube(), centre, (0, 0, 1), magnitude if case == "dent" else 0.0), "cube_100"
+        centre = np.r_[rng.uniform(-30.0, 30.0, 2), 50.0] if dent_centre is None else dent_centre
+        return actual.dented(
+            actual.cube(), centre, (0, 0, 1), magnitude if case == "dent" else 0.0, DENT_RADIUS_MM
+        ), "cube_100"
     if case == "hole":
         angle = rng.uniform(0, 2 * np.pi)
         return actual.holed_plate(magnitude * np.array([np.cos(angle), np.sin(angle)])), "plate_hole"
@@ -86,14 +90,22 @@ _LASER_SWEEPS = {
     "warp": [((0.1, 0.15, 1.0), (1, 0, 0))],
     "scale": [(_TOP, (1, 0, 0)), (_PX, (0, 1, 0)), (_NX, (0, 1, 0)), (_PY, (1, 0, 0)), (_NY, (1, 0, 0))],
 }
-#: laser sweep step between profiles (mm)
+#: laser sweep step between profiles (mm); the coarser step of the noise-free prescan that places the dent
 LASER_STEP_MM = 0.2
+PRESCAN_STEP_MM = 1.0
+#: the dent (radius, mm) and the measured margin around it; a 1 mm grid cell is covered when a prescan point lies
+#: within DENT_COVER_RADIUS_MM of it
+DENT_RADIUS_MM = 5.0
+DENT_MARGIN_MM = 2.0
+DENT_COVER_RADIUS_MM = 1.0
 
 
-def _scan(mesh_world, origin, case: str, sensor: str, seed: int) -> simulate.ScannedCloud:
+def _scan(mesh_world, origin, case: str, sensor: str, seed: int, error_model, prescan=False) -> simulate.ScannedCloud:
+    """The case's scan; ``prescan``: noise-free and coarse (PhoXi low resolution, laser at PRESCAN_STEP_MM)."""
     views = _VIEWS[case]
     if sensor in ("phoxi", "phoxi_low"):
-        return simulate.scan_phoxi(mesh_world, views, origin, "S", sensor == "phoxi", seed)
+        return simulate.scan_phoxi(mesh_world, views, origin, "S", sensor == "phoxi" and not prescan, seed,
+                                   not prescan, error_model, device_serial(seed))  # fmt: skip
     if sensor != "laser":
         raise InspectionInputError(f"unknown sensor {sensor!r} (known: {list(SENSORS)})")
     clouds = []
@@ -104,20 +116,60 @@ def _scan(mesh_world, origin, case: str, sensor: str, seed: int) -> simulate.Sca
         # the visible half of the part (depth 0 .. nearest point along the view) centred in the standoff range
         depth = (np.asarray(mesh_world.vertices) - origin) @ unit
         offset = 0.5 * depth.max() * unit
-        clouds.append(simulate.scan_laser(mesh_world, v, sweep, length, origin, LASER_STEP_MM, seed + 1000 * k, 1.0,
-                                          offset))  # fmt: skip
+        step, noise = (PRESCAN_STEP_MM, 0.0) if prescan else (LASER_STEP_MM, 1.0)
+        clouds.append(simulate.scan_laser(mesh_world, v, sweep, length, origin, step, seed + 1000 * k, noise, offset,
+                                          error_model))  # fmt: skip
     return simulate.ScannedCloud(np.vstack([c.points_mm for c in clouds]), np.concatenate([c.sigma_mm for c in clouds]),
                                  "laser_line")  # fmt: skip
 
 
-def build_case(case: str, magnitude: float = 0.0, seed: int = 0, sensor: str = "phoxi") -> Case:
-    """The case's actual part placed with the placement error, scanned; the inspection sees nominal + cloud."""
+def device_serial(seed: int) -> str:
+    """The simulated PhoXi of a run: each seed scans with another device (its own per-device errors). The laser
+    head is the error model's configured one (``laser.serial``) in every run: the sensors' speckle hash overflows
+    for about a fifth of the serials (reported to the sensors' owners)."""
+    return f"inspection-sim-{int(seed):04d}"
+
+
+def _measured_dent_centre(planned, error, sensor: str, seed: int, rng: np.random.Generator) -> np.ndarray:
+    """A dent centre (CAD, mm) drawn uniformly from the top face's points whose whole disc of the dent's radius
+    plus ``DENT_MARGIN_MM`` the case's scan covers: a noise-free, ideal prescan of the undented part as placed
+    (PhoXi at low resolution, laser sweeps at a coarse step) marks the covered cells of a 1 mm grid of the face."""
+    part = actual.cube()
+    placed = part.copy()
+    placed.apply_transform(planned @ error)
+    cloud = _scan(placed, PART_ORIGIN_MM, "dent", sensor, seed, None, prescan=True)
+    cad = np.linalg.inv(planned @ error)
+    points = cloud.points_mm @ cad[:3, :3].T + cad[:3, 3]
+    top = points[np.abs(points[:, 2] - 50.0) < 0.5][:, :2]
+    grid = np.stack(np.meshgrid(*(np.arange(-49.5, 50.0, 1.0),) * 2, indexing="ij"), axis=-1).reshape(-1, 2)
+    covered = np.isfinite(cKDTree(top).query(grid, distance_upper_bound=DENT_COVER_RADIUS_MM)[0]) if len(top) else \
+        np.zeros(len(grid), bool)  # fmt: skip
+    reach = DENT_RADIUS_MM + DENT_MARGIN_MM
+    gaps = grid[~covered]
+    far_from_gaps = np.isinf(cKDTree(gaps).query(grid, distance_upper_bound=reach)[0]) if len(gaps) else \
+        np.ones(len(grid), bool)  # fmt: skip
+    inside = covered & far_from_gaps & np.all(np.abs(grid) <= 50.0 - reach, axis=1)
+    if not inside.any():
+        raise InspectionInputError(f"the {sensor} scan of the dent case covers no disc of {reach} mm on the top face")
+    centre = grid[rng.choice(np.flatnonzero(inside))] + rng.uniform(-0.5, 0.5, 2)
+    return np.r_[centre, 50.0]
+
+
+def build_case(case: str, magnitude: float = 0.0, seed: int = 0, sensor: str = "phoxi",
+               error_model: str | None = "ideal") -> Case:  # fmt: skip
+    """The case's actual part placed with the placement error, scanned with the named error model (``ideal``:
+    noise only; ``realistic``: docs/sensor-errors.md); the inspection sees nominal + cloud. The dent is drawn
+    where the case's scan measures the whole dent (:func:`_measured_dent_centre`): a miss is a detection miss."""
     rng = np.random.default_rng(seed)
-    part, spec_name = _part(case, magnitude, rng)
     planned = np.eye(4)
     planned[:3, 3] = PART_ORIGIN_MM
-    error = actual.placement_error(rng, *PLACEMENT_ERROR)
+    if case == "dent":
+        error = actual.placement_error(rng, *PLACEMENT_ERROR)
+        part, spec_name = _part(case, magnitude, rng, _measured_dent_centre(planned, error, sensor, seed, rng))
+    else:
+        part, spec_name = _part(case, magnitude, rng)
+        error = actual.placement_error(rng, *PLACEMENT_ERROR)
     part = part.with_placement(planned, error)
-    cloud = _scan(part.placed_actual(), PART_ORIGIN_MM, case, sensor, seed)
-    return Case(case, float(magnitude), int(seed), sensor, part, cloud.points_mm, cloud.sigma_mm,
+    cloud = _scan(part.placed_actual(), PART_ORIGIN_MM, case, sensor, seed, error_model)
+    return Case(case, float(magnitude), int(seed), sensor, error_model, part, cloud.points_mm, cloud.sigma_mm,
                 load_spec(spec_path(spec_name)))  # fmt: skip

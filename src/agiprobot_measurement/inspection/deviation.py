@@ -10,6 +10,8 @@ its neighbours within ``patch_radius_mm``: the noise averages out, a dent does n
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,6 +33,11 @@ __all__ = [
 
 #: CAD edges whose faces meet at more than this angle (deg) are sharp (edge mask, no-data regions)
 SHARP_EDGE_DEG = 20.0
+#: closest-point queries of at least this many points are split over up to this many threads
+PARALLEL_MIN_POINTS = 200_000
+PARALLEL_CHUNKS = 2
+#: patch voxels are indexed through a dense occupancy table when the grid has at most this many cells per point
+DENSE_GRID_FACTOR = 8
 
 
 @dataclass
@@ -48,28 +55,39 @@ def _pcu():
     return point_cloud_utils
 
 
+def _query(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray):
+    distance, face, bary = _pcu().closest_points_on_mesh(points, vertices, faces)
+    return np.asarray(distance, float), np.asarray(face, dtype=np.int64), np.asarray(bary, float)
+
+
 def closest_points(mesh: trimesh.Trimesh, points_mm: np.ndarray) -> ClosestPoints:
-    """Exact closest points of ``points_mm`` (N, 3) on ``mesh``; sign from the closest face's outward normal."""
+    """Exact closest points of ``points_mm`` (N, 3) on ``mesh``; sign from the closest face's outward normal.
+    Large queries run in ``PARALLEL_CHUNKS`` threads (the query releases the GIL; each builds its own tree)."""
     points = np.ascontiguousarray(points_mm, dtype=np.float64)
     if not len(points):
         return ClosestPoints(np.zeros(0), np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
     vertices = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
     faces = np.ascontiguousarray(mesh.faces, dtype=np.int32)
-    pcu = _pcu()
-    distance, face, bary = pcu.closest_points_on_mesh(points, vertices, faces)
-    face = np.asarray(face, dtype=np.int64)
-    closest = np.einsum("ni,nij->nj", np.asarray(bary, float), vertices[faces[face]])
+    workers = min(PARALLEL_CHUNKS, os.cpu_count() or 1)
+    if len(points) >= PARALLEL_MIN_POINTS and workers > 1:
+        chunks = [np.ascontiguousarray(c) for c in np.array_split(points, workers)]
+        with ThreadPoolExecutor(workers) as pool:
+            parts = list(pool.map(lambda chunk: _query(chunk, vertices, faces), chunks))
+        distance, face, bary = (np.concatenate([p[k] for p in parts]) for k in range(3))
+    else:
+        distance, face, bary = _query(points, vertices, faces)
+    closest = np.einsum("ni,nij->nj", bary, vertices[faces[face]])
     sign = np.sign(np.einsum("ij,ij->i", points - closest, mesh.face_normals[face]))
     sign[sign == 0] = 1.0
-    return ClosestPoints(sign * np.asarray(distance, float), face, closest)
+    return ClosestPoints(sign * distance, face, closest)
 
 
 def sharp_edge_samples(mesh: trimesh.Trimesh, spacing_mm: float) -> np.ndarray:
     """Points every ``spacing_mm`` along the mesh's sharp edges and its open (boundary) edges (M, 3, mm)."""
     angles = np.degrees(mesh.face_adjacency_angles)
     edges = [mesh.face_adjacency_edges[angles > SHARP_EDGE_DEG]]
-    unique, counts = np.unique(mesh.edges_sorted, axis=0, return_counts=True)
-    edges.append(unique[counts == 1])
+    counts = np.bincount(mesh.edges_unique_inverse, minlength=len(mesh.edges_unique))  # cached by the mesh
+    edges.append(mesh.edges_unique[counts == 1])
     edges = np.concatenate(edges)
     if not len(edges):
         return np.zeros((0, 3))
@@ -97,7 +115,8 @@ def no_data_mask(surface_samples_mm: np.ndarray, closest_mm: np.ndarray, radius_
     """True for nominal surface samples with no measured point's closest point within ``radius_mm``."""
     if not len(closest_mm):
         return np.ones(len(surface_samples_mm), dtype=bool)
-    distance, _ = cKDTree(closest_mm).query(surface_samples_mm, k=1, distance_upper_bound=radius_mm)
+    tree = cKDTree(closest_mm, balanced_tree=False, compact_nodes=False)  # builds about twice as fast, same answers
+    distance, _ = tree.query(surface_samples_mm, k=1, distance_upper_bound=radius_mm)
     return ~np.isfinite(distance)
 
 
@@ -138,9 +157,15 @@ def patches(closest_mm: np.ndarray, signed_mm: np.ndarray, sigma_mm: np.ndarray,
     low = keys.min(axis=0)
     span = keys.max(axis=0) - low + 1
     linear_keys = np.ravel_multi_index((keys - low).T, span)
-    _, first, inverse = np.unique(linear_keys, return_index=True, return_inverse=True)
-    unique = keys[first]
-    inverse = inverse.reshape(-1)
+    cells = int(np.prod(span))
+    if cells <= DENSE_GRID_FACTOR * len(idx):  # occupancy table instead of a sort (same order as np.unique)
+        occupied = np.bincount(linear_keys, minlength=cells) > 0
+        inverse = (np.cumsum(occupied) - 1)[linear_keys]
+        unique = np.stack(np.unravel_index(np.flatnonzero(occupied), span), axis=1) + low
+    else:
+        _, first, inverse = np.unique(linear_keys, return_index=True, return_inverse=True)
+        unique = keys[first]
+        inverse = inverse.reshape(-1)
     voxel_of_point[idx] = inverse
     m = len(unique)
     count = np.bincount(inverse, minlength=m).astype(float)

@@ -23,6 +23,7 @@ from agiprobot_measurement.inspection.fitting import (
     min_zone_flatness,
     plane_basis,
 )
+from agiprobot_measurement.inspection.instrument import InstrumentUncertainty
 from agiprobot_measurement.inspection.spec import Feature
 
 __all__ = ["FeatureContext", "FeatureResult", "evaluate_feature"]
@@ -30,10 +31,14 @@ __all__ = ["FeatureContext", "FeatureResult", "evaluate_feature"]
 #: flatness: the face's heights are averaged within this radius (mm) before the minimum zone (noise filter)
 FLATNESS_FILTER_RADIUS_MM = 5.0
 #: hole edge ring: angular bins of the edge points
-HOLE_EDGE_BINS = 36
-#: hole wall: fewest points and smallest arc (deg) for the LS circle through the wall (else the edge ring)
+HOLE_EDGE_BINS = 90
+#: hole wall: fewest points and smallest arc (deg, in 10-deg bins holding at least WALL_BIN_POINTS points) for the
+#: LS circle through the wall (else the edge ring): a free-radius circle through a shorter arc trades its centre for
+#: its radius
 MIN_WALL_POINTS = 100
-MIN_WALL_ARC_DEG = 90.0
+MIN_WALL_ARC_DEG = 180.0
+WALL_BIN_POINTS = 3
+
 #: fewest points a feature is evaluated on
 MIN_FEATURE_POINTS = 30
 
@@ -73,6 +78,8 @@ class FeatureContext:
     face_points: dict
     face_planes: dict
     registration_sigma: object  # callable(points (N, 3), normals (N, 3)) -> (N,) mm
+    instrument: InstrumentUncertainty = field(default_factory=InstrumentUncertainty)
+    registration_centre_mm: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
 def _face(ctx: FeatureContext, name: str, feature: str) -> np.ndarray:
@@ -91,9 +98,8 @@ def _flatness(feature: Feature, ctx: FeatureContext) -> FeatureResult:
     h = plane.heights(pts)
     voxel = FLATNESS_FILTER_RADIUS_MM / 2
     pat = patches(flat, h, ctx.sigma[idx], np.ones(len(idx), dtype=bool), voxel, FLATNESS_FILTER_RADIUS_MM)
-    filtered = (
-        plane.centroid + pat.centre_mm[:, :1] * u + pat.centre_mm[:, 1:2] * v + pat.mean_mm[:, None] * plane.normal
-    )
+    heights = _local_linear(flat[:, :2], h, pat)
+    filtered = plane.centroid + pat.centre_mm[:, :1] * u + pat.centre_mm[:, 1:2] * v + heights[:, None] * plane.normal
     value = min_zone_flatness(filtered, plane.normal)
     raw = min_zone_flatness(pts, plane.normal)
     sigma_f = float(np.median(pat.sigma_mm))
@@ -103,10 +109,30 @@ def _flatness(feature: Feature, ctx: FeatureContext) -> FeatureResult:
     return FeatureResult(
         feature.name, "flatness",
         {"flatness_mm": value, "raw_flatness_mm": raw, "ls_rms_mm": plane.rms_mm, "filter_radius_mm": FLATNESS_FILTER_RADIUS_MM},
-        [decide("flatness", value, tol, expanded(u_f))], len(idx),
-        [f"minimum zone of the heights averaged within {FLATNESS_FILTER_RADIUS_MM} mm; raw (unfiltered) zone "
+        [decide("flatness", value, tol, expanded(u_f, ctx.instrument.form_mm))], len(idx),
+        [f"minimum zone of the heights filtered by local LS planes within {FLATNESS_FILTER_RADIUS_MM} mm; raw "
+         "(unfiltered) zone "
          "includes about 6 sigma of noise"],
     )  # fmt: skip
+
+
+def _local_linear(xy: np.ndarray, h: np.ndarray, pat) -> np.ndarray:
+    """Per patch, the height at its voxel's centroid from an LS plane through the patch's points (a local linear
+    filter): a patch mean at the face's border averages one side only and reads a sloped face's height short there,
+    a local plane does not. The patch mean where the points do not determine a plane."""
+    x, y = xy[:, 0], xy[:, 1]
+    voxel = pat.voxel_of_point
+    m = len(pat.mean_mm)
+    moments = np.stack([np.bincount(voxel, weights=w, minlength=m)
+                        for w in (np.ones_like(x), x, y, x * x, x * y, y * y, h, x * h, y * h)], axis=1)  # fmt: skip
+    s = pat.neighbours.tocsr() @ moments
+    normal = np.stack([s[:, [0, 1, 2]], s[:, [1, 3, 4]], s[:, [2, 4, 5]]], axis=1)
+    rhs = s[:, 6:9]
+    out = pat.mean_mm.copy()
+    ok = np.linalg.cond(normal) < 1e10
+    coef = np.linalg.solve(normal[ok], rhs[ok][:, :, None])[:, :, 0]
+    out[ok] = coef[:, 0] + coef[:, 1] * pat.centre_mm[ok, 0] + coef[:, 2] * pat.centre_mm[ok, 1]
+    return out
 
 
 def _size(feature: Feature, ctx: FeatureContext) -> FeatureResult:
@@ -119,7 +145,7 @@ def _size(feature: Feature, ctx: FeatureContext) -> FeatureResult:
     n /= np.linalg.norm(n)
     value = float((pa.centroid - pb.centroid) @ n)
     nominal, tol = feature.params["nominal_mm"], feature.params["tolerance_mm"]
-    u = expanded(pa.offset_sigma_mm, pb.offset_sigma_mm)
+    u = expanded(pa.offset_sigma_mm, pb.offset_sigma_mm, ctx.instrument.length_rel * nominal)
     d = decide("size", value, nominal + tol, u, lower=nominal - tol)
     parallel = float(np.degrees(np.arccos(np.clip(-pa.normal @ pb.normal, -1, 1))))
     return FeatureResult(feature.name, "size", {"size_mm": value, "nominal_mm": nominal, "deviation_mm": value - nominal,
@@ -144,7 +170,8 @@ def _hole(feature: Feature, ctx: FeatureContext) -> FeatureResult:
         fit, count = _edge_ring(feature, ctx, centre, axis, radius, height, radial, band, u, v)
         method = "edge ring"
         note = (
-            "centre and diameter from the innermost face point in each direction (edge ring): the centre is "
+            "centre and diameter from the innermost face point (upper half of the face's heights) in each of "
+            f"{HOLE_EDGE_BINS} directions (edge ring): the centre is "
             "unbiased, the diameter reads about one point spacing large"
         )
     c = np.array([(fit.centre - centre) @ u, (fit.centre - centre) @ v])
@@ -154,7 +181,8 @@ def _hole(feature: Feature, ctx: FeatureContext) -> FeatureResult:
     d3 = direction[0] * u + direction[1] * v
     u_reg = float(ctx.registration_sigma(centre[None], d3[None])[0])
     position = 2.0 * offset
-    decisions = [decide("position", position, p["position_tolerance_mm"], 2.0 * expanded(u_fit, u_reg))]
+    u_scale = ctx.instrument.length_rel * float(np.linalg.norm(centre - ctx.registration_centre_mm))
+    decisions = [decide("position", position, p["position_tolerance_mm"], 2.0 * expanded(u_fit, u_reg, u_scale))]
     diameter = 2.0 * fit.radius
     if "diameter_tolerance_mm" in p:
         tol = p["diameter_tolerance_mm"]
@@ -166,14 +194,19 @@ def _hole(feature: Feature, ctx: FeatureContext) -> FeatureResult:
 
 
 def _arc_deg(rel: np.ndarray, u: np.ndarray, v: np.ndarray) -> float:
-    """Angle (deg) the points span around the axis: 360 minus the largest empty gap."""
-    angles = np.sort(np.degrees(np.arctan2(rel @ v, rel @ u)))
-    gaps = np.diff(np.r_[angles, angles[0] + 360.0])
-    return float(360.0 - gaps.max())
+    """Angle (deg) the points cover around the axis: 10 deg per bin holding at least WALL_BIN_POINTS points."""
+    angles = np.degrees(np.arctan2(rel @ v, rel @ u)) + 180.0
+    counts = np.bincount(np.minimum((angles // 10.0).astype(int), 35), minlength=36)
+    return float(10.0 * np.count_nonzero(counts >= WALL_BIN_POINTS))
 
 
 def _edge_ring(feature, ctx, centre, axis, radius, height, radial, band, u, v):
-    near = ctx.usable & (np.abs(height) < band) & (radial > radius - 1.5) & (radial < radius + 3.0)
+    # the face's upper half only (heights above the median of the face around the hole): the wall's top, seen from
+    # one side, lies at the edge's radius and would read the edge short there; pushed above the face's median by
+    # the noise, only its topmost points remain
+    face = ctx.usable & (np.abs(height) < band) & (radial > radius + 1.0) & (radial < radius + 3.0)
+    level = float(np.median(height[face])) if face.any() else 0.0
+    near = ctx.usable & (height > level) & (height < band) & (radial > radius - 1.5) & (radial < radius + 3.0)
     pts = ctx.points[near]
     if len(pts) < MIN_FEATURE_POINTS:
         raise InspectionInputError(f"feature {feature.name!r}: {len(pts)} measured points around the hole, too few")

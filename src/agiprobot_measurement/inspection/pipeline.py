@@ -16,7 +16,15 @@ from agiprobot_measurement.inspection.decision import CONFORM, COVERAGE_FACTOR, 
 from agiprobot_measurement.inspection.deviation import closest_points, edge_mask, no_data_mask, patches
 from agiprobot_measurement.inspection.errors import InspectionInputError, RegistrationError
 from agiprobot_measurement.inspection.features import FeatureContext, FeatureResult, evaluate_feature
-from agiprobot_measurement.inspection.registration import Registration, apply, datum_frame, icp, prealign
+from agiprobot_measurement.inspection.instrument import InstrumentUncertainty
+from agiprobot_measurement.inspection.registration import (
+    Registration,
+    apply,
+    datum_frame,
+    icp,
+    prealign,
+    rps_alignment,
+)
 from agiprobot_measurement.inspection.spec import InspectionSpec
 
 __all__ = ["MIN_POINTS", "STAGES", "InspectionResult", "SurfaceRegion", "inspect_cloud"]
@@ -64,6 +72,7 @@ class InspectionResult:
     surface_uncertainty_mm: float
     smoothed_mm: np.ndarray  # per point: the mean deviation of its patch (NaN where masked)
     timings_s: dict = field(default_factory=dict)
+    instrument: InstrumentUncertainty = field(default_factory=InstrumentUncertainty)
 
     @property
     def flags(self) -> int:
@@ -120,8 +129,7 @@ def _register(points, mesh, spec, placement, progress) -> tuple[Registration, np
         cp = closest_points(mesh, moved)
         sets, planes = [], []
         for name in spec.datums:
-            tri = spec.face_triangles(mesh, name)
-            on = np.isin(cp.face, tri) & (np.abs(cp.signed_mm) < spec.icp.max_distance_mm)
+            on = spec.on_face(mesh, name, cp.face) & (np.abs(cp.signed_mm) < spec.icp.max_distance_mm)
             on &= ~edge_mask(mesh, cp.closest_mm, spec.surface.edge_margin_mm)
             sets.append(moved[on])
             face = spec.faces[name]
@@ -129,12 +137,19 @@ def _register(points, mesh, spec, placement, progress) -> tuple[Registration, np
         correction = datum_frame(sets, planes)
         reg.transform = correction @ reg.transform
         reg.method = "datum_321"
+    elif spec.alignment == "rps":
+        result = rps_alignment(apply(reg.transform, points), spec.rps_points, spec.rps_radius_mm,
+                               lock=spec.icp.lock)  # fmt: skip
+        reg.transform = result.correction @ reg.transform
+        reg.method, reg.rps = "rps", result
     return reg, reg.transform
 
 
 def inspect_cloud(points_world_mm, nominal: trimesh.Trimesh, spec: InspectionSpec, nominal_placement=None,
-                  sigma_mm=None, progress=None) -> InspectionResult:  # fmt: skip
-    """Inspect a measured cloud (world, in the spec's unit) against the nominal mesh (CAD frame, same unit)."""
+                  sigma_mm=None, progress=None, instrument: InstrumentUncertainty | None = None) -> InspectionResult:  # fmt: skip
+    """Inspect a measured cloud (world, in the spec's unit) against the nominal mesh (CAD frame, same unit).
+    ``instrument``: the scanner's systematic terms (mm) entering every uncertainty (None: noise only)."""
+    instrument = instrument or InstrumentUncertainty()
     report = progress or (lambda stage, fraction: None)
     timings, t0 = {}, time.perf_counter()
     report("check", 0.0)
@@ -173,23 +188,23 @@ def inspect_cloud(points_world_mm, nominal: trimesh.Trimesh, spec: InspectionSpe
     timings["deviations"] = time.perf_counter() - t
     report("regions", 0.0)
     t = time.perf_counter()
-    regions, u_surface, smoothed = _regions(nominal, cp, sigma, use, reg, s)
+    regions, u_surface, smoothed = _regions(nominal, cp, sigma, use, reg, s, instrument.surface_mm)
     face_of_point, face_stats, face_points = _faces(nominal, spec, cp, use, s.tolerance_mm)
     coverage = _coverage(nominal, spec, cp.closest_mm[use], s.no_data_radius_mm)
     timings["regions"] = time.perf_counter() - t
     report("features", 0.0)
     t = time.perf_counter()
     ctx = FeatureContext(cad, sigma, ~outlier, face_points, {n: (f.point, f.normal) for n, f in spec.faces.items()},
-                         reg.displacement_sigma)  # fmt: skip
+                         reg.displacement_sigma, instrument, reg.centre_mm)  # fmt: skip
     results = [evaluate_feature(feature, ctx) for feature in spec.features]
     timings["features"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     report("done", 1.0)
     return InspectionResult(spec, cad, cp.signed_mm, sigma, face_of_point, edge, outlier, reg, transform, regions,
-                            face_stats, results, coverage, u_surface, smoothed, timings)  # fmt: skip
+                            face_stats, results, coverage, u_surface, smoothed, timings, instrument)  # fmt: skip
 
 
-def _regions(mesh, cp, sigma, use, reg, s) -> tuple[list[SurfaceRegion], float, np.ndarray]:
+def _regions(mesh, cp, sigma, use, reg, s, systematic_mm=0.0) -> tuple[list[SurfaceRegion], float, np.ndarray]:
     pat = patches(cp.closest_mm, cp.signed_mm, sigma, use, s.voxel_mm, s.patch_radius_mm)
     smoothed = np.full(len(cp.signed_mm), np.nan)
     if not len(pat.mean_mm):
@@ -200,7 +215,7 @@ def _regions(mesh, cp, sigma, use, reg, s) -> tuple[list[SurfaceRegion], float, 
     n_sum = np.stack([np.bincount(voxel, weights=normals[:, k], minlength=len(pat.count)) for k in range(3)], axis=1)
     n_sum /= np.maximum(np.linalg.norm(n_sum, axis=1, keepdims=True), 1e-12)
     u_reg = reg.displacement_sigma(pat.centre_mm, n_sum)
-    uncertainty = COVERAGE_FACTOR * np.hypot(pat.sigma_mm, u_reg)
+    uncertainty = COVERAGE_FACTOR * np.sqrt(pat.sigma_mm**2 + u_reg**2 + systematic_mm**2)
     magnitude = np.abs(pat.mean_mm)
     t = s.tolerance_mm
     flagged = magnitude >= t - uncertainty
@@ -221,7 +236,9 @@ def _peak(cp, use, pat, members, worst, s) -> tuple[float, np.ndarray]:
     points."""
     centre = pat.centre_mm[worst]
     idx = np.flatnonzero(use)
-    idx = idx[np.isin(pat.voxel_of_point[idx], members)]
+    member = np.zeros(len(pat.mean_mm), dtype=bool)
+    member[members] = True
+    idx = idx[member[pat.voxel_of_point[idx]]]
     rel = cp.closest_mm[idx] - centre
     window = s.depth_radius_mm + 1.5
     near = np.einsum("ij,ij->i", rel, rel) <= window**2
@@ -256,7 +273,7 @@ def _faces(mesh, spec, cp, use, tolerance):
     face_of_point = np.full(len(cp.face), "", dtype=object)
     stats, members = {"all": _stats(cp.signed_mm[use], tolerance)}, {}
     for name in spec.faces:
-        on = np.isin(cp.face, spec.face_triangles(mesh, name)) & use
+        on = spec.on_face(mesh, name, cp.face) & use
         face_of_point[on] = name
         members[name] = np.flatnonzero(on)
         stats[name] = _stats(cp.signed_mm[on], tolerance)
@@ -269,6 +286,6 @@ def _coverage(mesh, spec, closest_used, radius) -> dict:
     empty = no_data_mask(samples, closest_used, radius)
     result = {"all_percent": float(100 * (1 - empty.mean())), "samples": len(samples)}
     for name in spec.faces:
-        on = np.isin(face, spec.face_triangles(mesh, name))
+        on = spec.on_face(mesh, name, face)
         result[f"{name}_percent"] = float(100 * (1 - empty[on].mean())) if on.any() else 0.0
     return result

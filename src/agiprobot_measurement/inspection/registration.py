@@ -10,7 +10,7 @@ frame; rotations about the points' centroid) can be locked.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import trimesh
@@ -24,10 +24,13 @@ __all__ = [
     "DOF_NAMES",
     "IcpSettings",
     "Registration",
+    "RpsPoint",
+    "RpsResult",
     "apply",
     "datum_frame",
     "icp",
     "prealign",
+    "rps_alignment",
     "transform_error",
 ]
 
@@ -36,6 +39,15 @@ DOF_NAMES = ("rx", "ry", "rz", "tx", "ty", "tz")
 INNER_ITERATIONS = 8
 #: share of the points that must lie within max_distance_mm of the nominal after prealignment
 MIN_OVERLAP = 0.3
+#: fewest measured points an RPS point's local plane is fitted to
+RPS_MIN_POINTS = 10
+#: coarse-to-fine: samples larger than COARSE_FACTOR x COARSE_SAMPLE points are first registered on COARSE_SAMPLE
+#: points to these tolerances (rad, mm); the full sample then refines from there (a closest-point query costs
+#: about its tree build plus its points: the coarse iterations are a fraction of the fine ones)
+COARSE_SAMPLE = 10000
+COARSE_FACTOR = 4
+COARSE_TOL_RAD = 1e-6
+COARSE_TOL_MM = 1e-4
 
 
 def apply(transform: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -90,6 +102,7 @@ class Registration:
     covariance: np.ndarray = field(default_factory=lambda: np.zeros((6, 6)))
     centre_mm: np.ndarray = field(default_factory=lambda: np.zeros(3))
     method: str = "best_fit"
+    rps: RpsResult | None = None  # the reference-point alignment's figures when the spec asks for one
 
     def displacement_sigma(self, points_mm: np.ndarray, normals: np.ndarray) -> np.ndarray:
         """1-sigma displacement along ``normals`` of points (CAD frame) due to the fit's parameter uncertainty."""
@@ -115,6 +128,9 @@ def icp(points_mm: np.ndarray, mesh: trimesh.Trimesh, settings: IcpSettings = Ic
     rng = np.random.default_rng(settings.seed)
     if len(points) > settings.sample:
         points = points[rng.choice(len(points), settings.sample, replace=False)]
+    if len(points) > COARSE_FACTOR * COARSE_SAMPLE:  # coarse to fine: most iterations on a small sample
+        coarse = replace(settings, sample=COARSE_SAMPLE, tol_rad=COARSE_TOL_RAD, tol_mm=COARSE_TOL_MM)
+        transform = icp(points, mesh, coarse, transform).transform
     free = np.array([name not in settings.lock for name in DOF_NAMES])
     edges = sharp_edge_samples(mesh, max(settings.edge_margin_mm / 4, 0.05)) if settings.edge_margin_mm > 0 else None
     edge_tree = cKDTree(edges) if edges is not None and len(edges) else None
@@ -228,3 +244,86 @@ def datum_frame(point_sets, nominal_planes) -> np.ndarray:
     measured = _frame([ma, mb, mc])
     # the measured frame's axes may be a left-handed set when C's normal was flipped: mirror both the same way
     return nominal @ np.linalg.inv(measured)
+
+
+@dataclass(frozen=True)
+class RpsPoint:
+    """A reference point (RPS, CAD frame, mm): its nominal ``point`` on the surface and the ``direction`` (unit)
+    it fixes the part in: the measured surface is sampled there and the part is moved until it meets the point
+    along that direction."""
+
+    name: str
+    point: np.ndarray
+    direction: np.ndarray
+
+
+@dataclass
+class RpsResult:
+    """The RPS correction (4x4, CAD <- CAD), the residual deviation (mm) at each point along its direction
+    after the alignment (0 for a determined set), the deviations before it, and the rank of the constraints."""
+
+    correction: np.ndarray
+    residual_mm: dict
+    deviation_mm: dict
+    rank: int
+
+
+def _rps_measure(points: np.ndarray, rps: RpsPoint, radius_mm: float, reach_mm: float) -> float:
+    """Signed distance along ``rps.direction`` from the nominal point to the measured surface: an LS plane through
+    the points within ``radius_mm`` of the line through the point (and ``reach_mm`` along it), met by the line."""
+    rel = points - rps.point
+    along = rel @ rps.direction
+    across = np.linalg.norm(rel - np.outer(along, rps.direction), axis=1)
+    near = (across <= radius_mm) & (np.abs(along) <= reach_mm)
+    if near.sum() < RPS_MIN_POINTS:
+        raise RegistrationError(
+            f"RPS point {rps.name}: {int(near.sum())} measured points within {radius_mm} mm (need {RPS_MIN_POINTS})"
+        )
+    local = points[near]
+    centroid = local.mean(axis=0)
+    normal = np.linalg.svd(local - centroid, full_matrices=False)[2][-1]
+    cos = float(normal @ rps.direction)
+    if abs(cos) < 0.2:
+        raise RegistrationError(f"RPS point {rps.name}: the measured surface runs along its direction")
+    return float(normal @ (centroid - rps.point)) / cos
+
+
+def rps_alignment(points_cad_mm: np.ndarray, rps_points, radius_mm: float = 3.0, reach_mm: float = 3.0,
+                  lock: tuple[str, ...] = (), iterations: int = 5) -> RpsResult:  # fmt: skip
+    """Reference-point alignment (e.g. 3-2-1: three points along the primary face's normal, two along the
+    secondary's, one along the tertiary's): the small rigid correction that brings the measured surface onto every
+    RPS point along its direction (least squares when over-determined; minimum norm over the degrees of freedom the
+    points leave free, so those keep the prior (best-fit) pose; ``lock``ed DOFs are not moved). Rotations about the
+    RPS points' centroid."""
+    rps_points = list(rps_points)
+    if not rps_points:
+        raise InspectionInputError("an RPS alignment needs at least one reference point")
+    unknown = sorted(set(lock) - set(DOF_NAMES))
+    if unknown:
+        raise InspectionInputError(f"unknown degrees of freedom to lock: {unknown} (known: {list(DOF_NAMES)})")
+    free = np.array([name not in lock for name in DOF_NAMES])
+    points = np.asarray(points_cad_mm, float)
+    nominal = np.array([r.point for r in rps_points])
+    directions = np.array([r.direction for r in rps_points])
+    centre = nominal.mean(axis=0)
+    jac = np.concatenate([np.cross(nominal - centre, directions), directions], axis=1)[:, free]
+    rank = int(np.linalg.matrix_rank(jac, tol=1e-9 * max(1.0, float(np.abs(jac).max()))))
+    correction = np.eye(4)
+    first = None
+    for _ in range(iterations):
+        moved = apply(correction, points)
+        deviation = np.array([_rps_measure(moved, r, radius_mm, reach_mm) for r in rps_points])
+        first = deviation if first is None else first
+        step = np.zeros(6)
+        step[free] = np.linalg.lstsq(jac, -deviation, rcond=None)[0]
+        update = np.eye(4)
+        update[:3, :3] = Rotation.from_rotvec(step[:3]).as_matrix()
+        update[:3, 3] = centre - update[:3, :3] @ centre + step[3:]
+        correction = update @ correction
+        if np.abs(step).max() < 1e-9:
+            break
+    moved = apply(correction, points)
+    residual = [_rps_measure(moved, r, radius_mm, reach_mm) for r in rps_points]
+    names = [r.name for r in rps_points]
+    return RpsResult(correction, dict(zip(names, map(float, residual), strict=True)),
+                     dict(zip(names, map(float, first), strict=True)), rank)  # fmt: skip

@@ -46,6 +46,14 @@ def deviation_colours(signed_mm: np.ndarray, tolerance_mm: float, masked: np.nda
     return (255 * np.clip(rgb, 0, 1)).astype(np.uint8)
 
 
+def _rps_figures(reg) -> dict:
+    """The reference-point alignment's deviations before it, residuals after it and its rank (when there was one)."""
+    if reg.rps is None:
+        return {}
+    return {"rps": {"deviation_before_mm": reg.rps.deviation_mm, "residual_mm": reg.rps.residual_mm,
+                    "rank": reg.rps.rank}}  # fmt: skip
+
+
 def report_dict(result: InspectionResult, meta: dict | None = None) -> dict:
     """The JSON report's content."""
     reg, s = result.registration, result.spec.surface
@@ -64,7 +72,9 @@ def report_dict(result: InspectionResult, meta: dict | None = None) -> dict:
             "sigma_rx_ry_rz_deg_tx_ty_tz_mm": [float(np.degrees(v)) if i < 3 else float(v)
                                                for i, v in enumerate(np.sqrt(np.diag(reg.covariance)))],
             "locked": list(result.spec.icp.lock),
+            **_rps_figures(reg),
         },
+        "instrument_systematic_1sigma": dict(result.instrument.__dict__),
         "surface": {
             "tolerance_mm": s.tolerance_mm, "patch_radius_mm": s.patch_radius_mm,
             "expanded_uncertainty_median_mm": result.surface_uncertainty_mm,

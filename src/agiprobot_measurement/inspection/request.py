@@ -15,6 +15,7 @@ import trimesh
 
 from agiprobot_measurement.common.config import ConfigError, read_yaml
 from agiprobot_measurement.inspection.errors import InspectionInputError
+from agiprobot_measurement.inspection.instrument import InstrumentUncertainty
 from agiprobot_measurement.inspection.pipeline import InspectionResult, inspect_cloud
 from agiprobot_measurement.inspection.report import write_report
 from agiprobot_measurement.inspection.spec import UNITS, load_spec
@@ -111,7 +112,7 @@ def placement_from_values(values) -> np.ndarray:
 class InspectionRequest:
     """What to inspect: ``points`` (N, 3) with optional ``sigma`` (N,) in hand, else ``cloud_file``; the cloud's unit
     ``cloud_units`` ('' = the spec's); ``placement`` the planned world <- part pose (spec unit); ``meta`` goes into
-    the report."""
+    the report; ``instrument`` the scanner's systematic uncertainty terms (:mod:`.instrument`)."""
 
     nominal_file: str | Path
     spec_file: str | Path
@@ -123,6 +124,7 @@ class InspectionRequest:
     cloud_units: str = ""
     overwrite: bool = False
     meta: dict | None = None
+    instrument: InstrumentUncertainty | None = None  # the scanner's systematic terms (None: noise only)
 
 
 def run_inspection(
@@ -147,7 +149,7 @@ def run_inspection(
         points = points * factor
         sigma = None if sigma is None else sigma * factor
     placement = np.eye(4) if request.placement is None else np.asarray(request.placement, dtype=float)
-    result = inspect_cloud(points, nominal, spec, placement, sigma, progress)
+    result = inspect_cloud(points, nominal, spec, placement, sigma, progress, request.instrument)
     if progress is not None:
         progress("report", 0.0)
     meta = dict(request.meta or {}, nominal=str(request.nominal_file), spec=str(request.spec_file))

@@ -6,6 +6,13 @@ its sweet spot / optimal standoff along that direction and looks at ``target_mm`
 each point carries its 1-sigma noise (mm) from the simulator's error model, projected on the surface normal
 (the simulators displace points along the sensor's ray; a deviation is measured along the normal, so the
 stated sigma along the ray times |cos(ray, normal)| is the sigma of the point's signed deviation).
+
+``error_model`` names a configuration of ``config/error_models/`` (``ideal`` = noise only, ``realistic`` = the
+scanners' calibration, fixed-pattern, material, edge and -- for the laser head -- hand-eye and repeatability
+errors, see docs/sensor-errors.md) or is None (noise only); ``serial`` names the simulated device, whose
+per-device errors are drawn from it. The laser head is moved along ideal straight sweeps (no robot): of its pose
+chain only the hand-eye error and one repeatability draw per sweep apply. With the realistic laser, the points'
+sigma is the error model's noise (depth and incidence dependent) instead of the planning model's ``u``.
 """
 
 from __future__ import annotations
@@ -13,11 +20,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import trimesh
 
 from agiprobot_measurement.inspection.deviation import closest_points
 from agiprobot_measurement.inspection.errors import InspectionInputError
+from agiprobot_measurement.sensors.error_models import ErrorModel, LaserErrors, PhoxiErrors, load_error_model
 from agiprobot_measurement.sensors.laser_line.model import SensorModel
-from agiprobot_measurement.sensors.laser_line.simulator import LaserLineScannerSimulator
+from agiprobot_measurement.sensors.laser_line.simulator import LaserLineScannerSimulator, pose_chain_poses
 from agiprobot_measurement.sensors.phoxi.models import RESOLUTION_HIGH, RESOLUTION_LOW
 from agiprobot_measurement.sensors.phoxi.renderer import (
     ScanSettings,
@@ -62,24 +71,33 @@ def _unit(v) -> np.ndarray:
     return v / np.linalg.norm(v)
 
 
-def _along_normal(mesh_world_mm, points_mm, origins_mm, sigma_ray_mm) -> np.ndarray:
-    """sigma along the ray -> sigma along the surface normal at each point (normal of the nearest face)."""
+def _ray_cosines(mesh_world_mm, points_mm, origins_mm) -> np.ndarray:
+    """|cos| of the angle between each point's ray (from its origin) and the nearest face's normal."""
     if not len(points_mm):
         return np.zeros(0)
     cp = closest_points(mesh_world_mm, points_mm)
     normals = np.asarray(mesh_world_mm.face_normals)[cp.face]
     rays = points_mm - origins_mm
     rays /= np.maximum(np.linalg.norm(rays, axis=1, keepdims=True), 1e-12)
-    return sigma_ray_mm * np.abs(np.einsum("ij,ij->i", rays, normals))
+    return np.abs(np.einsum("ij,ij->i", rays, normals))
+
+
+def _error_model(error_model):
+    """None, an :class:`ErrorModel` or its name / file -> None or the model."""
+    return error_model if error_model is None or isinstance(error_model, ErrorModel) else load_error_model(error_model)
 
 
 def scan_phoxi(mesh_world_mm, view_directions, target_mm=(0.0, 0.0, 0.0), model: str = "S", high_resolution=False,
-               seed: int = 0, noise: bool = True) -> ScannedCloud:  # fmt: skip
+               seed: int = 0, noise: bool = True, error_model=None, serial: str = "sim-0") -> ScannedCloud:  # fmt: skip
     """One PhoXi frame per view direction at the model's sweet spot, merged; noise along the camera rays.
     The camera is rolled so that its projector lies above or below it (side faces lit alike)."""
     scanner_model = load_scanner_model(model)
-    scanner = StructuredLightScanner(scanner_model, workers=1)
-    geometry = SceneGeometry.from_trimesh(mesh_world_mm, "part", 0.8).transformed(np.diag([1e-3, 1e-3, 1e-3, 1.0]))
+    errors = PhoxiErrors.create(scanner_model, serial, _error_model(error_model))
+    scanner = StructuredLightScanner(scanner_model, workers=1, errors=errors)
+    # metres before building the scene: a scaling ``transformed`` would scale the face normals too (the material
+    # block reads them as unit vectors)
+    mesh_m = trimesh.Trimesh(np.asarray(mesh_world_mm.vertices) * 1e-3, mesh_world_mm.faces, process=False)
+    geometry = SceneGeometry.from_trimesh(mesh_m, "part", 0.8)
     settings = ScanSettings(resolution=RESOLUTION_HIGH if high_resolution else RESOLUTION_LOW, noise=noise, seed=seed,
                             confidence=0.0)  # fmt: skip
     points, sigmas, origins = [], [], []
@@ -98,16 +116,18 @@ def scan_phoxi(mesh_world_mm, view_directions, target_mm=(0.0, 0.0, 0.0), model:
         sigmas.append((np.asarray(frame.confidence, float) * ray_length)[valid].reshape(-1))
         origins.append(np.repeat(eye[None], int(valid.sum()), axis=0))
     cloud = np.vstack(points)
-    sigma = _along_normal(mesh_world_mm, cloud, np.vstack(origins), np.concatenate(sigmas))
+    sigma = np.concatenate(sigmas) * _ray_cosines(mesh_world_mm, cloud, np.vstack(origins))
     return ScannedCloud(cloud, sigma, f"phoxi_{model}")
 
 
 def scan_laser(mesh_world_mm, view_direction, sweep_direction, length_mm: float, target_mm=(0.0, 0.0, 0.0),
-               step_mm: float = 0.2, seed: int = 0, noise_scale: float = 1.0, offset_mm=(0.0, 0.0, 0.0)) -> ScannedCloud:  # fmt: skip
+               step_mm: float = 0.2, seed: int = 0, noise_scale: float = 1.0, offset_mm=(0.0, 0.0, 0.0), error_model=None,
+               serial: str | None = None) -> ScannedCloud:  # fmt: skip
     """One straight laser sweep of ``length_mm`` centred on ``target_mm + offset_mm``: the boresight along
     ``-view_direction`` at the optimal standoff, the emitter moving along ``sweep_direction`` (its x axis)."""
     model = SensorModel(load_scanner_config().sensor_parameters)
-    simulator = LaserLineScannerSimulator(model, seed=seed, noise_scale=noise_scale)
+    errors = LaserErrors.create(model, _error_model(error_model), serial)
+    simulator = LaserLineScannerSimulator(model, seed=seed, noise_scale=noise_scale, errors=errors)
     simulator.set_target(mesh_world_mm)
     z = -_unit(view_direction)
     x = np.asarray(sweep_direction, float) - (np.asarray(sweep_direction, float) @ z) * z
@@ -120,11 +140,23 @@ def scan_laser(mesh_world_mm, view_direction, sweep_direction, length_mm: float,
     poses = np.repeat(np.eye(4)[None], len(steps), axis=0)
     poses[:, :3, :3] = rotation
     poses[:, :3, 3] = centre + steps[:, None] * x
-    profiles = simulator.profiles(poses)
+    true_poses = poses
+    if errors is not None and errors.pose_chain is not None:
+        # hand-eye error on every profile, one repeatability draw for the whole (continuous) sweep
+        first, _ = pose_chain_poses(errors, poses[:1], poses[:1], np.eye(4), rng=np.random.default_rng(seed))
+        true_poses = poses @ errors.hand_eye_error
+        true_poses[:, :3, 3] += first[0, :3, 3] - true_poses[0, :3, 3]
+    profiles = simulator.profiles(true_poses, poses if true_poses is not poses else None)
     kept = [(k, p) for k, p in enumerate(profiles) if len(p)]
     if not kept:
         return ScannedCloud(np.zeros((0, 3)), np.zeros(0), "laser_line")
     cloud = np.vstack([p.points_mm for _, p in kept])
     origins = np.vstack([np.repeat(poses[k, :3, 3][None], len(p), axis=0) for k, p in kept])
-    sigma_ray = np.concatenate([p.uncertainties_mm * noise_scale for _, p in kept])
-    return ScannedCloud(cloud, _along_normal(mesh_world_mm, cloud, origins, sigma_ray), "laser_line")
+    cosines = _ray_cosines(mesh_world_mm, cloud, origins)
+    if errors is not None and errors.noise is not None:  # the error model's noise along the ray, at the true hits
+        hits = np.vstack([p.true_points_mm for _, p in kept])
+        depth = np.einsum("ij,j->i", hits - origins, z)
+        sigma_ray = errors.sigma_mm(depth, cosines, model.optimal_standoff)
+    else:
+        sigma_ray = np.concatenate([p.uncertainties_mm * noise_scale for _, p in kept])
+    return ScannedCloud(cloud, sigma_ray * cosines, "laser_line")

@@ -19,11 +19,13 @@ import trimesh
 
 from agiprobot_measurement.common.config import ConfigError, read_yaml
 from agiprobot_measurement.inspection.errors import SpecError
-from agiprobot_measurement.inspection.registration import DOF_NAMES, IcpSettings
+from agiprobot_measurement.inspection.registration import DOF_NAMES, IcpSettings, RpsPoint
 
 __all__ = ["FEATURE_TYPES", "Face", "Feature", "InspectionSpec", "SurfaceSettings", "load_spec", "parse_spec"]
 
 FEATURE_TYPES = ("flatness", "size", "hole", "plane", "sphere", "cylinder")
+#: alignment methods: robust best fit; best fit then 3-2-1 datum planes; best fit then reference points (RPS)
+ALIGNMENTS = ("best_fit", "datum_321", "rps")
 #: a nominal triangle belongs to a named face when its normal is within this angle (deg) of the face's
 FACE_ANGLE_DEG = 2.0
 
@@ -70,6 +72,8 @@ class InspectionSpec:
     surface: SurfaceSettings
     faces: dict[str, Face] = field(default_factory=dict)
     features: tuple[Feature, ...] = ()
+    rps_points: tuple[RpsPoint, ...] = ()
+    rps_radius_mm: float = 3.0
 
     def face_triangles(self, mesh: trimesh.Trimesh, name: str) -> np.ndarray:
         """Indices of the nominal triangles of the named face (a :class:`SpecError` for an unknown name or a face
@@ -89,6 +93,12 @@ class InspectionSpec:
                 f"{face.point.round(3).tolist()} mm) matches no triangle of the nominal model"
             )
         return np.flatnonzero(hit)
+
+    def on_face(self, mesh: trimesh.Trimesh, name: str, triangle_of_point: np.ndarray) -> np.ndarray:
+        """Per point: its (closest) triangle belongs to the named face (a lookup table, not a set search)."""
+        member = np.zeros(len(mesh.faces), dtype=bool)
+        member[self.face_triangles(mesh, name)] = True
+        return member[np.asarray(triangle_of_point, dtype=np.int64)]
 
     def check_against(self, mesh: trimesh.Trimesh) -> None:
         """Every face a feature or datum names exists on ``mesh``."""
@@ -161,8 +171,8 @@ def parse_spec(data, where: str = "spec") -> InspectionSpec:
         raise SpecError(f"{where}: units {unit!r} unknown (known: {sorted(UNITS)})")
     align = data.get("alignment") or {}
     method = str(align.get("method", "best_fit"))
-    if method not in ("best_fit", "datum_321"):
-        raise SpecError(f"{where}: alignment method {method!r}: use best_fit or datum_321")
+    if method not in ALIGNMENTS:
+        raise SpecError(f"{where}: alignment method {method!r}: use one of {list(ALIGNMENTS)}")
     lock = tuple(str(x) for x in align.get("lock", ()) or ())
     if bad := sorted(set(lock) - set(DOF_NAMES)):
         raise SpecError(f"{where}: alignment lock {bad}: known degrees of freedom {list(DOF_NAMES)}")
@@ -193,9 +203,46 @@ def parse_spec(data, where: str = "spec") -> InspectionSpec:
     for name in {*datums, *(f for feat in features for f in feat.faces)}:
         if name not in faces:
             raise SpecError(f"{where}: unknown face {name!r} (named faces: {sorted(faces)})")
+    rps_points, rps_radius = _rps(align.get("rps"), method, where)
     return InspectionSpec(
-        str(data.get("part", Path(where).stem)), UNITS[unit], method, icp, datums, surface, faces, features
+        str(data.get("part", Path(where).stem)),
+        UNITS[unit],
+        method,
+        icp,
+        datums,
+        surface,
+        faces,
+        features,
+        rps_points,
+        rps_radius,
     )
+
+
+def _rps(entry, method: str, where: str) -> tuple[tuple[RpsPoint, ...], float]:
+    """The RPS points of ``alignment.rps`` ({radius_mm, points: [{name, point, direction}]})."""
+    if method != "rps":
+        if entry:
+            raise SpecError(f"{where}: alignment rps given but the method is {method!r} (use method: rps)")
+        return (), 3.0
+    if not isinstance(entry, dict) or not entry.get("points"):
+        raise SpecError(f"{where}: rps alignment needs alignment.rps.points: [{{name, point, direction}}, ...]")
+    if extra := sorted(set(entry) - {"radius_mm", "points"}):
+        raise SpecError(f"{where}: alignment.rps: unknown keys {extra} (known: ['points', 'radius_mm'])")
+    radius = _positive(entry.get("radius_mm", 3.0), f"{where}: alignment.rps.radius_mm")
+    points = []
+    for k, p in enumerate(entry["points"]):
+        if not isinstance(p, dict) or {"point", "direction"} - set(p) or set(p) - {"name", "point", "direction"}:
+            raise SpecError(f"{where}: alignment.rps.points[{k}]: needs point and direction (and a name)")
+        name = str(p.get("name", f"P{k + 1}"))
+        direction = _vec(p["direction"], f"{where}: RPS point {name!r} direction")
+        if np.linalg.norm(direction) < 1e-9:
+            raise SpecError(f"{where}: RPS point {name!r}: zero direction")
+        points.append(RpsPoint(name, _vec(p["point"], f"{where}: RPS point {name!r} point"),
+                               direction / np.linalg.norm(direction)))  # fmt: skip
+    names = [p.name for p in points]
+    if len(set(names)) != len(names):
+        raise SpecError(f"{where}: RPS point names repeat: {names}")
+    return tuple(points), radius
 
 
 def load_spec(path: str | Path) -> InspectionSpec:

@@ -16,6 +16,7 @@ from agiprobot_measurement.inspection.errors import InspectionInputError, Regist
 from agiprobot_measurement.inspection.pipeline import inspect_cloud
 from agiprobot_measurement.inspection.registration import transform_error
 from agiprobot_measurement.inspection.report import REPORT_FILES, write_report
+from agiprobot_measurement.inspection.spec import load_spec
 
 SEEDS = (0, 1, 2)
 
@@ -91,8 +92,8 @@ def test_bad_clouds_are_refused_with_a_clear_error(null_case):
 
 
 def test_report_is_complete_or_absent(tmp_path, null_case):
-    c = null_case
-    r = inspect_cloud(c.points_mm, c.nominal, c.spec, c.part.nominal_placement, c.sigma_mm)
+    c = null_case  # every fourth point: the report's files and contents do not depend on the density
+    r = inspect_cloud(c.points_mm[::4], c.nominal, c.spec, c.part.nominal_placement, c.sigma_mm[::4])
     out = write_report(r, tmp_path / "report", {"seed": 0})
     assert sorted(p.name for p in out.iterdir()) == sorted(REPORT_FILES)
     data = json.loads((out / "report.json").read_text())
@@ -116,3 +117,13 @@ def test_cloud_files_are_read_or_refused(tmp_path):
         read_cloud(tmp_path / "bad.xyz")
     with pytest.raises(InspectionInputError, match="not found"):
         read_cloud(tmp_path / "missing.ply")
+
+
+def test_rps_alignment_of_a_scanned_part_meets_its_reference_points(null_case):
+    c = null_case
+    spec = load_spec(cases.spec_path("cube_100_rps"))
+    r = inspect_cloud(c.points_mm[::2], c.nominal, spec, c.part.nominal_placement, c.sigma_mm[::2])
+    assert r.registration.method == "rps" and r.registration.rps.rank == 6
+    assert max(abs(v) for v in r.registration.rps.residual_mm.values()) < 1e-4
+    error_mm, error_deg = transform_error(r.transform, np.linalg.inv(c.part.actual_placement), c.nominal.vertices)
+    assert error_mm < 0.05 and error_deg < 0.02 and r.flags == 0

@@ -24,8 +24,9 @@ def test_points_in_metres_give_the_report_of_the_same_points_in_mm(tmp_path):
     nominal = tmp_path / "cube.stl"
     case.nominal.export(nominal)
     stages = []
-    request = InspectionRequest(nominal, spec_path("cube_100"), tmp_path / "report", points=case.points_mm / 1000.0,
-                                sigma=case.sigma_mm / 1000.0, placement=case.part.nominal_placement, cloud_units="m")  # fmt: skip
+    points, sigma = case.points_mm[::3], case.sigma_mm[::3]  # a third of the points: the same verdicts, less work
+    request = InspectionRequest(nominal, spec_path("cube_100"), tmp_path / "report", points=points / 1000.0,
+                                sigma=sigma / 1000.0, placement=case.part.nominal_placement, cloud_units="m")  # fmt: skip
     result, folder = run_inspection(request, lambda stage, fraction: stages.append(stage))
     assert result.verdict == "not conform" and result.flags >= 1
     assert stages[-1] == "report" and "register" in stages

@@ -1,5 +1,5 @@
 """The inspection's building blocks on synthetic data with exact answers: fits, minimum zone, decisions, spec
-checks, signed distances, registration with locks and 3-2-1 datums."""
+checks, signed distances, registration with locks, 3-2-1 datums and reference points (RPS)."""
 
 from __future__ import annotations
 
@@ -8,10 +8,11 @@ import pytest
 import trimesh
 from scipy.spatial.transform import Rotation
 
+from agiprobot_measurement._paths import CONFIG_DIR
 from agiprobot_measurement.inspection import actual, decision, fitting, registration
 from agiprobot_measurement.inspection.deviation import closest_points, edge_mask
-from agiprobot_measurement.inspection.errors import InspectionInputError, SpecError
-from agiprobot_measurement.inspection.spec import parse_spec
+from agiprobot_measurement.inspection.errors import InspectionInputError, RegistrationError, SpecError
+from agiprobot_measurement.inspection.spec import load_spec, parse_spec
 
 RNG = np.random.default_rng(7)
 
@@ -127,3 +128,52 @@ def test_datum_321_maps_measured_datums_onto_the_nominal():
                ((0, -50.0, 0), np.array([0, -1.0, 0]))]  # fmt: skip
     correction = registration.datum_frame(measured, nominal)
     assert np.allclose(correction @ error, np.eye(4), atol=1e-9)
+
+
+def _cube_surface(count=60000):
+    points, _ = trimesh.sample.sample_surface(actual.cube(), count, seed=3)
+    return points
+
+
+def test_rps_3_2_1_undoes_a_known_rigid_motion_and_follows_a_moved_datum_face():
+    spec = load_spec(CONFIG_DIR / "inspection" / "cube_100_rps.yaml")
+    assert spec.alignment == "rps" and len(spec.rps_points) == 6
+    truth = np.eye(4)
+    truth[:3, :3] = Rotation.from_rotvec(np.radians([0.15, -0.1, 0.2])).as_matrix()
+    truth[:3, 3] = (0.3, -0.2, 0.25)
+    surface = _cube_surface()
+    moved = registration.apply(truth, surface)
+    result = registration.rps_alignment(moved, spec.rps_points, spec.rps_radius_mm)
+    assert result.rank == 6
+    error_mm, error_deg = registration.transform_error(result.correction, np.linalg.inv(truth), surface)
+    assert error_mm < 1e-6 and error_deg < 1e-6
+    assert max(abs(v) for v in result.residual_mm.values()) < 1e-8
+    # the top face (datum A) 0.04 mm low: the RPS lifts the whole part by 0.04 mm, the other datums stay met
+    low = surface.copy()
+    low[np.isclose(low[:, 2], 50.0), 2] -= 0.04
+    lifted = registration.rps_alignment(low, spec.rps_points, spec.rps_radius_mm)
+    assert np.allclose(lifted.correction[:3, 3], (0, 0, 0.04), atol=1e-9)
+    assert np.allclose(lifted.correction[:3, :3], np.eye(3), atol=1e-9)
+    assert np.allclose([lifted.deviation_mm[n] for n in ("A1", "A2", "A3")], -0.04, atol=1e-9)
+    # rotations locked: the same lift by translation alone
+    lift = registration.rps_alignment(low, spec.rps_points, spec.rps_radius_mm, lock=("rx", "ry", "rz"))
+    assert np.allclose(lift.correction[:3, 3], (0, 0, 0.04), atol=1e-9) and lift.rank == 3
+    # tz locked, the part shifted 0.1 mm along x: moved back along x, nothing else
+    shifted = surface + np.array([0.1, 0.0, 0.0])
+    kept = registration.rps_alignment(shifted, spec.rps_points, spec.rps_radius_mm, lock=("tz",))
+    assert np.allclose(kept.correction[:3, 3], (-0.1, 0, 0), atol=1e-9) and kept.rank == 5
+    assert np.allclose(kept.correction[:3, :3], np.eye(3), atol=1e-9)
+
+
+def test_rps_spec_errors_name_the_problem():
+    base = {"faces": {"top": {"normal": [0, 0, 1], "point": [0, 0, 50]}}}
+    with pytest.raises(SpecError, match=r"needs alignment\.rps\.points"):
+        parse_spec({**base, "alignment": {"method": "rps"}})
+    with pytest.raises(SpecError, match="zero direction"):
+        parse_spec({**base, "alignment": {"method": "rps", "rps": {"points": [{"point": [0, 0, 50],
+                                                                              "direction": [0, 0, 0]}]}}})  # fmt: skip
+    with pytest.raises(SpecError, match="method is 'best_fit'"):
+        parse_spec({**base, "alignment": {"rps": {"points": []}}})
+    with pytest.raises(RegistrationError, match="RPS point far"):
+        registration.rps_alignment(_cube_surface(2000), [registration.RpsPoint("far", np.array([0, 0, 80.0]),
+                                                                                  np.array([0, 0, 1.0]))])  # fmt: skip

@@ -1,0 +1,86 @@
+"""The inspection with the realistic sensor error models and the speed paths: the instrument's systematic terms
+widen each decision's uncertainty by exactly their share; the fast paths (threaded closest points, occupancy-table
+patches) give the same answers as the plain ones; the generated dent lies where the scan measures."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from agiprobot_measurement.inspection import cases, deviation, instrument
+from agiprobot_measurement.inspection.cli import _instrument
+from agiprobot_measurement.inspection.decision import COVERAGE_FACTOR
+from agiprobot_measurement.inspection.errors import InspectionInputError
+from agiprobot_measurement.inspection.instrument import InstrumentUncertainty, load_instrument
+from agiprobot_measurement.inspection.pipeline import inspect_cloud
+
+
+def test_instrument_terms_are_read_per_error_model_and_scanner(tmp_path):
+    assert load_instrument("ideal", "phoxi_S") == InstrumentUncertainty()
+    real = load_instrument("realistic", "phoxi_S")
+    assert real.surface_mm > 0 and real.length_rel > 0
+    with pytest.raises(InspectionInputError, match="no error model 'nope'"):
+        load_instrument("nope", "phoxi_S")
+    with pytest.raises(InspectionInputError, match="no scanner 'phoxi_Q'"):
+        load_instrument("realistic", "phoxi_Q")
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("realistic: {phoxi_S: {surface_mm: 0.01, scale: 2}}\n")
+    with pytest.raises(InspectionInputError, match="unknown keys"):
+        instrument.load_instrument("realistic", "phoxi_S", bad)
+
+
+@pytest.fixture(scope="module")
+def realistic_null():
+    return cases.build_case("null", 0.0, 0, "phoxi_low", "realistic")
+
+
+def test_realistic_scan_differs_from_ideal_and_the_systematic_terms_add_in_quadrature(realistic_null):
+    c = realistic_null
+    ideal = cases.build_case("null", 0.0, 0, "phoxi_low", "ideal")
+    assert len(c.points_mm) > 0.9 * len(ideal.points_mm)
+    assert not np.allclose(c.points_mm[:1000], ideal.points_mm[:1000], atol=1e-3)
+    terms = InstrumentUncertainty(surface_mm=0.03, form_mm=0.02, length_rel=4e-4)
+    points, sigma = c.points_mm[::3], c.sigma_mm[::3]
+    plain = inspect_cloud(points, c.nominal, c.spec, c.part.nominal_placement, sigma)
+    wide = inspect_cloud(points, c.nominal, c.spec, c.part.nominal_placement, sigma, instrument=terms)
+    added = {"size": 4e-4 * 100.0, "flatness": 0.02}
+    for before, after in zip(plain.features, wide.features, strict=True):
+        u0, u1 = before.decisions[0].uncertainty_mm, after.decisions[0].uncertainty_mm
+        assert np.isclose(u1**2 - u0**2, (COVERAGE_FACTOR * added[before.type]) ** 2, rtol=1e-6)
+    assert wide.surface_uncertainty_mm > plain.surface_uncertainty_mm >= 0
+    assert wide.surface_uncertainty_mm >= COVERAGE_FACTOR * 0.03
+
+
+def test_fast_paths_answer_as_the_plain_ones(monkeypatch, realistic_null):
+    c = realistic_null
+    points = c.points_mm[:60000] - c.part.nominal_placement[:3, 3]
+    serial = deviation.closest_points(c.nominal, points)
+    monkeypatch.setattr(deviation, "PARALLEL_MIN_POINTS", 1000)
+    threaded = deviation.closest_points(c.nominal, points)
+    assert np.array_equal(serial.face, threaded.face) and np.array_equal(serial.signed_mm, threaded.signed_mm)
+    use = np.abs(serial.signed_mm) < 3.0
+    dense = deviation.patches(serial.closest_mm, serial.signed_mm, np.full(len(points), 0.05), use, 1.0, 2.0)
+    monkeypatch.setattr(deviation, "DENSE_GRID_FACTOR", 0)
+    plain = deviation.patches(serial.closest_mm, serial.signed_mm, np.full(len(points), 0.05), use, 1.0, 2.0)
+    assert np.array_equal(dense.voxel_of_point, plain.voxel_of_point)
+    assert np.allclose(dense.mean_mm, plain.mean_mm) and np.allclose(dense.centre_mm, plain.centre_mm)
+
+
+def test_the_generated_dent_lies_where_the_scan_measures():
+    # seed 118 once drew the dent in the corner the single view's depth range does not reach
+    c = cases.build_case("dent", 0.3, 118, "phoxi_low")
+    cad = np.linalg.inv(c.part.actual_placement)
+    points = c.points_mm @ cad[:3, :3].T + cad[:3, 3]
+    centre, radius = np.asarray(c.truth["dent_centre_mm"]), c.truth["dent_radius_mm"]
+    ring = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+    probes = centre[:2] + np.c_[np.cos(ring), np.sin(ring)] * radius
+    top = points[np.abs(points[:, 2] - 50.0) < 1.0][:, :2]
+    for probe in np.vstack([centre[:2], probes]):
+        assert np.min(np.linalg.norm(top - probe, axis=1)) < 1.0
+
+
+def test_the_command_line_names_the_instrument_as_model_and_scanner():
+    assert _instrument(None) is None
+    assert _instrument("realistic:phoxi_S") == load_instrument("realistic", "phoxi_S")
+    with pytest.raises(InspectionInputError, match="ERROR_MODEL:SCANNER"):
+        _instrument("realistic")
