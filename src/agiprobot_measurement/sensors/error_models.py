@@ -536,11 +536,13 @@ def value_noise(points_mm: np.ndarray, cell_mm: float, seed: int) -> np.ndarray:
     frac = p - base
     frac = frac * frac * (3.0 - 2.0 * frac)  # smoothstep
     base = base.astype(np.int64)
+    # the seed's hash term within int64 (any serial's seed; below 2^63 / 2654435761 it is the plain product)
+    seed_term = np.int64((int(seed) * 2654435761) % (1 << 63))
     out = np.zeros(len(p))
     for corner in range(8):
         offset = np.array([(corner >> k) & 1 for k in range(3)])
         ijk = base + offset
-        h = (ijk[:, 0] * 73856093) ^ (ijk[:, 1] * 19349663) ^ (ijk[:, 2] * 83492791) ^ (seed * 2654435761)
+        h = (ijk[:, 0] * 73856093) ^ (ijk[:, 1] * 19349663) ^ (ijk[:, 2] * 83492791) ^ seed_term
         h = (h ^ (h >> 13)) * 1274126177
         h = h ^ (h >> 16)
         value = (h & 0xFFFFFF).astype(float) / float(0xFFFFFF) * 2.0 - 1.0

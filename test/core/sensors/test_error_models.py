@@ -226,6 +226,16 @@ def test_laser_speckle_is_static_and_the_rest_temporal(realistic, sensor):
     assert field.std() == pytest.approx(1.0, rel=0.2)
 
 
+def test_value_noise_takes_any_device_seed():
+    # a serial's seed is any non-negative integer (hashes of serials reach 2^64): the field is defined and fixed
+    points = np.random.default_rng(1).uniform(0, 10, (2000, 3))
+    small = value_noise(points, 0.5, 7)
+    for seed in (2**32 + 5, 2**40, 2**64 - 1):
+        field = value_noise(points, 0.5, seed)
+        assert np.all(np.isfinite(field)) and np.array_equal(field, value_noise(points, 0.5, seed))
+        assert not np.array_equal(field, small)
+
+
 def test_laser_calibration_error_stays_within_the_linearity_envelope(realistic, sensor):
     errors = LaserErrors.create(sensor, realistic)
     cal = errors.calibration

@@ -61,10 +61,12 @@ class SceneGeometry:
         return len(self.triangles)
 
     def transformed(self, pose: np.ndarray) -> SceneGeometry:
-        rotation, translation = pose[:3, :3], pose[:3, 3]
-        return SceneGeometry(
-            self.triangles @ rotation.T + translation, self.normals @ rotation.T, self.albedo, self.owner, self.names
-        )
+        """The scene under the 4x4 ``pose`` (rigid, or with a scale, e.g. mm -> m): normals transform with the
+        inverse transpose and stay unit length."""
+        linear, translation = pose[:3, :3], pose[:3, 3]
+        normals = self.normals @ np.linalg.inv(linear)  # (L^-T n^T)^T
+        normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
+        return SceneGeometry(self.triangles @ linear.T + translation, normals, self.albedo, self.owner, self.names)
 
     @staticmethod
     def concatenate(parts: list[SceneGeometry]) -> SceneGeometry:

@@ -312,3 +312,17 @@ def test_moving_the_robot_changes_the_cloud_where_its_links_are(station_render):
     assert arrived.sum() > 2000
     assert np.mean(np.abs(b.depth_mm - robot_only[1].depth_mm)[arrived] < 0.01) > 0.95
     assert np.mean(changed[arrived]) > 0.95
+
+
+def test_a_scaled_scene_keeps_unit_normals_at_their_directions():
+    # e.g. a part in mm put into a scene in metres by a scaling transform: the renderer's incidence and noise read
+    # the normals, which must stay unit vectors (a plain rotation of the normals shrank them by the scale)
+    scene = SceneGeometry.from_trimesh(primitive_mesh("box", [10.0, 20.0, 30.0]), "box", 0.8)
+    turn = np.eye(4)
+    turn[:3, :3] = look_at(np.zeros(3), np.array([1.0, 2.0, 3.0]))[:3, :3]
+    scaled = turn.copy()
+    scaled[:3, :3] *= 0.001
+    rotated, shrunk = scene.transformed(turn), scene.transformed(scaled)
+    np.testing.assert_allclose(np.linalg.norm(shrunk.normals, axis=1), 1.0)
+    np.testing.assert_allclose(shrunk.normals, rotated.normals, atol=1e-12)
+    np.testing.assert_allclose(shrunk.triangles, rotated.triangles * 0.001, atol=1e-12)
