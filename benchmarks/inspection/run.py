@@ -93,7 +93,7 @@ def evaluate(case: cases.Case, instrument: InstrumentUncertainty | None = None) 
         if f.values:
             row["position_error_mm"] = f.values["position_mm"] - truth["hole_position_deviation_mm"]
             row["position_U_mm"] = f.decisions[0].uncertainty_mm
-            row["within_U"] = abs(row["position_error_mm"]) <= row["position_U_mm"]
+            row["within_U"] = bool(abs(row["position_error_mm"]) <= row["position_U_mm"])
             centre = (
                 np.asarray(f.values["centre_offset_mm"])[:2] + np.asarray(case.spec.features[0].params["centre"])[:2]
             )
