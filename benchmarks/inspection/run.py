@@ -92,6 +92,8 @@ def evaluate(case: cases.Case, instrument: InstrumentUncertainty | None = None) 
         row["ok"] = f.verdict == row["expected"]
         if f.values:
             row["position_error_mm"] = f.values["position_mm"] - truth["hole_position_deviation_mm"]
+            row["position_U_mm"] = f.decisions[0].uncertainty_mm
+            row["within_U"] = bool(abs(row["position_error_mm"]) <= row["position_U_mm"])
             centre = (
                 np.asarray(f.values["centre_offset_mm"])[:2] + np.asarray(case.spec.features[0].params["centre"])[:2]
             )
@@ -137,6 +139,10 @@ def _summary(rows: list[dict]) -> list[dict]:
             if values:
                 entry[key + "_max"] = float(max(values))
                 entry[key + "_p95"] = float(np.percentile(values, 95))
+        if any("position_U_mm" in r for r in group):
+            entry["position_U_mm_min"] = float(min(r["position_U_mm"] for r in group if "position_U_mm" in r))
+            entry["position_U_mm_max"] = float(max(r["position_U_mm"] for r in group if "position_U_mm" in r))
+            entry["within_U_share"] = float(np.mean([r["within_U"] for r in group if "within_U" in r]))
         if case == "dent":
             entry["flag_share"] = float(np.mean([r["flagged"] for r in group]))
             entry["false_flag_share"] = float(np.mean([r["other_flags"] > 0 for r in group]))
@@ -208,6 +214,14 @@ def _realistic_targets(summary: list[dict], sensor: str) -> list[tuple[str, bool
                              f"{e['depth_error_mm_max']:.4f}"))  # fmt: skip
         elif c == "dent" and m < 0.1:
             rows.append((f"dent {m}: flagged <= 5 %", e["flag_share"] <= 0.05, f"{e['flag_share']:.2f}"))
+        if "within_U_share" in e:
+            rows.append(
+                (
+                    f"{c} {m}: position error within its U in every run",
+                    e["within_U_share"] == 1.0,
+                    f"{e['within_U_share']:.2f} (U {e['position_U_mm_min']:.3f}-{e['position_U_mm_max']:.3f})",
+                )
+            )
         kind = {"hole": "position", "warp": "flatness", "scale": "size"}.get(c)
         if kind and bounds[kind][0] in e:
             key, bound = bounds[kind]

@@ -182,7 +182,10 @@ def _hole(feature: Feature, ctx: FeatureContext) -> FeatureResult:
     u_reg = float(ctx.registration_sigma(centre[None], d3[None])[0])
     position = 2.0 * offset
     u_scale = ctx.instrument.length_rel * float(np.linalg.norm(centre - ctx.registration_centre_mm))
-    decisions = [decide("position", position, p["position_tolerance_mm"], 2.0 * expanded(u_fit, u_reg, u_scale))]
+    # the hole's view against the datums' (or the rest of the cloud's) views: their relative pose error
+    u_stitch = ctx.instrument.stitching_mm
+    u_position = 2.0 * expanded(u_fit, u_reg, u_scale, u_stitch)
+    decisions = [decide("position", position, p["position_tolerance_mm"], u_position)]
     diameter = 2.0 * fit.radius
     if "diameter_tolerance_mm" in p:
         tol = p["diameter_tolerance_mm"]

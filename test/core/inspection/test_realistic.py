@@ -1,6 +1,7 @@
 """The inspection with the realistic sensor error models and the speed paths: the instrument's systematic terms
 widen each decision's uncertainty by exactly their share; the fast paths (threaded closest points, occupancy-table
-patches) give the same answers as the plain ones; the generated dent lies where the scan measures."""
+patches) give the same answers as the plain ones; the generated dent lies where the scan measures; a hole measured
+against datums of other laser sweeps carries their relative pose error."""
 
 from __future__ import annotations
 
@@ -13,6 +14,9 @@ from agiprobot_measurement.inspection.decision import COVERAGE_FACTOR
 from agiprobot_measurement.inspection.errors import InspectionInputError
 from agiprobot_measurement.inspection.instrument import InstrumentUncertainty, load_instrument
 from agiprobot_measurement.inspection.pipeline import inspect_cloud
+from agiprobot_measurement.sensors.error_models import load_error_model
+from agiprobot_measurement.sensors.laser_line.model import SensorModel
+from agiprobot_measurement.station.config import load_scanner_config
 
 
 def test_instrument_terms_are_read_per_error_model_and_scanner(tmp_path):
@@ -84,3 +88,34 @@ def test_the_command_line_names_the_instrument_as_model_and_scanner():
     assert _instrument("realistic:phoxi_S") == load_instrument("realistic", "phoxi_S")
     with pytest.raises(InspectionInputError, match="ERROR_MODEL:SCANNER"):
         _instrument("realistic")
+
+
+def test_the_stitching_term_is_derived_from_the_error_models_pose_chain(tmp_path):
+    laser = load_instrument("realistic", "laser_line")
+    chain = dict(load_error_model("realistic").laser["pose_chain"])
+    standoff = SensorModel(load_scanner_config().sensor_parameters).optimal_standoff
+    assert laser.stitching_mm == pytest.approx(instrument.pose_chain_stitching_mm(chain, standoff))
+    assert laser.stitching_mm > chain["hand_eye_translation_mm"]  # two orientations: sqrt(2) x the per-view error
+    wider = instrument.pose_chain_stitching_mm({**chain, "hand_eye_translation_mm": 2 * chain["hand_eye_translation_mm"]},
+                                               standoff)  # fmt: skip
+    assert wider > laser.stitching_mm
+    assert instrument.pose_chain_stitching_mm({**chain, "enabled": False}, standoff) == 0.0
+    assert instrument.pose_chain_stitching_mm(None, standoff) == 0.0
+    assert load_instrument("realistic", "phoxi_S").stitching_mm == 0.0
+    assert load_instrument("ideal", "laser_line").stitching_mm == 0.0
+    given = tmp_path / "given.yaml"
+    given.write_text("realistic: {laser_line: {stitching_mm: 0.05}}\n")
+    assert load_instrument("realistic", "laser_line", given).stitching_mm == 0.05
+
+
+def test_realistic_laser_hole_against_datums_of_other_sweeps_is_not_called_wrong():
+    # the hole (top sweeps) and its datums B, C (side sweeps) are stitched by the head's poses: the hand-eye error
+    # shifts them against each other; without the stitching term this run's 0.05 mm shift (conform) read not conform
+    c = cases.build_case("hole", 0.05, 0, "laser", "realistic")
+    terms = load_instrument("realistic", "laser_line")
+    result = inspect_cloud(c.points_mm, c.nominal, c.spec, c.part.nominal_placement, c.sigma_mm, instrument=terms)
+    hole = next(f for f in result.features if f.type == "hole")
+    position = hole.decisions[0]
+    assert position.verdict != "not conform"
+    assert abs(position.value_mm - c.truth["hole_position_deviation_mm"]) <= position.uncertainty_mm
+    assert position.uncertainty_mm >= 2 * COVERAGE_FACTOR * terms.stitching_mm
