@@ -108,6 +108,26 @@ def test_view_budget_stops_the_loop_and_the_outputs_are_written(station, tmp_pat
     assert VoxelMap.load_npz(result.map_file).shape == recon.map.shape
 
 
+def test_a_move_that_cannot_be_timed_skips_that_view_and_the_loop_goes_on(station):
+    from agiprobot_measurement.motion.time_parameterization import TimeParameterizationError
+
+    recon, _ = make(station, max_views=3)
+    route = recon.router.route
+    calls = []
+
+    def route_failing_once(q_from, q_to, *args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:  # the move to the first planned view: a spline leaving the wrist's limits
+            raise TimeParameterizationError("wrist_3_joint leaves its limits")
+        return route(q_from, q_to, *args, **kwargs)
+
+    recon.router.route = route_failing_once
+    result = recon.run()
+    assert result.error == "" and result.termination_reason == "max_views"
+    assert len(result.views) == 3 and result.motion_failures == 1
+    assert len(calls) >= 4
+
+
 def test_gain_threshold_and_cancel_and_budgets(station):
     recon, _ = make(station, max_views=5, min_gain_area_mm2=1e9)
     assert recon.run().termination_reason == "gain_below_threshold"
