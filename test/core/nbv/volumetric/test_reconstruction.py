@@ -194,6 +194,33 @@ def test_reconstruct_cli_refuses_unusable_outputs_before_any_work(tmp_path, caps
     assert "is a directory" in capsys.readouterr().err
 
 
+def test_ours_scores_coarse_first_and_chooses_among_the_best_scored_with_the_full_bundle(station):
+    from agiprobot_measurement.nbv.volumetric.policies.ours import coarse_view
+
+    recon, _ = make(station, max_views=1)
+    recon.run()
+    policy, q = recon.policy, recon.current_joints()
+
+    def scored(exact):
+        policy.exact_evaluated = exact
+        policy.context.rng = np.random.default_rng(3)  # the same pool each time
+        recon.generator.rng = np.random.default_rng(4)
+        policy.first_expected_area_m2 = None
+        cands, _, idx, _, _, utilities = policy.scored_pool(q)
+        return cands.poses[idx], utilities
+
+    poses, full = scored(0)
+    assert len(full) > 12
+    np.testing.assert_array_equal(scored(len(full))[1], full)  # as many exact slots as candidates: all exact
+    poses_k, mixed = scored(8)
+    np.testing.assert_array_equal(poses_k, poses)
+    order = np.argsort(-mixed)
+    assert mixed[order[7]] > mixed[order[8]]  # the 8 rescored rank above every coarse-only one
+    assert full[order[0]] >= 0.7 * full.max()  # the choice is (near) the full bundle's best
+    coarse = coarse_view(recon.context.view_model, 2)
+    assert coarse.rays_h * coarse.rays_v * 4 == recon.context.view_model.rays_h * recon.context.view_model.rays_v
+
+
 # --------------------------------------------------------------------------------------------- ours' motion weight
 def ours_policy(**planning):
     return OursPolicy(None, PlanningSettings.from_mapping(planning))
