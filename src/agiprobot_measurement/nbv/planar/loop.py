@@ -12,7 +12,10 @@ Documented choices where the report is silent:
 - Home pose and search trajectory: the source runs along a line below the scene, laser pointing +y, placed so that
   the far edge of the camera's depth window lies on the scene's middle row (a body in the scene's lower half is
   seen), from ``x = 0`` to ``x = nx - 1`` in steps of ``search_step_cells``; the sideways steps continue along it
-  by ``side_step_cells``.
+  by ``side_step_cells``. When that line measures nothing (the part of the body in the depth window is shadowed
+  by a nearer part, or lies nearer than the window), the line is moved away from the scene in steps of 0.8 of the
+  window's depth until the window's near edge has passed the scene's edge, then the same from the other three
+  sides (a rotated comb whose teeth hide its bar was never found from one line).
 - ``Possible_Improvement(W)`` is the number of remaining scanning candidates (``getcandidates2d`` cells of all
   growth points): it is what the implemented stop drives to zero.
 - Every cell that was ``cc`` once and is still unknown is marked in the working copy (+0.1 unmeasurable, -0.1
@@ -358,33 +361,56 @@ class _Engine:
 
     # --- the report's loop ------------------------------------------------------------------------------------
     def initial_search(self):
+        """The a-priori search: the growth point to start from (a measured cell with a full neighbour), or None.
+
+        The report's line first (see the module docstring); when it measures nothing (the part of the body in the
+        depth window is shadowed, or lies nearer than the window), the same line further from the scene in steps
+        of 0.8 of the window's depth until the window's near edge has passed the scene's edge, then the same from
+        the other three sides of the scene (the line turned about the scene centre by 90, 180, 270 degrees)."""
         rf = self.rf
         nx, ny = self.shape
-        _, far = rf.depth_window_cells()
+        near, far = rf.depth_window_cells()
         # the far edge of the camera's depth window on the scene's middle row: the search sees the body's lower half
         y_line = (ny - 1) / 2 - min(far, 2 * rf.standoff_cells) + 1.0
+        band = 0.8 * (min(far, 2 * rf.standoff_cells) - near)
         step = self.cfg.search_step_cells
-        xs = np.arange(0.0, nx - 1 + 1e-9, step)
-        hit = None
-        x_hit = None
-        for x in xs:
-            pos = rf.pose_through((x, y_line), (x, y_line + rf.standoff_cells), 1)
-            _, cell, _ = self.measure(pos, None, None)
-            if cell is not None:
-                hit, x_hit = cell, x
-                break
-        if hit is None:
-            return None
-        # small sideways steps until the growth point has a full neighbour (planning needs a contour direction)
-        x = x_hit
+        centre = np.array([(nx - 1) / 2, (ny - 1) / 2])
+        for turn in range(4):
+            along, across = (nx, ny) if turn % 2 == 0 else (ny, nx)
+            c, s = ((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0))[turn]
+            rot = np.array([[c, -s], [s, c]])
+            offset = y_line - centre[1]  # the line's signed distance from the centre (negative: below)
+            shifts = 0 if band <= 0 else max(0, math.ceil((offset + near + (across - 1) / 2) / band))
+            for k in range(shifts + 1):
+                line = (rot, offset - k * band, (along - 1) / 2)
+                hit, t_hit = None, None
+                for t in np.arange(0.0, along - 1 + 1e-9, step):
+                    _, cell, _ = self.measure(self._search_pose(centre, line, t), None, None)
+                    if cell is not None:
+                        hit, t_hit = cell, t
+                        break
+                if hit is not None:
+                    return self._side_steps(centre, line, hit, t_hit)
+        return None
+
+    def _search_pose(self, centre, line, t):
+        """The pose at ``t`` (cells from the line's start) of a search line (rotation, offset from the centre,
+        half length): the source on the line, the laser across it towards the scene."""
+        rot, offset, half = line
+        source = centre + rot @ np.array([t - half, offset])
+        return self.rf.pose_through(source, source + rot @ np.array([0.0, self.rf.standoff_cells]), 1)
+
+    def _side_steps(self, centre, line, hit, t):
+        """Small sideways steps along the search line until the growth point has a full neighbour (planning
+        needs a contour direction); the growth point."""
+        step = self.cfg.search_step_cells
         for _ in range(int(4 * step / self.cfg.side_step_cells) + 8):
             i0, i1 = max(hit[0] - 1, 0), hit[0] + 2
             j0, j1 = max(hit[1] - 1, 0), hit[1] + 2
             if (self.m[i0:i1, j0:j1] == FULL).sum() >= 2:
                 break
-            x += self.cfg.side_step_cells
-            pos = rf.pose_through((x, y_line), (x, y_line + rf.standoff_cells), 1)
-            _, cell, _ = self.measure(pos, None, None)
+            t += self.cfg.side_step_cells
+            _, cell, _ = self.measure(self._search_pose(centre, line, t), None, None)
             if cell is not None:
                 hit = cell
         return hit

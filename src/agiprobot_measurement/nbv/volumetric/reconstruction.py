@@ -43,6 +43,8 @@ import numpy as np
 from agiprobot_measurement.errors import InputError, InternalError
 from agiprobot_measurement.motion.motion_planning import MotionPlanner
 from agiprobot_measurement.motion.routing import Router, RouteSettings, path_length_rad
+from agiprobot_measurement.motion.time_parameterization import TimeParameterizationError
+from agiprobot_measurement.motion.trajectory import TrajectoryError
 from agiprobot_measurement.nbv.volumetric.candidates import CandidateConfig, CandidateGenerator, poses_from_directions
 from agiprobot_measurement.nbv.volumetric.gains import ViewModel
 from agiprobot_measurement.nbv.volumetric.interfaces import CapturedView, NBVCamera, NBVRobot
@@ -295,7 +297,13 @@ class Reconstructor:
         route with the poses the robot has already been at (the home pose and the views so far; the known-free
         region only grows, so they stay free) as vias and the moves around the ROI."""
         vias = [self.home_rad, *(v.joints for v in self.views)]
-        return self.router.route(q_from, q_to, vias, centre=0.5 * (self.roi_min_m + self.roi_max_m))
+        try:
+            return self.router.route(q_from, q_to, vias, centre=0.5 * (self.roi_min_m + self.roi_max_m))
+        except (TimeParameterizationError, TrajectoryError) as exc:
+            # one move whose spline cannot be timed within the limits (e.g. a wrist near its limit) must not end
+            # the run: the view counts as unreachable (the caller bans it and tries the next one)
+            LOG.warning("no timed motion to %s: %s", np.round(np.asarray(q_to, dtype=float), 3).tolist(), exc)
+            return None
 
     # ------------------------------------------------------------------------------------ loop
     def run(

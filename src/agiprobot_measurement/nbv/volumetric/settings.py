@@ -159,6 +159,7 @@ class CandidateSettings:
     table_clearance_m: float | None = None
     tabu_distance_m: float | None = None
     unknown_obstacle: bool | None = None
+    unknown_obstacle_pool: int | None = None
 
     @classmethod
     def from_mapping(cls, values: dict) -> CandidateSettings:
@@ -171,6 +172,7 @@ class CandidateSettings:
         }
         rules.update({k: (k, _whole(0)) for k in ("max_targets", "visibility_directions", "sphere_directions",
                                                   "cone_azimuths")})  # fmt: skip
+        rules["unknown_obstacle_pool"] = ("unknown_obstacle_pool", _whole(1, 8))
         rules.update({k: (k, number) for k in ("roi_clearance_m", "table_clearance_m", "tabu_distance_m")})
         return cls(**_parse(values, "candidates", rules))
 
@@ -221,6 +223,10 @@ class PlanningSettings:
     expected_surface: dict = field(default_factory=dict)
     gain_rays: tuple[int, int] = (32, 24)
     max_evaluated: int = 160
+    #: ours: the gain terms of every evaluated candidate come from a bundle with ``coarse_ray_divisor`` times fewer
+    #: rays per axis, and only the ``exact_evaluated`` best by that score are scored with ``gain_rays`` (0: all)
+    exact_evaluated: int = 0
+    coarse_ray_divisor: int = 2
     surprise_ratio: float = 0.2
     surprise_distance_m: float = 0.15
     surprise_angle_rad: float = math.radians(25.0)
@@ -242,6 +248,8 @@ class PlanningSettings:
             "expected_surface": ("expected_surface", _mapping),
             "gain_rays": ("gain_rays", _ray_bundle),
             "max_evaluated": ("max_evaluated", _whole()),
+            "exact_evaluated": ("exact_evaluated", _whole()),
+            "coarse_ray_divisor": ("coarse_ray_divisor", _whole(1, 8)),
             "surprise_ratio": ("surprise_ratio", number),
             "surprise_distance_m": ("surprise_distance_m", number),
             "surprise_angle_deg": ("surprise_angle_rad", _degrees),

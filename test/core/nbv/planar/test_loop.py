@@ -84,11 +84,27 @@ def test_termination_on_a_pathological_grid():
     assert len(res.records) <= truth.size * cfg.max_measurements_per_candidate
 
 
-def test_nothing_found_and_budgets():
+def _laser_directions(records) -> set:
+    return {tuple(np.round((r.pos[2] - r.pos[0]) / np.hypot(*(r.pos[2] - r.pos[0])), 6)) for r in records}
+
+
+def test_the_search_goes_round_the_scene_until_it_finds_the_body(monkeypatch):
     rf = _rf()
     tiny = np.zeros((80, 80), dtype=bool)
-    tiny[75, 75] = True  # out of the search trajectory's view
-    assert run(tiny, rf, RunConfig()).termination == "nothing_found"
+    tiny[75, 75] = True  # out of the report's search line's view (its depth window ends at the middle row)
+    res = run(tiny, rf, RunConfig())
+    assert res.termination == "growth_points_exhausted"
+    first = next(r for r in res.records if r.cell is not None)
+    assert first.label == "search" and _laser_directions([first]) != {(0.0, 1.0)}  # from another side
+    # a body that returns nothing: every side and depth band of the search is tried, then nothing_found
+    monkeypatch.setattr("agiprobot_measurement.nbv.planar.loop.scan", lambda *args: None)
+    res = run(_square(), rf, RunConfig())
+    assert res.termination == "nothing_found"
+    assert {(0.0, 1.0), (-1.0, 0.0), (0.0, -1.0), (1.0, 0.0)} <= _laser_directions(res.records)
+
+
+def test_nothing_found_and_budgets():
+    rf = _rf()
     res = run(_square(), rf, RunConfig(max_measurements=40))
     assert res.termination == "measurement_budget" and len(res.records) == 40
     res = run(_square(), rf, RunConfig(min_possible_improvement=10**6))

@@ -77,6 +77,25 @@ def test_unknown_region_mesh_is_closed_and_covers_the_unknown_voxels():
     assert np.all(lo <= 0.0051) and np.all(hi >= 0.0949)
 
 
+def test_pooled_unknown_region_mesh_holds_the_fine_one_with_fewer_faces():
+    from types import SimpleNamespace
+
+    labels = -np.ones((12, 12, 12), dtype=int)  # known free but for a ball and one voxel at the grid's far corner
+    i, j, k = np.indices(labels.shape)
+    labels[(i - 5) ** 2 + (j - 6) ** 2 + (k - 5) ** 2 <= 12] = 0
+    labels[11, 11, 11] = 1
+    grid = SimpleNamespace(labels=lambda: labels, static=np.zeros(labels.shape, bool), resolution_m=0.01,
+                           origin_m=np.array([0.2, -0.1, 1.0]))  # fmt: skip
+    fine, pooled = unknown_region_mesh(grid), unknown_region_mesh(grid, 2)
+    assert fine.is_watertight and pooled.is_watertight
+    assert np.all(pooled.bounds[0] <= fine.bounds[0] + 1e-9) and np.all(pooled.bounds[1] >= fine.bounds[1] - 1e-9)
+    assert pooled.volume >= fine.volume
+    assert np.all(pooled.bounds[1] >= grid.origin_m + 11.5 * 0.01 - 1e-9)  # the odd corner voxel is in a block
+
+    labels[:] = 0
+    assert len(unknown_region_mesh(grid, 2).faces) < len(unknown_region_mesh(grid).faces) / 3
+
+
 def test_hemisphere_has_the_requested_views_at_the_standoff(generator):
     center = np.array([0.45, -0.55, 1.13])
     for n in (6, 12, 24):

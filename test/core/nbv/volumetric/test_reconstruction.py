@@ -108,6 +108,26 @@ def test_view_budget_stops_the_loop_and_the_outputs_are_written(station, tmp_pat
     assert VoxelMap.load_npz(result.map_file).shape == recon.map.shape
 
 
+def test_a_move_that_cannot_be_timed_skips_that_view_and_the_loop_goes_on(station):
+    from agiprobot_measurement.motion.time_parameterization import TimeParameterizationError
+
+    recon, _ = make(station, max_views=3)
+    route = recon.router.route
+    calls = []
+
+    def route_failing_once(q_from, q_to, *args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:  # the move to the first planned view: a spline leaving the wrist's limits
+            raise TimeParameterizationError("wrist_3_joint leaves its limits")
+        return route(q_from, q_to, *args, **kwargs)
+
+    recon.router.route = route_failing_once
+    result = recon.run()
+    assert result.error == "" and result.termination_reason == "max_views"
+    assert len(result.views) == 3 and result.motion_failures == 1
+    assert len(calls) >= 4
+
+
 def test_gain_threshold_and_cancel_and_budgets(station):
     recon, _ = make(station, max_views=5, min_gain_area_mm2=1e9)
     assert recon.run().termination_reason == "gain_below_threshold"
@@ -172,6 +192,33 @@ def test_reconstruct_cli_refuses_unusable_outputs_before_any_work(tmp_path, caps
     assert "--out: cannot create the folder" in capsys.readouterr().err
     assert cli.main(["cup", "--out", str(tmp_path / "new"), "--summary", str(tmp_path)]) == 2
     assert "is a directory" in capsys.readouterr().err
+
+
+def test_ours_scores_coarse_first_and_chooses_among_the_best_scored_with_the_full_bundle(station):
+    from agiprobot_measurement.nbv.volumetric.policies.ours import coarse_view
+
+    recon, _ = make(station, max_views=1)
+    recon.run()
+    policy, q = recon.policy, recon.current_joints()
+
+    def scored(exact):
+        policy.exact_evaluated = exact
+        policy.context.rng = np.random.default_rng(3)  # the same pool each time
+        recon.generator.rng = np.random.default_rng(4)
+        policy.first_expected_area_m2 = None
+        cands, _, idx, _, _, utilities = policy.scored_pool(q)
+        return cands.poses[idx], utilities
+
+    poses, full = scored(0)
+    assert len(full) > 12
+    np.testing.assert_array_equal(scored(len(full))[1], full)  # as many exact slots as candidates: all exact
+    poses_k, mixed = scored(8)
+    np.testing.assert_array_equal(poses_k, poses)
+    order = np.argsort(-mixed)
+    assert mixed[order[7]] > mixed[order[8]]  # the 8 rescored rank above every coarse-only one
+    assert full[order[0]] >= 0.7 * full.max()  # the choice is (near) the full bundle's best
+    coarse = coarse_view(recon.context.view_model, 2)
+    assert coarse.rays_h * coarse.rays_v * 4 == recon.context.view_model.rays_h * recon.context.view_model.rays_v
 
 
 # --------------------------------------------------------------------------------------------- ours' motion weight

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 
 from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.nbv.volumetric.gain_names import GAIN_NAMES
-from agiprobot_measurement.nbv.volumetric.gains import ExpectedSurfaceModel, evaluate_views, expected_surface
+from agiprobot_measurement.nbv.volumetric.gains import ExpectedSurfaceModel, ViewModel, evaluate_views, expected_surface
 from agiprobot_measurement.nbv.volumetric.policies.base import Policy, PolicyContext, weighted_score
 from agiprobot_measurement.nbv.volumetric.settings import PlanningSettings
 
@@ -47,6 +48,8 @@ class OursPolicy(Policy):
         self.first_expected_area_m2 = None
         self.fallback_below_mm2 = planning.coverage_fallback_below_mm2
         self.fallback_reach_vox = planning.coverage_fallback_reach_vox
+        self.exact_evaluated = planning.exact_evaluated
+        self.coarse_ray_divisor = planning.coarse_ray_divisor
 
     def cost_factor(self, expected_area_m2: float) -> float:
         """The share of lambda applied now. ``constant``: 1. ``remaining_surface``: 1 - A / A1, with A the most
@@ -71,18 +74,35 @@ class OursPolicy(Policy):
             return None, stats, None, None, None, None
         idx = np.nonzero(cands.feasible)[0]
         exp_gain, exp_area = expected_surface(c.planning_map, cands.poses[idx], c.view_model, self.model)
-        terms = {"expected_surface": exp_gain}
-        if set(self.weights) - {"expected_surface"}:
-            g, _ = c.evaluate(cands, "report")
-            terms.update(g.all_gains)
-        score = weighted_score(terms, self.weights, len(idx))
         cost = c.motion_cost(q, cands.joints[idx])
         if self.cost_s_per_rad > 0:
             cost = cost + self.cost_s_per_rad * np.abs(cands.joints[idx] - q).sum(axis=1)
-        factor = self.cost_factor(float(exp_area.max()))
-        utilities = score * np.exp(-c.cost_weight * factor * cost)
+        discount = np.exp(-c.cost_weight * self.cost_factor(float(exp_area.max())) * cost)
+        exact = len(idx) <= self.exact_evaluated or self.exact_evaluated <= 0
+        view_model = c.view_model if exact else coarse_view(c.view_model, self.coarse_ray_divisor)
+        utilities = self._score(cands.poses[idx], exp_gain, view_model)
+        utilities *= discount
+        if not exact:
+            # coarse to fine: the best by the coarse bundle are scored with the full one (each term normalised
+            # within them) and the choice is among them; the others keep their coarse utility, ranked below
+            top = np.argsort(-utilities, kind="stable")[: self.exact_evaluated]
+            fine = self._score(cands.poses[idx[top]], exp_gain[top], c.view_model) * discount[top]
+            rest = np.ones(len(idx), dtype=bool)
+            rest[top] = False
+            if rest.any():
+                floor = float(fine.min())
+                utilities[rest] = floor * utilities[rest] / max(float(utilities[rest].max()), 1e-12) * (1 - 1e-6)
+            utilities[top] = fine
         self.remember(cands, utilities)
         return cands, stats, idx, exp_gain, exp_area, utilities
+
+    def _score(self, poses: np.ndarray, exp_gain: np.ndarray, view_model: ViewModel) -> np.ndarray:
+        """Ours' weighted score (before the motion discount) of camera poses (n, 4, 4) with their expected gains."""
+        terms = {"expected_surface": exp_gain}
+        if set(self.weights) - {"expected_surface"}:
+            g = evaluate_views(self.context.planning_map, poses, view_model, gain="report")
+            terms.update(g.all_gains)
+        return weighted_score(terms, self.weights, len(poses))
 
     def choose(self, q):
         return self.choose_from(q, *self.scored_pool(q))
@@ -137,3 +157,14 @@ class OursPolicy(Policy):
             option.remaining_gain = math.inf  # not comparable with the predicted-surface gain of the first view
         stats["fallbacks"] = fallbacks
         return choice, "", stats
+
+
+def coarse_view(view: ViewModel, divisor: int) -> ViewModel:
+    """``view`` with ``divisor`` times fewer rays per axis in the camera and the projector bundle (at least one)."""
+    return dataclasses.replace(
+        view,
+        rays_h=max(1, view.rays_h // divisor),
+        rays_v=max(1, view.rays_v // divisor),
+        projector_rays_h=max(1, view.projector_rays_h // divisor),
+        projector_rays_v=max(1, view.projector_rays_v // divisor),
+    )
