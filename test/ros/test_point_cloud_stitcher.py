@@ -91,6 +91,10 @@ class PointCloudStitcherTest(unittest.TestCase):
         reply = self.switch(False)
         after_off = rospy.Time.now().to_sec()
         self.assertEqual((reply.success, reply.message), (True, "deactivated stitching"))
+        # the latched state topic travels on its own connection: it may arrive after the service's reply
+        deadline = time.monotonic() + 5.0
+        while self.stitching[-2:] != [True, False] and time.monotonic() < deadline:
+            time.sleep(0.02)
         self.assertEqual(self.stitching[-2:], [True, False])
         points, message = self.measured_cloud()
         profiles = int(message.split(" from ")[1].split()[0])
