@@ -29,6 +29,11 @@ __all__ = [
 # Size and time cap of the quick programme over the LP's favourite columns that tightens the incumbent.
 SUPPORT_MIP_COLS = 400
 SUPPORT_MIP_TIME_S = 2.0
+# Column generation for the LP of programmes with more columns than this; columns added per pricing round (and
+# the cheapest per point that start it); reduced costs below minus this price a column in (HiGHS's dual tolerance)
+PRICING_MIN_COLS = 1000
+PRICING_BATCH_COLS = 300
+PRICING_TOLERANCE = 1e-7
 # The integer programme is not started with less time than this (s) left: it could not improve the incumbent.
 MIN_MIP_TIME_S = 0.5
 
@@ -69,24 +74,60 @@ def highs_model(sub: ColumnSets, costs: np.ndarray, integer: bool, time_limit_s:
     return h
 
 
-def lp_relaxation(sub: ColumnSets, costs: np.ndarray, time_limit_s: float):
+def lp_relaxation(sub: ColumnSets, costs: np.ndarray, time_limit_s: float, start=None):
     """LP relaxation: primal x, a rigorous lower bound and reduced costs; None if it did not solve.
 
     The bound is recomputed from the duals clipped to y >= 0 (any such y gives the Lagrangian bound
     ``sum(y) + sum(min(rc, 0))`` with ``rc = c - A^T y``), so solver tolerances cannot make it invalid. For
     any cover that uses column j, ``cost >= bound + max(rc_j, 0)``.
+
+    Programmes of more than :data:`PRICING_MIN_COLS` columns are solved by column generation: the LP over the
+    columns ``start`` (a cover, so the LP is feasible) and the :data:`PRICING_BATCH_COLS` of least cost per row, then
+    the :data:`PRICING_BATCH_COLS` columns of most negative reduced cost are added (HiGHS goes on from its basis)
+    until no column prices out. The optimum is the same as over all columns; a view sees hundreds of points, so the
+    full programme is dense, and its simplex takes several times as long. When the time runs out first, the bound
+    is still the Lagrangian one of the last duals.
     """
     import highspy
 
-    h = highs_model(sub, costs, integer=False, time_limit_s=time_limit_s)
-    h.run()
-    if h.getModelStatus() != highspy.HighsModelStatus.kOptimal:
-        return None
-    sol = h.getSolution()
-    y = np.maximum(np.asarray(sol.row_dual, dtype=np.float64), 0.0)
-    x = np.clip(np.asarray(sol.col_value, dtype=np.float64), 0.0, 1.0)
-    rc = costs - np.add.reduceat(y[sub.indices], sub.indptr[:-1])
-    return x, float(y.sum() + np.minimum(rc, 0.0).sum()), rc
+    n = sub.n_cols
+    deadline = time.perf_counter() + time_limit_s
+    if n <= PRICING_MIN_COLS or start is None:
+        active = np.arange(n)
+    else:
+        by_ratio = np.argsort(costs / np.maximum(sub.sizes(), 1), kind="stable")[:PRICING_BATCH_COLS]
+        active = np.union1d(np.asarray(start, dtype=np.int64), by_ratio)
+    h = highs_model(
+        sub.take(active) if active.size < n else sub, costs[active], integer=False, time_limit_s=time_limit_s
+    )
+    col_of = np.repeat(np.arange(n), sub.sizes())
+    inactive = np.ones(n, dtype=bool)
+    inactive[active] = False
+    result = None
+    while True:
+        h.setOptionValue("time_limit", float(max(deadline - time.perf_counter(), 0.01)))
+        h.run()
+        if h.getModelStatus() != highspy.HighsModelStatus.kOptimal:
+            # the last pricing round's figures: its bound holds whatever the columns added since (one of no more
+            # than 0 says nothing: every cost is positive)
+            return result if result is not None and result[1] > 0.0 else None
+        sol = h.getSolution()
+        y = np.maximum(np.asarray(sol.row_dual, dtype=np.float64), 0.0)
+        rc = costs - np.bincount(col_of, weights=y[sub.indices], minlength=n)
+        x = np.zeros(n)
+        x[active] = np.clip(np.asarray(sol.col_value, dtype=np.float64), 0.0, 1.0)
+        result = x, float(y.sum() + np.minimum(rc, 0.0).sum()), rc
+        priced = np.flatnonzero(inactive & (rc < -PRICING_TOLERANCE))
+        if priced.size == 0 or time.perf_counter() > deadline:
+            return result
+        new = priced[np.argsort(rc[priced], kind="stable")[:PRICING_BATCH_COLS]]
+        part = sub.take(new)
+        h.addCols(
+            new.size, costs[new], np.zeros(new.size), np.ones(new.size), part.indices.size,
+            part.indptr[:-1].astype(np.int32), part.indices.astype(np.int32), np.ones(part.indices.size),
+        )  # fmt: skip
+        active = np.concatenate([active, new])
+        inactive[new] = False
 
 
 def solve_highs(
@@ -186,7 +227,7 @@ def solve_reduced_ip(sub, costs, tie, integral, solve, deadline, mip_gap, warm_s
     """
     t0 = time.perf_counter()
     candidates = [make_irredundant(sub, greedy_weighted_cover(sub, tie, costs), costs)]
-    lp = lp_relaxation(sub, costs, max(deadline - time.perf_counter(), 0.01)) if lp_fixing else None
+    lp = lp_relaxation(sub, costs, max(deadline - time.perf_counter(), 0.01), candidates[0]) if lp_fixing else None
     lp_bound = -math.inf
     if lp is not None:
         x_lp, lp_bound, rc = lp

@@ -4,10 +4,10 @@ and forced columns, duplicate and implied rows, repeated until nothing changes.
 
 from __future__ import annotations
 
-import itertools
 import time
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from agiprobot_measurement.planning.cover.columns import ColumnSets
@@ -17,12 +17,10 @@ __all__ = [
     "Reduction",
     "column_bitsets",
     "dominated_columns",
-    "dominated_in_block",
     "duplicate_columns",
     "implied_rows",
     "reduce_problem",
     "restrict",
-    "rows_held",
 ]
 
 # Reductions run a few rounds at most: after two or three nothing changes on realistic data.
@@ -73,166 +71,78 @@ def duplicate_columns(cols: ColumnSets, order: np.ndarray) -> np.ndarray:
     return dup
 
 
-def dominated_columns(
-    cols: ColumnSets, costs: np.ndarray, deadline: float, probe_rows: int = 16, max_pool_bytes: int = 256 << 20
-) -> tuple[np.ndarray, bool]:
-    """Mask of columns whose rows are a subset of another column's that costs no more.
+#: columns visited by one call of the compiled dominance search: the deadline is checked between calls
+DOMINANCE_CHUNK_COLS = 2048
+
+
+def dominated_columns(cols: ColumnSets, costs: np.ndarray, deadline: float) -> tuple[np.ndarray, bool]:
+    """Mask of columns whose rows are a strict subset of another column's that costs no more.
 
     Columns are visited by decreasing size (then cost, then index), so every strict superset of a column is
-    visited before it, and only columns found undominated (the *pool*) need to be searched: a superset
-    that is itself dominated has an undominated dominator of its own, which also dominates (subset and cost
-    are transitive). Equal-sized columns cannot strictly contain one another, so each size level is checked
-    against the pool as a whole, vectorised. For every pool row a bitset over the pool says which pool
-    columns hold it; ANDing the bitsets of a column's few rarest rows leaves a handful of candidates, which
-    are then checked row by row. Identical columns must have been merged already (they are never flagged
-    here). Returns the mask and whether the search finished before ``deadline``.
+    visited before it. A dominator holds all rows of the column, so it is sought among the earlier columns of the
+    column's rarest row only, and only among those not found dominated themselves: a dominated superset has an
+    undominated dominator of its own, which also dominates (subset and cost are transitive). The subset test merges
+    the two sorted row lists and stops at the first row the candidate lacks. Compiled (:func:`_dominated_kernel`),
+    :data:`DOMINANCE_CHUNK_COLS` columns per call. Identical columns must have been merged already (they are never
+    flagged here). Returns the mask and whether the search finished before ``deadline``.
     """
-    n, m = cols.n_cols, cols.n_rows
+    n = cols.n_cols
     dominated = np.zeros(n, dtype=bool)
     if n < 2:
         return dominated, True
     sizes = cols.sizes()
     order = np.lexsort((np.arange(n), costs, -sizes))
-    sorted_sizes = sizes[order]
-    level_starts = np.flatnonzero(np.concatenate([[True], sorted_sizes[1:] != sorted_sizes[:-1]]))
-    level_bounds = [*level_starts.tolist(), n]
-    max_words = max(1, min(-(-n // 64), max_pool_bytes // (8 * max(m, 1))))
-    pool_bits = np.zeros((m, min(max_words, 16)), dtype=np.uint64)
-    pool = np.empty(min(n, 64 * max_words), dtype=np.int64)
-    n_pool = 0
-    pool_degree = np.zeros(m, dtype=np.int64)
-    # Cost mask: pool columns are filed in cost buckets; ANDing with the bitset of the pool columns in the
-    # candidate's bucket or a cheaper one keeps the lowest-candidate rounds from trying expensive columns.
-    # Same-bucket candidates still get the exact cost test.
-    n_buckets = 1 if np.all(costs == costs[0]) else 64
-    edges = np.quantile(costs, np.linspace(0.0, 1.0, n_buckets + 1)[1:-1]) if n_buckets > 1 else np.zeros(0)
-    bucket = np.searchsorted(edges, costs, side="left")
-    cheap_bits = np.zeros((n_buckets, pool_bits.shape[1]), dtype=np.uint64)
+    ranked = cols.take(order)  # column p is order[p]
+    rows = ranked.transpose()  # per row: the ranks of its columns, ascending
+    indptr, indices = ranked.indptr.astype(np.int64), ranked.indices.astype(np.int64)
+    row_ptr, row_cols = rows.indptr.astype(np.int64), rows.indices.astype(np.int64)
+    ranked_costs = np.ascontiguousarray(costs[order], dtype=np.float64)
+    found = np.zeros(n, dtype=bool)  # by rank
     complete = True
-    for lo, hi in itertools.pairwise(level_bounds):
+    for begin in range(0, n, DOMINANCE_CHUNK_COLS):
         if time.perf_counter() > deadline:
             complete = False
             break
-        level = order[lo:hi]
-        size = int(sizes[level[0]])
-        n_words = -(-n_pool // 64)
-        step = max(1, min(4_000_000 // max(n_words, 1), 4_000_000 // size))
-        for b0 in range(0, level.size if n_pool else 0, step):
-            block = level[b0 : b0 + step]
-            rows2d = cols.take(block).indices.reshape(block.size, size)
-            degree2d = pool_degree[rows2d]
-            possible = degree2d.min(axis=1) > 0  # a row no pool column holds: nothing can dominate
-            if not possible.any():
-                continue
-            block, rows2d, degree2d = block[possible], rows2d[possible], degree2d[possible]
-            t = min(size, probe_rows)
-            if t < size:
-                probe = np.take_along_axis(rows2d, np.argpartition(degree2d, t - 1, axis=1)[:, :t], axis=1)
-            else:
-                probe = rows2d
-            acc = pool_bits[probe[:, 0], :n_words]
-            for i in range(1, t):
-                acc = acc & pool_bits[probe[:, i], :n_words]
-            if n_buckets > 1:
-                acc &= cheap_bits[bucket[block], :n_words]
-            dominated[block[dominated_in_block(acc, pool, block, rows2d, costs, pool_bits, t < size)]] = True
-        kept = level[~dominated[level]]
-        room = pool.size - n_pool
-        if kept.size > room:
-            complete = False  # pool memory cap: later columns are only checked against this pool
-            kept = kept[:room]
-        if kept.size == 0:
-            continue
-        idx = n_pool + np.arange(kept.size, dtype=np.int64)
-        need = -(-(n_pool + kept.size) // 64)
-        if need > pool_bits.shape[1]:
-            grown = np.zeros((m, min(max_words, max(need, 2 * pool_bits.shape[1]))), dtype=np.uint64)
-            grown[:, : pool_bits.shape[1]] = pool_bits
-            pool_bits = grown
-            grown = np.zeros((n_buckets, pool_bits.shape[1]), dtype=np.uint64)
-            grown[:, : cheap_bits.shape[1]] = cheap_bits
-            cheap_bits = grown
-        rows = cols.take(kept).indices
-        k = np.repeat(idx, size)
-        np.bitwise_or.at(pool_bits, (rows, k >> 6), np.left_shift(np.uint64(1), (k & 63).astype(np.uint64)))
-        pool_degree += np.bincount(rows, minlength=m)
-        if n_buckets > 1:
-            # Each new column joins its own bucket's mask and every more expensive one's.
-            w0 = n_pool // 64
-            new_bits = np.zeros((n_buckets, -(-(n_pool + kept.size) // 64) - w0), dtype=np.uint64)
-            np.bitwise_or.at(
-                new_bits, (bucket[kept], (idx >> 6) - w0), np.left_shift(np.uint64(1), (idx & 63).astype(np.uint64))
-            )
-            cheap_bits[:, w0 : w0 + new_bits.shape[1]] |= np.bitwise_or.accumulate(new_bits, axis=0)
-        pool[n_pool : n_pool + kept.size] = kept
-        n_pool += kept.size
+        end = min(n, begin + DOMINANCE_CHUNK_COLS)
+        _dominated_kernel(indptr, indices, row_ptr, row_cols, ranked_costs, found, begin, end)
+    dominated[order] = found
     return dominated, complete
 
 
-def rows_held(pool_bits: np.ndarray, rows2d: np.ndarray, k: np.ndarray) -> np.ndarray:
-    """For pairs (rows2d[i], pool column k[i]): does the pool column hold every one of the rows?
-
-    Rows are checked 16 at a time and failed pairs dropped in between: a non-superset usually misses many
-    rows, so it rarely costs more than the first slice.
-    """
-    word, shift = k >> 6, (k & 63).astype(np.uint64)
-    live = np.arange(k.size)
-    for j0 in range(0, rows2d.shape[1], 16):
-        if live.size == 0:
-            break
-        held = pool_bits[rows2d[live, j0 : j0 + 16], word[live, None]] >> shift[live, None]
-        live = live[np.all(held & np.uint64(1), axis=1)]
-    ok = np.zeros(k.size, dtype=bool)
-    ok[live] = True
-    return ok
-
-
-def dominated_in_block(
-    acc: np.ndarray,
-    pool: np.ndarray,
-    block: np.ndarray,
-    rows2d: np.ndarray,
-    costs: np.ndarray,
-    pool_bits: np.ndarray,
-    verify: bool,
-) -> np.ndarray:
-    """Positions in ``block`` with a verified dominator among their candidates (set bits of ``acc``).
-
-    One dominator per column is enough and most candidates that survive the probe rows and the cost mask
-    are genuine, so each column's lowest candidate is tried first, for a few rounds (a check costs one
-    gather per row); only the columns still open after that have all their remaining candidates expanded
-    and checked.
-    """
-    found = np.zeros(block.size, dtype=bool)
-    open_rows = np.nonzero(acc.any(axis=1))[0]
-    for _ in range(4):
-        if open_rows.size == 0:
-            return found
-        sub = acc[open_rows]
-        w = np.argmax(sub != 0, axis=1)
-        word = sub[np.arange(open_rows.size), w]
-        lowest = word & (~word + np.uint64(1))
-        k = w.astype(np.int64) * 64 + np.log2(lowest.astype(np.float64)).astype(np.int64)  # exact: 2**n
-        ok = costs[pool[k]] <= costs[block[open_rows]]
-        if verify and ok.any():
-            ok[ok] = rows_held(pool_bits, rows2d[open_rows[ok]], k[ok])
-        found[open_rows[ok]] = True
-        acc[open_rows, w] &= ~lowest
-        open_rows = open_rows[~ok]
-        open_rows = open_rows[acc[open_rows].any(axis=1)]
-    if open_rows.size == 0:
-        return found
-    ai, wi = np.nonzero(acc[open_rows])
-    bits = np.unpackbits(acc[open_rows[ai], wi].view(np.uint8).reshape(-1, 8), axis=1, bitorder="little")
-    hit, bit = np.nonzero(bits)
-    a_pos = open_rows[ai[hit]]
-    k = wi[hit].astype(np.int64) * 64 + bit
-    ok = costs[pool[k]] <= costs[block[a_pos]]
-    a_pos, k = a_pos[ok], k[ok]
-    if verify and a_pos.size:
-        a_pos = a_pos[rows_held(pool_bits, rows2d[a_pos], k)]
-    found[a_pos] = True
-    return found
+@numba.njit(cache=True)
+def _dominated_kernel(indptr, indices, row_ptr, row_cols, costs, dominated, begin, end):  # pragma: no cover
+    """:func:`dominated_columns` for the columns ``begin:end`` (columns numbered by rank: larger first): sets
+    ``dominated`` in place."""
+    for c in range(begin, end):
+        a, b = indptr[c], indptr[c + 1]
+        size = b - a
+        if size == 0:
+            continue
+        rare = indices[a]
+        for e in range(a + 1, b):
+            r = indices[e]
+            if row_ptr[r + 1] - row_ptr[r] < row_ptr[rare + 1] - row_ptr[rare]:
+                rare = r
+        for q in range(row_ptr[rare], row_ptr[rare + 1]):
+            d = row_cols[q]
+            if d >= c:
+                break  # later ranks are no larger
+            if dominated[d] or indptr[d + 1] - indptr[d] <= size or costs[d] > costs[c]:
+                continue
+            # rows(c) within rows(d)? both sorted: one merge, stopped at the first row d lacks
+            j, stop = indptr[d], indptr[d + 1]
+            subset = True
+            for i in range(a, b):
+                row = indices[i]
+                while j < stop and indices[j] < row:
+                    j += 1
+                if j == stop or indices[j] != row:
+                    subset = False
+                    break
+                j += 1
+            if subset:
+                dominated[c] = True
+                break
 
 
 def column_bitsets(cols: ColumnSets) -> np.ndarray:
