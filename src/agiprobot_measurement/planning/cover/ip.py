@@ -75,7 +75,8 @@ def highs_model(sub: ColumnSets, costs: np.ndarray, integer: bool, time_limit_s:
 
 
 def lp_relaxation(sub: ColumnSets, costs: np.ndarray, time_limit_s: float, start=None):
-    """LP relaxation: primal x, a rigorous lower bound and reduced costs; None if it did not solve.
+    """LP relaxation: primal x, a rigorous lower bound, reduced costs and the row duals y >= 0 they come from; None
+    if it did not solve.
 
     The bound is recomputed from the duals clipped to y >= 0 (any such y gives the Lagrangian bound
     ``sum(y) + sum(min(rc, 0))`` with ``rc = c - A^T y``), so solver tolerances cannot make it invalid. For
@@ -116,7 +117,7 @@ def lp_relaxation(sub: ColumnSets, costs: np.ndarray, time_limit_s: float, start
         rc = costs - np.bincount(col_of, weights=y[sub.indices], minlength=n)
         x = np.zeros(n)
         x[active] = np.clip(np.asarray(sol.col_value, dtype=np.float64), 0.0, 1.0)
-        result = x, float(y.sum() + np.minimum(rc, 0.0).sum()), rc
+        result = x, float(y.sum() + np.minimum(rc, 0.0).sum()), rc, y
         priced = np.flatnonzero(inactive & (rc < -PRICING_TOLERANCE))
         if priced.size == 0 or time.perf_counter() > deadline:
             return result
@@ -215,8 +216,11 @@ def lp_rounding(sub: ColumnSets, costs: np.ndarray, x: np.ndarray) -> list[int]:
     return picks
 
 
-def solve_reduced_ip(sub, costs, tie, integral, solve, deadline, mip_gap, warm_start, lp_fixing, stats):
+def solve_reduced_ip(sub, costs, tie, integral, solve, deadline, mip_gap, warm_start, lp_fixing, stats, offset=0.0):
     """Solve the reduced programme; returns (chosen local columns, lower bound, detail).
+
+    ``mip_gap`` is the relative gap of the whole cover, whose cost is ``offset`` (the forced columns) more than the
+    reduced programme's: a gap of the reduced cover's cost ``ub`` is ``mip_gap * (ub + offset)``.
 
     An incumbent comes from the best of Chvatal's greedy, an LP rounding and a small programme over the
     columns of least reduced cost (the last two only with ``lp_fixing``). With the LP's reduced costs,
@@ -230,7 +234,7 @@ def solve_reduced_ip(sub, costs, tie, integral, solve, deadline, mip_gap, warm_s
     lp = lp_relaxation(sub, costs, max(deadline - time.perf_counter(), 0.01), candidates[0]) if lp_fixing else None
     lp_bound = -math.inf
     if lp is not None:
-        x_lp, lp_bound, rc = lp
+        x_lp, lp_bound, rc, _ = lp
         candidates.append(make_irredundant(sub, lp_rounding(sub, costs, x_lp), costs))
         stats["lp_bound"] = lp_bound
         # local columns by how likely a cover is to use them (LP value, then reduced cost): the planner verifies
@@ -253,9 +257,9 @@ def solve_reduced_ip(sub, costs, tie, integral, solve, deadline, mip_gap, warm_s
     if not math.isfinite(lp_bound):
         settled = False
     elif integral:
-        settled = math.ceil(lp_bound - 1e-6) >= ub * (1.0 - mip_gap) - 1e-9
+        settled = math.ceil(lp_bound - 1e-6) >= ub - mip_gap * (ub + offset) - 1e-9
     else:
-        settled = lp_bound >= ub * (1.0 - max(mip_gap, 1e-9)) - 1e-12
+        settled = lp_bound >= ub - max(mip_gap, 1e-9) * (ub + offset) - 1e-12
     if settled:
         stats["mip_shape"] = (0, 0)
         return np.asarray(incumbent, dtype=np.int64), lp_bound, "the LP bound meets the heuristic cover"
@@ -273,7 +277,9 @@ def solve_reduced_ip(sub, costs, tie, integral, solve, deadline, mip_gap, warm_s
     restricted = sub.take(kept)
     start = np.isin(kept, incumbent)
     t_mip = time.perf_counter()
-    outcome = solve(restricted, costs[kept], start if warm_start else None, max(deadline - t_mip, 0.01), mip_gap)
+    # the solver's relative gap is of the reduced cover's cost: widened by the offset, it means the same stop
+    local_gap = mip_gap * (ub + offset) / ub if ub > 0 else mip_gap
+    outcome = solve(restricted, costs[kept], start if warm_start else None, max(deadline - t_mip, 0.01), local_gap)
     stats["mip_time_s"] = time.perf_counter() - t_mip
     stats["mip_shape"] = (restricted.n_rows, restricted.n_cols)
     if outcome.x is not None and float(costs[kept][outcome.x].sum()) <= ub:

@@ -242,7 +242,7 @@ def solve_set_cover(
     solve = solve_highs if backend == "highs" else solve_cbc
     deadline = t_start + time_limit_s
     local, bound_local, detail = solve_reduced_ip(
-        sub, sub_costs, tie[red.cols_alive], integral, solve, deadline, mip_gap, warm_start, reduce, stats
+        sub, sub_costs, tie[red.cols_alive], integral, solve, deadline, mip_gap, warm_start, reduce, stats, offset
     )
     picks = forced + red.cols_alive[local].tolist()
     picks = make_irredundant(cols, picks, costs)

@@ -20,6 +20,7 @@ import numpy as np
 import scipy.sparse
 
 from agiprobot_measurement.motion.cartesian_kernels import kernels_loaded
+from agiprobot_measurement.planning.cover.pricing import full_bound, price_pool
 from agiprobot_measurement.planning.cover.solve import SOLVER_TYPES, SetCoverResult, solve_set_cover
 from agiprobot_measurement.planning.errors import PlanningError, PlanningInputError
 from agiprobot_measurement.planning.run import PlanningRun, PlanningTools
@@ -38,6 +39,8 @@ LOG = logging.getLogger(__name__)
 
 #: an IP solve of one verification round stops after this long (s): its cover only names what to verify next
 ROUND_IP_TIME_S = 2.0
+#: ... and may stop at this relative gap (or the requested one, if larger)
+ROUND_MIP_GAP = 0.04
 #: ... and this long on problems of at least LARGE_PROBLEM_VIEWS candidates (tilt full; counted before dominated
 #: ones were dropped): there the pool's programmes have a ~40 % integrality gap, so a round's solve always runs to
 #: its limit; 1 s gave the same covers as 2 s on the cylinder and idler_riser and saved ~25 s on the cylinder
@@ -55,6 +58,10 @@ POLISH_IP_TIME_S = 15.0
 FULL_ROUND_IP_TIME_S = 8.0
 #: the set cover loop solves the problem over all views at most this often (the rest over the candidate pool)
 MAX_FULL_SOLVES = 3
+#: a verified cover of the pool is priced over all views at most this often (each time the views of negative
+#: reduced cost join the pool), up to this many views each time, most negative first
+MAX_PRICING_ROUNDS = 6
+PRICING_POOL_COLS = 2000
 #: each verification round takes up to this many unverified views of every point no verified view measures yet
 POINT_VIEWS_PER_ROUND = 24
 #: ... but no more than this many in one round (the next round's cover may settle the rest)
@@ -88,6 +95,7 @@ class _Round:
     limit: float
     chosen: list
     pending: list
+    solved: bool = True  # False when the round took a settled cover of an earlier round (its bound is that pool's)
 
 
 @dataclass
@@ -120,6 +128,8 @@ class CoverLoop:
     full_checked: bool = False
     full_solve_s: float = 0.0
     full_solves: int = 0
+    pricing_rounds: int = 0
+    pricing_added: bool = True  # whether the last pricing named views (the first is always run)
     best_verified: SetCoverResult | None = None
     # a round's cover whose picks all verified as executable with their points: the next round takes it as
     # its (verified) cover instead of solving again, which could pick other, equally good unverified views
@@ -197,7 +207,8 @@ class CoverLoop:
             # past the deadline the fallback's cover of verified views (a small programme) gets a short solve
             limit = max(min(1.0, max(remaining, LATE_IP_TIME_S)), min(limit, 0.5 * remaining))
         sub = matrix if columns.size == len(views) else matrix[:, columns]
-        if self.settled is not None and not self.only_verified:
+        solved = self.settled is None or self.only_verified
+        if not solved:
             result, self.settled = self.settled, None
         else:
             result = solve_set_cover(
@@ -206,7 +217,10 @@ class CoverLoop:
                 uncertainties=worst[columns],
                 durations_s=durations[columns] if self.solver_type == "IP_time" else None,
                 time_limit_s=limit,
-                mip_gap=self.mip_gap,
+                # a round's cover only names what to verify next: it need not close the last view of an
+                # integrality gap (the search for it ran each round to its time limit); the fallback and the polish
+                # over verified views solve to the requested gap
+                mip_gap=self.mip_gap if self.only_verified else max(self.mip_gap, ROUND_MIP_GAP),
             )
             self.set_cover_time += result.solve_time_s
             if columns.size == len(views):
@@ -216,7 +230,7 @@ class CoverLoop:
         self.result = result
         self.chosen = [views[j] for j in result.selected.tolist()]
         pending = [v for v in self.chosen if v.mechanics_verified is False]
-        return _Round(columns, matrix, worst, durations, sub, limit, self.chosen, pending)
+        return _Round(columns, matrix, worst, durations, sub, limit, self.chosen, pending, solved)
 
     def settle(self, step: _Round, round_index: int) -> str | None:
         """What the round's cover settles: ``'done'`` (the cover is final), ``'again'`` (solve again without a
@@ -241,9 +255,25 @@ class CoverLoop:
         if columns.size == len(views):
             self.full_checked = True
             return "done"
-        # a verified cover of the pool: worth proving over all views only if that fits in the time, and a
-        # few times at most (each full solve may name new candidates, each costs the full reductions)
-        if self.full_solves < MAX_FULL_SOLVES and time.perf_counter() + 1.5 * self.full_solve_s < self.deadline:
+        # a verified cover of the pool: the pool LP's duals priced over all views prove it or name the views
+        # outside the pool that improve the LP (milliseconds, where a solve over all views costs seconds and, on an
+        # integrality gap, runs to its time limit without closing it); a solve over all views only when the LP did
+        # not solve
+        priced = None
+        if self.pricing_rounds < MAX_PRICING_ROUNDS:
+            # priced before without a gain, and the pool's bound leaves a gap: no pricing closes it
+            priced = self._price(step) if self._worth_pricing(step) else ("again", np.zeros(0, dtype=np.int64))
+        if priced is not None:
+            verdict, added = priced
+            if verdict == "done":
+                self.full_checked = True
+                return "done"
+            self.pricing_added = bool(added.size)
+            if added.size:
+                self.pricing_rounds += 1
+                self.pool = np.union1d(columns, added)
+                return "again"
+        elif self.full_solves < MAX_FULL_SOLVES and time.perf_counter() + 1.5 * self.full_solve_s < self.deadline:
             self.pool = None
             return "again"
         # points that only unverified views outside the pool measure: verify their views (no solve) while
@@ -259,11 +289,54 @@ class CoverLoop:
             self.pool = np.union1d(columns, open_columns)
             return "again"
         self.run.warn(
-            f"set cover: the gap holds for a candidate pool of {columns.size} of {len(views)} views (no more time "
-            "or rounds to solve over all views again)",
+            f"set cover: the gap holds for a candidate pool of {columns.size} of {len(views)} views (its LP priced "
+            "over all views, or no more time or rounds to solve over all views again)",
             LOG,
         )
         return "done"
+
+    def _worth_pricing(self, step: _Round) -> bool:
+        """Whether pricing the pool's verified cover may settle anything: it can prove the cover only when the pool's
+        own bound (of this round's solve) is within the gap, and after a pricing that named no views only that."""
+        if self.pricing_added or not step.solved or self.result.lower_bound is None:
+            return True
+        objective = self.result.objective
+        return objective <= 0 or (objective - self.result.lower_bound) / objective <= max(self.mip_gap, 1e-9)
+
+    def _price(self, step: _Round) -> tuple[str, np.ndarray] | None:
+        """The pool's verified cover priced over all views (:func:`price_pool`): ``('done', ...)`` when no cover
+        over all views (unverified ones counted as executable) beats it by more than the gap (the result then
+        carries that bound), else ``('again', columns)`` with the outside views of negative reduced cost (none: the
+        pool's LP is the LP over all views, the gap left is the programme's own); None when the pool LP did not
+        solve in time."""
+        result, columns, views = self.result, step.columns, self.views
+        if self.solver_type == "IP_uncertainty":
+            raw = step.worst
+        elif self.solver_type == "IP_time":
+            raw = step.durations
+        else:
+            raw = np.ones(len(views))
+        scale = float(raw.max()) if raw.size and raw.max() > 0 else 1.0
+        left = self.deadline - time.perf_counter()
+        limit = min(step.limit, 0.5 * left) if math.isfinite(left) else step.limit
+        started = time.perf_counter()
+        pricing = price_pool(step.matrix, columns, raw / scale, max(limit, 0.05))
+        self.set_cover_time += time.perf_counter() - started
+        if pricing is None:
+            return None
+        integral = self.solver_type == "IP_basic"
+        objective = result.objective / scale
+        pool_bound = result.lower_bound / scale if step.solved and result.lower_bound is not None else None
+        bound = full_bound(pricing, pool_bound, integral)
+        gap = max(0.0, (objective - bound) / objective) if objective > 0 else 0.0
+        if int(result.covered.sum()) >= pricing.n_coverable and gap <= max(self.mip_gap, 1e-9):
+            proven = gap <= 1e-9
+            self.result = dataclasses.replace(
+                result, gap=0.0 if proven else gap, lower_bound=objective * scale if proven else bound * scale,
+                proven_optimal=proven,
+            )  # fmt: skip
+            return "done", np.zeros(0, dtype=np.int64)
+        return "again", pricing.improving()[:PRICING_POOL_COLS]
 
     def _batch(self, step: _Round, round_index: int) -> tuple[list, int, np.ndarray | None]:
         """The views to verify this round (the picks first), the batch size aimed at, the likely columns."""
