@@ -11,6 +11,7 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import sparse
 
 from agiprobot_measurement.planning.cover.columns import ColumnSets
 from agiprobot_measurement.planning.cover.greedy import greedy_weighted_cover, make_irredundant
@@ -33,6 +34,7 @@ SUPPORT_MIP_TIME_S = 2.0
 # the cheapest per point that start it); reduced costs below minus this price a column in (HiGHS's dual tolerance)
 PRICING_MIN_COLS = 1000
 PRICING_BATCH_COLS = 300
+PRICING_BATCH_SHARE = 20  # ... or this share of the columns, if more
 PRICING_TOLERANCE = 1e-7
 # The integer programme is not started with less time than this (s) left: it could not improve the incumbent.
 MIN_MIP_TIME_S = 0.5
@@ -84,7 +86,7 @@ def lp_relaxation(sub: ColumnSets, costs: np.ndarray, time_limit_s: float, start
 
     Programmes of more than :data:`PRICING_MIN_COLS` columns are solved by column generation: the LP over the
     columns ``start`` (a cover, so the LP is feasible) and the :data:`PRICING_BATCH_COLS` of least cost per row, then
-    the :data:`PRICING_BATCH_COLS` columns of most negative reduced cost are added (HiGHS goes on from its basis)
+    the :data:`PRICING_BATCH_COLS` columns (or 1 / :data:`PRICING_BATCH_SHARE` of them) of most negative reduced cost are added (HiGHS goes on from its basis)
     until no column prices out. The optimum is the same as over all columns; a view sees hundreds of points, so the
     full programme is dense, and its simplex takes several times as long. When the time runs out first, the bound
     is still the Lagrangian one of the last duals.
@@ -101,7 +103,9 @@ def lp_relaxation(sub: ColumnSets, costs: np.ndarray, time_limit_s: float, start
     h = highs_model(
         sub.take(active) if active.size < n else sub, costs[active], integer=False, time_limit_s=time_limit_s
     )
-    col_of = np.repeat(np.arange(n), sub.sizes())
+    # A^T y by one sparse product per pricing round
+    transposed = sparse.csr_array((np.ones(sub.indices.size), sub.indices, sub.indptr), shape=(n, sub.n_rows))
+    batch = max(PRICING_BATCH_COLS, n // PRICING_BATCH_SHARE)
     inactive = np.ones(n, dtype=bool)
     inactive[active] = False
     result = None
@@ -114,14 +118,14 @@ def lp_relaxation(sub: ColumnSets, costs: np.ndarray, time_limit_s: float, start
             return result if result is not None and result[1] > 0.0 else None
         sol = h.getSolution()
         y = np.maximum(np.asarray(sol.row_dual, dtype=np.float64), 0.0)
-        rc = costs - np.bincount(col_of, weights=y[sub.indices], minlength=n)
+        rc = costs - transposed @ y
         x = np.zeros(n)
         x[active] = np.clip(np.asarray(sol.col_value, dtype=np.float64), 0.0, 1.0)
         result = x, float(y.sum() + np.minimum(rc, 0.0).sum()), rc, y
         priced = np.flatnonzero(inactive & (rc < -PRICING_TOLERANCE))
         if priced.size == 0 or time.perf_counter() > deadline:
             return result
-        new = priced[np.argsort(rc[priced], kind="stable")[:PRICING_BATCH_COLS]]
+        new = priced[np.argsort(rc[priced], kind="stable")[:batch]]
         part = sub.take(new)
         h.addCols(
             new.size, costs[new], np.zeros(new.size), np.ones(new.size), part.indices.size,

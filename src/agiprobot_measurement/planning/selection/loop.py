@@ -60,7 +60,7 @@ FULL_ROUND_IP_TIME_S = 8.0
 MAX_FULL_SOLVES = 3
 #: a verified cover of the pool is priced over all views at most this often (each time the views of negative
 #: reduced cost join the pool), up to this many views each time, most negative first
-MAX_PRICING_ROUNDS = 6
+MAX_PRICING_ROUNDS = 3
 PRICING_POOL_COLS = 2000
 #: each verification round takes up to this many unverified views of every point no verified view measures yet
 POINT_VIEWS_PER_ROUND = 24
