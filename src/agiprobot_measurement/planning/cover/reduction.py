@@ -25,6 +25,8 @@ __all__ = [
 
 # Reductions run a few rounds at most: after two or three nothing changes on realistic data.
 MAX_REDUCTION_ROUNDS = 10
+# once the rows were reduced, a round that removed less than this share of the programme's entries is the last
+REDUCTION_MIN_CHANGE = 0.02
 # candidate row pairs checked between two looks at the deadline in :func:`implied_rows`
 IMPLIED_GROUP_PAIRS = 200_000
 
@@ -82,9 +84,10 @@ def dominated_columns(cols: ColumnSets, costs: np.ndarray, deadline: float) -> t
     visited before it. A dominator holds all rows of the column, so it is sought among the earlier columns of the
     column's rarest row only, and only among those not found dominated themselves: a dominated superset has an
     undominated dominator of its own, which also dominates (subset and cost are transitive). The subset test merges
-    the two sorted row lists and stops at the first row the candidate lacks. Compiled (:func:`_dominated_kernel`),
-    :data:`DOMINANCE_CHUNK_COLS` columns per call. Identical columns must have been merged already (they are never
-    flagged here). Returns the mask and whether the search finished before ``deadline``.
+    the two sorted row lists and stops at the first row the candidate lacks. Compiled (:func:`_rank_lists`, then
+    :func:`_dominated_kernel` for :data:`DOMINANCE_CHUNK_COLS` columns per call), without copying the columns.
+    Identical columns must have been merged already (they are never flagged here). Returns the mask and whether the
+    search finished before ``deadline``.
     """
     n = cols.n_cols
     dominated = np.zeros(n, dtype=bool)
@@ -92,10 +95,7 @@ def dominated_columns(cols: ColumnSets, costs: np.ndarray, deadline: float) -> t
         return dominated, True
     sizes = cols.sizes()
     order = np.lexsort((np.arange(n), costs, -sizes))
-    ranked = cols.take(order)  # column p is order[p]
-    rows = ranked.transpose()  # per row: the ranks of its columns, ascending
-    indptr, indices = ranked.indptr.astype(np.int64), ranked.indices.astype(np.int64)
-    row_ptr, row_cols = rows.indptr.astype(np.int64), rows.indices.astype(np.int64)
+    row_ptr, row_ranks = _rank_lists(cols.indptr, cols.indices, order, cols.n_rows)
     ranked_costs = np.ascontiguousarray(costs[order], dtype=np.float64)
     found = np.zeros(n, dtype=bool)  # by rank
     complete = True
@@ -104,16 +104,36 @@ def dominated_columns(cols: ColumnSets, costs: np.ndarray, deadline: float) -> t
             complete = False
             break
         end = min(n, begin + DOMINANCE_CHUNK_COLS)
-        _dominated_kernel(indptr, indices, row_ptr, row_cols, ranked_costs, found, begin, end)
+        _dominated_kernel(cols.indptr, cols.indices, order, row_ptr, row_ranks, ranked_costs, found, begin, end)
     dominated[order] = found
     return dominated, complete
 
 
 @numba.njit(cache=True)
-def _dominated_kernel(indptr, indices, row_ptr, row_cols, costs, dominated, begin, end):  # pragma: no cover
-    """:func:`dominated_columns` for the columns ``begin:end`` (columns numbered by rank: larger first): sets
-    ``dominated`` in place."""
-    for c in range(begin, end):
+def _rank_lists(indptr, indices, order, n_rows):  # pragma: no cover - compiled
+    """Per row, the ranks (positions in ``order``) of the columns that hold it, ascending: (row_ptr, ranks)."""
+    row_ptr = np.zeros(n_rows + 1, np.int64)
+    for e in range(indices.size):
+        row_ptr[indices[e] + 1] += 1
+    for r in range(n_rows):
+        row_ptr[r + 1] += row_ptr[r]
+    fill = row_ptr[:-1].copy()
+    ranks = np.empty(indices.size, np.int64)
+    for p in range(order.size):
+        c = order[p]
+        for e in range(indptr[c], indptr[c + 1]):
+            r = indices[e]
+            ranks[fill[r]] = p
+            fill[r] += 1
+    return row_ptr, ranks
+
+
+@numba.njit(cache=True)
+def _dominated_kernel(indptr, indices, order, row_ptr, row_ranks, costs, dominated, begin, end):  # pragma: no cover
+    """:func:`dominated_columns` for the ranks ``begin:end`` (rank p is column ``order[p]``; larger first; ``costs``
+    and ``dominated`` by rank): sets ``dominated`` in place."""
+    for p in range(begin, end):
+        c = order[p]
         a, b = indptr[c], indptr[c + 1]
         size = b - a
         if size == 0:
@@ -124,10 +144,11 @@ def _dominated_kernel(indptr, indices, row_ptr, row_cols, costs, dominated, begi
             if row_ptr[r + 1] - row_ptr[r] < row_ptr[rare + 1] - row_ptr[rare]:
                 rare = r
         for q in range(row_ptr[rare], row_ptr[rare + 1]):
-            d = row_cols[q]
-            if d >= c:
+            rank = row_ranks[q]
+            if rank >= p:
                 break  # later ranks are no larger
-            if dominated[d] or indptr[d + 1] - indptr[d] <= size or costs[d] > costs[c]:
+            d = order[rank]
+            if dominated[rank] or indptr[d + 1] - indptr[d] <= size or costs[rank] > costs[p]:
                 continue
             # rows(c) within rows(d)? both sorted: one merge, stopped at the first row d lacks
             j, stop = indptr[d], indptr[d + 1]
@@ -141,7 +162,7 @@ def _dominated_kernel(indptr, indices, row_ptr, row_cols, costs, dominated, begi
                     break
                 j += 1
             if subset:
-                dominated[c] = True
+                dominated[p] = True
                 break
 
 
@@ -242,12 +263,19 @@ def reduce_problem(cols: ColumnSets, costs: np.ndarray, tie: np.ndarray, deadlin
         if not nonempty.all():
             cur, col_ids = cur.take(np.nonzero(nonempty)[0]), col_ids[nonempty]
 
+    entries, rows_reduced = cur.indices.size, False
     for _ in range(MAX_REDUCTION_ROUNDS):
         if cur.n_rows == 0:
             break
         if time.perf_counter() > deadline:
             stats["reductions_complete"] = False
             break
+        if rows_reduced and entries - cur.indices.size < REDUCTION_MIN_CHANGE * entries:
+            # the last round took little, and the rows were reduced once: another round costs as much (passes
+            # over every entry) for even less
+            stats["reductions_complete"] = False
+            break
+        entries = cur.indices.size
         stats["rounds"] += 1
         changed = False
         # Duplicate columns: keep the cheapest, then the lowest worst uncertainty, then the lowest index.
@@ -279,7 +307,10 @@ def reduce_problem(cols: ColumnSets, costs: np.ndarray, tie: np.ndarray, deadlin
                 col_ids[col_keep],
             )
             drop_empty_columns()
-            continue  # the rows changed: redo the column reductions first
+            changed = True
+            if entries - cur.indices.size >= REDUCTION_MIN_CHANGE * entries:
+                continue  # the rows changed much: redo the column reductions first
+            rows_t = cur.transpose()  # a few forced columns: the rows' turn first (it may change more)
         # Rows: identical rows, then rows implied by a row with fewer views.
         if time.perf_counter() > deadline:
             stats["reductions_complete"] = False
@@ -294,6 +325,7 @@ def reduce_problem(cols: ColumnSets, costs: np.ndarray, tie: np.ndarray, deadlin
             changed = True
             cur, row_ids = restrict(cur, ~drop, np.arange(cur.n_cols)), row_ids[~drop]
             drop_empty_columns()
+        rows_reduced = True
         if not changed:
             break
     return Reduction(forced, col_ids, row_ids, cur, stats)
