@@ -113,9 +113,7 @@ def lp_relaxation(sub: ColumnSets, costs: np.ndarray, time_limit_s: float, start
         h.setOptionValue("time_limit", float(max(deadline - time.perf_counter(), 0.01)))
         h.run()
         if h.getModelStatus() != highspy.HighsModelStatus.kOptimal:
-            # the last pricing round's figures: its bound holds whatever the columns added since (one of no more
-            # than 0 says nothing: every cost is positive)
-            return result if result is not None and result[1] > 0.0 else None
+            return _informative(result)  # the last pricing round's: its bound holds whatever the columns added since
         sol = h.getSolution()
         y = np.maximum(np.asarray(sol.row_dual, dtype=np.float64), 0.0)
         rc = costs - transposed @ y
@@ -123,8 +121,10 @@ def lp_relaxation(sub: ColumnSets, costs: np.ndarray, time_limit_s: float, start
         x[active] = np.clip(np.asarray(sol.col_value, dtype=np.float64), 0.0, 1.0)
         result = x, float(y.sum() + np.minimum(rc, 0.0).sum()), rc, y
         priced = np.flatnonzero(inactive & (rc < -PRICING_TOLERANCE))
-        if priced.size == 0 or time.perf_counter() > deadline:
+        if priced.size == 0:
             return result
+        if time.perf_counter() > deadline:
+            return _informative(result)
         new = priced[np.argsort(rc[priced], kind="stable")[:batch]]
         part = sub.take(new)
         h.addCols(
@@ -133,6 +133,12 @@ def lp_relaxation(sub: ColumnSets, costs: np.ndarray, time_limit_s: float, start
         )  # fmt: skip
         active = np.concatenate([active, new])
         inactive[new] = False
+
+
+def _informative(result):
+    """A column generation's figures stopped before the LP optimum, or None when its bound says nothing (no more
+    than 0: every cost is positive; the Lagrangian bound of an early round is often far below)."""
+    return result if result is not None and result[1] > 0.0 else None
 
 
 def solve_highs(

@@ -129,3 +129,25 @@ def test_reductions_keep_the_optimum_of_the_unreduced_programme(seed):
         assert reduced.objective == pytest.approx(plain.objective)
         np.testing.assert_array_equal(reduced.covered, plain.covered)
         assert reduced.stats["forced_cols"] > 0 and reduced.stats["dominated_cols"] > 0
+
+
+def test_column_generation_cut_short_gives_no_bound_rather_than_a_useless_one(monkeypatch):
+    rng = np.random.default_rng(5)
+    mask = _random_mask(rng, 200, cover_ip.PRICING_MIN_COLS + 600, 0.3)  # dense, as the programmes of large parts
+    mask = mask[mask.any(axis=1)]
+    cols, _ = cover_columns.measurable_columns(sparse.csc_array(mask))
+    cols = cols.take(np.flatnonzero(cols.sizes() > 0))
+    costs = np.ones(cols.n_cols)
+    start = cover_greedy.greedy_weighted_cover(cols, np.zeros(cols.n_cols), costs)
+
+    class Clock:  # the deadline passes right after the first restricted LP
+        calls = 0
+
+        @classmethod
+        def perf_counter(cls):
+            cls.calls += 1
+            return 0.0 if cls.calls <= 2 else 1e9
+
+    monkeypatch.setattr(cover_ip, "time", Clock)
+    result = cover_ip.lp_relaxation(cols, costs, 60.0, start)
+    assert result is None or result[1] > 0.0
