@@ -136,9 +136,13 @@ def lp_relaxation(sub: ColumnSets, costs: np.ndarray, time_limit_s: float, start
 
 
 def _informative(result):
-    """A column generation's figures stopped before the LP optimum, or None when its bound says nothing (no more
-    than 0: every cost is positive; the Lagrangian bound of an early round is often far below)."""
-    return result if result is not None and result[1] > 0.0 else None
+    """A column generation's figures stopped before the LP optimum; a bound of no more than 0 (every cost is
+    positive; the Lagrangian bound of an early round is often far below) says nothing and becomes -inf, the primal
+    values and reduced costs still order the columns."""
+    if result is None or result[1] > 0.0:
+        return result
+    x, _, rc, y = result
+    return x, -math.inf, rc, y
 
 
 def solve_highs(
