@@ -285,6 +285,23 @@ class VoxelMap:
         self._static_mesh = mesh_world if len(mesh_world.faces) else None
         self._apply_static(static)
 
+    def on_static_scene(self, points_m: np.ndarray) -> np.ndarray:
+        """(N,) whether world points (m) inside the grid lie on the static scene as fusion judges it (in a static
+        voxel, or in the margin band with the static mesh within ``static_margin_m``): fusion drops them."""
+        points = np.asarray(points_m, dtype=float).reshape(-1, 3)
+        idx = self.world_to_index(points)
+        out = np.zeros(len(points), dtype=bool)
+        inside = self.in_grid(idx)
+        out[inside] = self._on_static_scene(points[inside], self.flat_index(idx[inside]))
+        return out
+
+    def _on_static_scene(self, points: np.ndarray, flat: np.ndarray) -> np.ndarray:
+        on = self.static.reshape(-1)[flat].copy()
+        band = self._static_near.reshape(-1)[flat] & ~on
+        if band.any():
+            on[band] = self._near_static_mesh(points[band])
+        return on
+
     def _near_static_mesh(self, points: np.ndarray) -> np.ndarray:
         """(N,) whether static geometry lies within ``static_margin_m`` of each point along one of the six axis
         directions (Embree ray casts through trimesh)."""
@@ -395,11 +412,7 @@ class VoxelMap:
         end_flat = np.full(len(points), -1, dtype=np.int64)
         end_flat[inside] = self.flat_index(idx[inside])
         near_static = np.zeros(len(points), dtype=bool)
-        band = np.zeros(len(points), dtype=bool)
-        near_static[inside] = self.static.reshape(-1)[end_flat[inside]]
-        band[inside] = self._static_near.reshape(-1)[end_flat[inside]] & ~near_static[inside]
-        if band.any():
-            near_static[band] = self._near_static_mesh(points[band])
+        near_static[inside] = self._on_static_scene(points[inside], end_flat[inside])
         kept = inside & ~near_static
         nx, ny, nz = self.shape
         args = (
