@@ -161,6 +161,26 @@ def _neighbourhood_moments(points, starts, ends, n_query, n_nb):
     return out
 
 
+def _near_mesh(mesh, margin_m: float, points: np.ndarray) -> np.ndarray:
+    """(N,) whether ``mesh`` (trimesh or None) lies within ``margin_m`` of each point along one of the six axis
+    directions (Embree ray casts through trimesh)."""
+    near = np.zeros(len(points), dtype=bool)
+    if mesh is None or not len(points) or margin_m <= 0:
+        return near
+    for axis in range(3):
+        for sign in (1.0, -1.0):
+            d = np.zeros(3)
+            d[axis] = sign
+            left = np.flatnonzero(~near)
+            if not len(left):
+                return near
+            loc, ray, _ = mesh.ray.intersects_location(points[left], np.tile(d, (len(left), 1)), multiple_hits=False)
+            if len(ray):
+                dist = np.linalg.norm(loc - points[left][ray], axis=1)
+                near[left[ray[dist < margin_m]]] = True
+    return near
+
+
 class VoxelMap:
     """Dense probabilistic voxel map over an axis-aligned ROI (see the module docstring).
 
@@ -224,6 +244,11 @@ class VoxelMap:
     def _changed(self) -> None:
         self._version += 1
         self._cache.clear()
+
+    @property
+    def version(self) -> int:
+        """Counts the changes of the map (fusion, static geometry, edits made known by :meth:`invalidate`)."""
+        return self._version
 
     def invalidate(self) -> None:
         """Drop derived data (labels, masks, planning grid) after editing the arrays directly."""
@@ -299,31 +324,8 @@ class VoxelMap:
         on = self.static.reshape(-1)[flat].copy()
         band = self._static_near.reshape(-1)[flat] & ~on
         if band.any():
-            on[band] = self._near_static_mesh(points[band])
+            on[band] = _near_mesh(self._static_mesh, self.config.static_margin_m, points[band])
         return on
-
-    def _near_static_mesh(self, points: np.ndarray) -> np.ndarray:
-        """(N,) whether static geometry lies within ``static_margin_m`` of each point along one of the six axis
-        directions (Embree ray casts through trimesh)."""
-        near = np.zeros(len(points), dtype=bool)
-        mesh = self._static_mesh
-        margin = self.config.static_margin_m
-        if mesh is None or not len(points) or margin <= 0:
-            return near
-        for axis in range(3):
-            for sign in (1.0, -1.0):
-                d = np.zeros(3)
-                d[axis] = sign
-                left = np.flatnonzero(~near)
-                if not len(left):
-                    return near
-                loc, ray, _ = mesh.ray.intersects_location(
-                    points[left], np.tile(d, (len(left), 1)), multiple_hits=False
-                )
-                if len(ray):
-                    dist = np.linalg.norm(loc - points[left][ray], axis=1)
-                    near[left[ray[dist < margin]]] = True
-        return near
 
     def _inside_by_columns(self, mesh) -> np.ndarray:
         """Voxels whose centre is inside a watertight mesh: one +z ray per (x, y) column, parity of the crossings
