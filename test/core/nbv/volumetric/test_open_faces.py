@@ -74,3 +74,13 @@ def test_the_expected_surface_counts_open_faces_for_a_view_that_faces_them():
     assert area[0] > 0.0 and area[1] == 0.0
     _, without = expected_surface(grid, side[None], view, ExpectedSurfaceModel(open_face_angle_deg=0.0))
     assert without[0] < area[0]
+
+
+def test_the_running_evidence_equals_a_recount_from_all_points():
+    grid = plate_seen_from_above()
+    before = open_faces(grid, 30.0)[0]  # the evidence of the two views so far, kept for the map
+    grid.integrate([-0.3, 0.045, PLATE_Z], [[0.0302, 0.045, PLATE_Z - 0.001]], [[-1.0, 0.0, 0.0]])
+    running = open_faces(grid, 30.0)[0]  # updated with the new point only
+    recount = open_faces(grid, 29.9)[0]  # another angle: counted from all the points again
+    np.testing.assert_array_equal(running, recount)
+    assert running.sum() == before.sum() - 1
