@@ -268,7 +268,7 @@ def unknown_region_mesh(grid, pool: int = 1):
     """The not-yet-known-free region of a (planning) grid as a closed Trimesh (world frame): its full and unknown
     voxels except the static ones (the scene checker has those), marching-cubed; None when nothing is left. With
     ``pool`` > 1 the region is taken on blocks of ``pool``^3 voxels (a block is in it when any of its voxels is): a
-    superset with about ``pool``^2 times fewer faces (the collision tree is built afresh for every view)."""
+    superset with about ``pool``^2 times fewer faces (the collision tree is built afresh whenever the map changed)."""
     import trimesh
     from skimage.measure import marching_cubes
 
@@ -298,9 +298,14 @@ class CandidateGenerator:
         self.config = config
         self.rng = np.random.default_rng(seed)
         self.ik = station.ik
+        #: the scene and the not-yet-known-free region (the motion router plans with it)
         self.checker = station.collision_checker()
+        #: the scene alone (the first collision stage), so the region's tree in :attr:`checker` can stay while the
+        #: map has not changed (a second pool in the same view, e.g. ours' coverage fallback, reuses it)
+        self.scene_checker = station.collision_checker()
         self._visibility_dirs = fibonacci_sphere(int(config.visibility_directions))
         self._has_unknown = False
+        self._unknown_key = None  # (the grid, its version) the region in ``checker`` was built from
 
     # ----------------------------------------------------------------------------------- targets
     def targets(self, grid, banned_m: np.ndarray | None = None) -> Targets:
@@ -495,11 +500,16 @@ class CandidateGenerator:
 
     # ----------------------------------------------------------------------------------- filters
     def update_unknown_obstacle(self, grid) -> None:
-        """Give the collision checker the grid's not-yet-known-free region (replacing the previous one)."""
+        """Give the collision checker the grid's not-yet-known-free region (replacing the previous one; kept as it
+        is while the same grid has not changed since)."""
+        key = (id(grid), grid.version) if self.config.unknown_obstacle and grid is not None else None
+        if key is not None and key == self._unknown_key:
+            return
         if self._has_unknown:
             self.checker.remove_object(UNKNOWN_OBSTACLE)
             self._has_unknown = False
-        if not self.config.unknown_obstacle or grid is None:
+        self._unknown_key = key
+        if key is None:
             return
         mesh = unknown_region_mesh(grid, self.config.unknown_obstacle_pool)
         if mesh is not None and len(mesh.faces):
@@ -547,11 +557,7 @@ class CandidateGenerator:
         if not len(alive):
             return
         q = cands.joints[alive]
-        had_unknown = self._has_unknown
-        if had_unknown:
-            self.checker.remove_object(UNKNOWN_OBSTACLE)
-            self._has_unknown = False
-        free = self.checker.check_states(q)
+        free = self.scene_checker.check_states(q)
         bad = np.zeros(len(cands), dtype=bool)
         bad[alive[~free]] = True
         cands.reject(bad, "collision_scene")

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import math
 import time
+import weakref
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -61,6 +62,7 @@ __all__ = [
     "evaluate_views",
     "expected_surface",
     "expected_surface_fields",
+    "open_faces",
     "predicted_normals",
     "utility",
 ]
@@ -69,6 +71,9 @@ UTILITY_METHODS = ("rpg", "exp")
 #: Vasquez-Gomez's desired fractions of occupied and occlusion-plane voxels (rpg's defaults)
 AREA_FACTOR_OCCUPIED_DESIRED = 0.2
 AREA_FACTOR_OCCPLANE_DESIRED = 0.8
+#: the angle (deg) within which a measured normal marks a voxel's face seen (:func:`open_faces`; the running per-map
+#: evidence is kept at this angle)
+FACE_SEEN_ANGLE_DEG = 30.0
 #: most rays of one bundle (a full low-resolution PhoXi frame)
 MAX_BUNDLE_RAYS = 1032 * 772
 
@@ -387,6 +392,10 @@ class ExpectedSurfaceModel:
     distance of the observed surface are expected surface too, with a weight falling linearly from
     ``occlusion_weight`` at the surface to 0 at that distance; ``kolmost_weight``: the report's ``w``; voxels with a
     measured point within ``seen_radius_fraction`` x resolution of their centre expect nothing (already seen).
+    ``open_face_angle_deg``: a full voxel's face towards observed-free space, turned away from its seen surface, is
+    an **open face** (seen surface whose side there was never measured: the rim of a plate thinner than a voxel, a
+    sharp edge's second face) while no point measured in the voxel has its normal within this angle of the face's
+    direction (:func:`open_faces`; 0: no open faces).
     """
 
     plane_radius_vox: int = 2
@@ -394,6 +403,7 @@ class ExpectedSurfaceModel:
     occlusion_weight: float = 0.5
     kolmost_weight: float = 0.5
     seen_radius_fraction: float = 0.6
+    open_face_angle_deg: float = FACE_SEEN_ANGLE_DEG
 
     def __post_init__(self):
         if not isinstance(self.plane_radius_vox, (int, np.integer)) or not 0 <= self.plane_radius_vox <= 5:
@@ -406,6 +416,8 @@ class ExpectedSurfaceModel:
             raise InputError(f"kolmost_weight must be in [0, 1], got {self.kolmost_weight!r}")
         if not 0.0 <= float(self.seen_radius_fraction) <= 2.0:
             raise InputError(f"seen_radius_fraction must be in [0, 2], got {self.seen_radius_fraction!r}")
+        if not 0.0 <= float(self.open_face_angle_deg) <= 45.0:
+            raise InputError(f"open_face_angle_deg must be in [0, 45], got {self.open_face_angle_deg!r}")
 
     @classmethod
     def from_config(cls, values: dict | None) -> ExpectedSurfaceModel:
@@ -416,6 +428,7 @@ class ExpectedSurfaceModel:
             "occlusion_weight",
             "kolmost_weight",
             "seen_radius_fraction",
+            "open_face_angle_deg",
         }
         unknown = sorted(set(values) - known)
         if unknown:
@@ -447,6 +460,112 @@ def _seen_near(grid: VoxelMap, mask: np.ndarray, radius_m: float) -> np.ndarray:
     return out
 
 
+#: a voxel's face more than this far from the voxel's mean measured normal may be an unseen side (:func:`open_faces`)
+OPEN_FACE_SURFACE_ANGLE_DEG = 60.0
+#: per map: (raw points taken in, seen flags (6 x voxels), summed normals (voxels, 3)), updated with new points only
+_FACE_EVIDENCE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+#: the six axis directions of a voxel's faces
+FACE_DIRECTIONS = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=np.int64)
+
+
+def _face_points(grid: VoxelMap, xyz: np.ndarray, normal: np.ndarray, angle_deg: float):
+    """(flat voxel index, face index into :data:`FACE_DIRECTIONS`) of the points whose normal lies within
+    ``angle_deg`` (<= 45: at most one face) of a face's direction, each in its voxel and in the voxel half a voxel
+    behind it (a face on a voxel boundary); and (flat index, normal) of every point inside the grid."""
+    axis = np.argmax(np.abs(normal), axis=1)
+    component = normal[np.arange(len(normal)), axis]
+    face = 2 * axis + (component < 0)
+    facing = np.abs(component) >= math.cos(math.radians(min(angle_deg, 45.0)))
+    out = []
+    for shift in (0.0, 0.5 * grid.resolution_m):
+        idx = grid.world_to_index(xyz[facing] - shift * normal[facing])
+        ok = grid.in_grid(idx)
+        out.append((grid.flat_index(idx[ok]), face[facing][ok]))
+    idx = grid.world_to_index(xyz)
+    ok = grid.in_grid(idx)
+    return out, (grid.flat_index(idx[ok]), normal[ok])
+
+
+def _face_evidence(grid: VoxelMap) -> tuple[np.ndarray, np.ndarray]:
+    """(seen flags (6 x voxels) at :data:`FACE_SEEN_ANGLE_DEG`, summed normals (voxels, 3)) of the map's raw points,
+    kept per map and updated with the points added since (the raw points only grow)."""
+    n_vox = grid.n_voxels
+    done, seen, total = _FACE_EVIDENCE.get(grid, (0, None, None))
+    if seen is None or len(grid.raw) < done or len(seen) != 6 * n_vox:
+        done, seen, total = 0, np.zeros(6 * n_vox, dtype=bool), np.zeros((n_vox, 3))
+    if len(grid.raw) > done:
+        xyz = np.asarray(grid.raw.xyz_m[done:], dtype=np.float64)
+        normal = np.asarray(grid.raw.normal[done:], dtype=np.float64)
+        facing, (flat, n) = _face_points(grid, xyz, normal, FACE_SEEN_ANGLE_DEG)
+        for f, face in facing:
+            seen[face * n_vox + f] = True
+        for a in range(3):
+            total[:, a] += np.bincount(flat, weights=n[:, a], minlength=n_vox)
+        done = len(grid.raw)
+    _FACE_EVIDENCE[grid] = (done, seen, total)
+    return seen, total
+
+
+def _seen_faces(grid: VoxelMap, angle_deg: float) -> np.ndarray:
+    """Seen flags (6, *grid shape) at another angle than the running evidence's, from all raw points."""
+    xyz = np.asarray(grid.raw.xyz_m, dtype=np.float64)
+    facing, _ = _face_points(grid, xyz, np.asarray(grid.raw.normal, dtype=np.float64), angle_deg)
+    seen = np.zeros(6 * grid.n_voxels, dtype=bool)
+    for f, face in facing:
+        seen[face * grid.n_voxels + f] = True
+    return seen.reshape(6, *grid.shape)
+
+
+def open_faces(
+    grid: VoxelMap, seen_angle_deg: float, surface_angle_deg: float = OPEN_FACE_SURFACE_ANGLE_DEG
+) -> tuple[np.ndarray, np.ndarray]:
+    """Open faces of the seen surface: (count per voxel (grid shape, float64), their mean outward direction
+    (grid shape + (3,))). A face of a full voxel with measured points is open when
+
+    - its 6-neighbour is observed free (not the static scene), or unknown right above the static scene with the
+      face turned sideways (within ``surface_angle_deg`` of the perpendicular to the mean normal),
+    - the face turns away from the voxel's seen surface: its direction is more than ``surface_angle_deg`` from the
+      voxel's mean measured normal (a staircase face of a sloped surface is not a new side), and
+    - no point measured in the voxel (or half a voxel behind it along its normal, for a face on a voxel boundary)
+      has its normal within ``seen_angle_deg`` (at most 45) of the face's direction.
+
+    That is the seen surface turning to a side no view has measured: the rim of a plate thinner than a voxel, which
+    no frontier voxel marks (the space around it is already known to be free), or a sharp edge's second face."""
+    shape = grid.shape
+    count = np.zeros(shape, dtype=np.float64)
+    direction = np.zeros((*shape, 3), dtype=np.float64)
+    xyz = grid.raw.xyz_m
+    if seen_angle_deg <= 0 or not len(xyz):
+        return count, direction
+    seen, mean = _face_evidence(grid)
+    length = np.linalg.norm(mean, axis=1)
+    with_points = (length > 1e-9).reshape(shape)
+    mean = (mean / np.maximum(length, 1e-12)[:, None]).reshape(*shape, 3)
+    seen = seen.reshape(6, *shape) if seen_angle_deg == FACE_SEEN_ANGLE_DEG else _seen_faces(grid, seen_angle_deg)
+    full = grid.full_mask() & with_points
+    free = grid.empty_mask() & ~grid.static
+    # the air right above the static scene stays unknown however often it is seen (its points are masked out): a
+    # face there counts when it turns sideways (not into the part, as a face of its unseen inside would)
+    above_static = grid.unknown_mask() & _dilate_static(grid.static)
+    cos_surface = math.cos(math.radians(surface_angle_deg))
+    for k, d in enumerate(FACE_DIRECTIONS):
+        a = int(np.flatnonzero(d)[0])
+        src = tuple(slice(max(0, -j), shape[i] - max(0, j)) for i, j in enumerate(d))
+        dst = tuple(slice(max(0, j), shape[i] - max(0, -j)) for i, j in enumerate(d))
+        neighbour_free = np.zeros(shape, dtype=bool)
+        neighbour_free[src] = free[dst]
+        neighbour_static = np.zeros(shape, dtype=bool)
+        neighbour_static[src] = above_static[dst]
+        towards = mean[..., a] * d[a]
+        is_open = neighbour_free | (neighbour_static & (towards > -cos_surface))
+        is_open &= full & ~seen[k] & (towards < cos_surface)
+        count[is_open] += 1.0
+        direction[is_open, a] += d[a]
+    length = np.linalg.norm(direction, axis=-1, keepdims=True)
+    direction = np.where(length > 1e-9, direction / np.maximum(length, 1e-12), 0.0)
+    return count, direction
+
+
 def expected_surface_fields(grid: VoxelMap, model: ExpectedSurfaceModel = ExpectedSurfaceModel()):
     """Per-voxel expected-surface weight (flat float64, 0 = none) and predicted outward normal (flat, 3).
 
@@ -459,6 +578,9 @@ def expected_surface_fields(grid: VoxelMap, model: ExpectedSurfaceModel = Expect
     - occlusion-plane voxels (unknown next to observed-free space) within ``occlusion_max_dist_m`` of the observed
       surface, weight ``occlusion_weight x (1 - d / max)``, normal towards the free space (the gradient of the
       smoothed free-space indicator).
+
+    - full voxels with open faces (:func:`open_faces`), weight the number of open faces, normal their mean
+      direction; the expected-surface ray cast counts such a voxel where its ray ends.
 
     Unknown voxels with no free neighbour and off every predicted plane (a part's inside) weigh 0.
     """
@@ -537,6 +659,10 @@ def expected_surface_fields(grid: VoxelMap, model: ExpectedSurfaceModel = Expect
         # by a grazing miss leaves a surface voxel unknown, and a face on a voxel-layer boundary leaves holes of
         # unknown voxels under free ones): nothing new is expected there
         weight[_seen_near(grid, weight > 0, model.seen_radius_fraction * grid.resolution_m)] = 0.0
+        faces, face_normals = open_faces(grid, float(model.open_face_angle_deg))
+        has_faces = faces > 0
+        weight[has_faces] = faces[has_faces]
+        normals[has_faces] = face_normals[has_faces]
         return weight.reshape(-1), np.ascontiguousarray(normals.reshape(-1, 3))
 
     key = ("expected_fields", model)

@@ -4,7 +4,6 @@ rule compare with what the view promised."""
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
 
 __all__ = ["NoveltyTracker"]
 
@@ -15,7 +14,9 @@ class NoveltyTracker:
     A frame's point counts when no earlier point lies within one novelty cell (the ROI's largest edge / 300, at least
     1 mm; 26-neighbourhood), weighted by the surface a pixel covers there ((depth / f)^2 / cos incidence, the
     incidence clipped at cos 0.2). Noise does not move a point by a cell, and a face first seen grazing still counts
-    when a later view samples it densely. Points at the static scene (the fixture's top) do not count. ``default_fx``:
+    when a later view samples it densely. Points on the static scene (the fixture's top) do not count, judged as fusion
+judges them (:meth:`~.voxel_map.VoxelMap.on_static_scene`: a band of voxels around the static scene dropped all of a
+plate thinner than the band lying on the fixture, so its views added nothing and the run stopped after three). ``default_fx``:
     the focal length (px) of frames without intrinsics."""
 
     def __init__(self, roi_min_m: np.ndarray, roi_max_m: np.ndarray, voxel_map, default_fx: float):
@@ -30,7 +31,6 @@ class NoveltyTracker:
         self._cell_m = max(0.001, extent / 300.0)
         shape = tuple(int(n) for n in np.ceil((self.roi_max_m - self.roi_min_m) / self._cell_m))
         self._near = np.zeros(shape, dtype=bool)
-        self._static_band = ndimage.binary_dilation(self.map.static, np.ones((3, 3, 3), dtype=bool), iterations=2)
 
     def add(self, view) -> float:
         """The surface (m^2) the captured ``view`` added; its points count as seen from now on."""
@@ -42,9 +42,8 @@ class NoveltyTracker:
         near = self._near
         idx = np.floor((pts - self.roi_min_m) / self._cell_m).astype(np.int64)
         ok = np.all((idx >= 0) & (idx < np.asarray(near.shape)), axis=1)
-        fine = self.map.world_to_index(pts)
-        ok &= np.all((fine >= 0) & (fine < np.asarray(self.map.shape)), axis=1)
-        ok[ok] &= ~self._static_band[tuple(fine[ok].T)]
+        ok &= self.map.in_grid(self.map.world_to_index(pts))
+        ok[ok] &= ~self.map.on_static_scene(pts[ok])
         idx, pts = idx[ok], pts[ok]
         normals = np.asarray(view.normals, dtype=float).reshape(-1, 3)[ok]
         novel = ~near[tuple(idx.T)]

@@ -690,12 +690,12 @@ def _expected_chunk(
             )
             for s in range(m):
                 f = buf_flat[s]
-                if blocked[f]:
-                    break
                 w = exp_weight[f]
+                if blocked[f] and w <= 0.0:
+                    break
                 if w <= 0.0:
                     continue
-                # the first expected-surface voxel ends the ray: the predicted surface hides what lies behind it
+                # the first expected-surface voxel (a full one: its open faces) ends the ray: the predicted surface hides what lies behind it
                 if stamp[f] == tag:
                     break
                 stamp[f] = tag
@@ -741,7 +741,8 @@ def _expected_surface_bundle(n_chunks, *scene):
 
     ``exp_weight`` (flat float64) is each voxel's expected-surface weight (0: none; the likelihood that the surface
     passes there), ``exp_normals`` (flat, 3) its predicted outward normal. Each camera ray (clipped to the grid, up
-    to ``range_max`` depth) ends at the first full voxel or the first expected-surface voxel; that voxel counts
+    to ``range_max`` depth) ends at the first full voxel or the first expected-surface voxel (a full voxel may be one:
+    its open faces); that voxel counts
     once per view when its depth is in range, both incidence cosines (camera and projector, signed: the front side
     of the predicted surface) are at least ``cos_max_incidence`` and the projector lights it. Returns ``(gain (V,),
     voxels (V,))``: the sum of ``weight x (w cos a + 1 - w)`` (Kolmost) and the sum of weights. ``scene``: the

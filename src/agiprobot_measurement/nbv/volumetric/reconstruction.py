@@ -171,7 +171,8 @@ class Reconstructor:
         self.policy = (policy_factory or (lambda c, p: make_policy(request.method, c, p)))(self.context, planning)
         self._captures: list[CapturedView] = []
         self._tsdf = None
-        self.stopping = StoppingRule(request.min_gain_area_mm2, request.min_relative_gain, planning.realised_streak)
+        self.stopping = StoppingRule(request.min_gain_area_mm2, request.min_relative_gain, planning.realised_streak,
+                                     planning.min_growth_share)  # fmt: skip
         fx = self.station.scanner_model.intrinsics(self.station.resolution).fx
         self.novelty = NoveltyTracker(self.roi_min_m, self.roi_max_m, self.map, fx)
         self._banned: list[np.ndarray] = []  # targets that turned out unmeasurable (the report's extra state)
@@ -394,7 +395,7 @@ class Reconstructor:
             area = choice.new_area_m2 if choice.remaining_area_m2 is None else choice.remaining_area_m2
             gain = choice.gain if choice.remaining_gain is None else choice.remaining_gain
             if self.policy.uses_stopping_rule:
-                fires = self.stopping.update(gain, area, self._last_novel_m2)
+                fires = self.stopping.update(gain, area, self._last_novel_m2, self.map.observed_surface_area_m2())
                 if self.stop_view is None and fires:
                     if self.on_stop is None:
                         return "gain_below_threshold"

@@ -185,7 +185,9 @@ class CandidateSettings:
 class TourSettings:
     """``planning.tour``: ours_tour's receding-horizon plan (see :mod:`.policies.touring`): greedy views first, the
     plan's size and covered share, the share of its planned gain a view must keep to stay in the plan, the smallest
-    marginal value (share of the first pick's) worth a stop, and the IK branches per view."""
+    marginal value (share of the first pick's) worth a stop, the IK branches per view, and ``greedy_share``: when ours'
+    best view alone promises at least this share of the plan's predicted new surface, it is visited first (the gain
+    is concentrated there: a tour that leaves it for later loses coverage; 1: never)."""
 
     min_greedy_views: int = 3
     max_plan_views: int = 8
@@ -193,6 +195,7 @@ class TourSettings:
     keep_share: float = 0.5
     min_marginal_share: float = 0.3
     max_branches: int = 4
+    greedy_share: float = 0.5
 
     @classmethod
     def from_mapping(cls, values: dict) -> TourSettings:
@@ -206,6 +209,7 @@ class TourSettings:
             "keep_share": ("keep_share", share),
             "min_marginal_share": ("min_marginal_share", share),
             "max_branches": ("max_branches", _whole(1, 8)),
+            "greedy_share": ("greedy_share", share),
         }
         return cls(**_parse(values, "planning.tour", rules))
 
@@ -231,6 +235,8 @@ class PlanningSettings:
     surprise_distance_m: float = 0.15
     surprise_angle_rad: float = math.radians(25.0)
     realised_streak: int = 3
+    #: stop also when the last ``realised_streak`` views together added less than this share of the observed surface
+    min_growth_share: float = 0.0
     #: ours: below this best predicted new surface (mm^2), and whenever the frontier predicts none, the view of the
     #: global sphere that sees the most never-observed space next to the seen surface is weighed too (0: only when
     #: the frontier predicts none)
@@ -254,6 +260,7 @@ class PlanningSettings:
             "surprise_distance_m": ("surprise_distance_m", number),
             "surprise_angle_deg": ("surprise_angle_rad", _degrees),
             "realised_streak": ("realised_streak", _whole()),
+            "min_growth_share": ("min_growth_share", lambda value, where: number(value, where, 0.0, 1.0)),
             "coverage_fallback_below_mm2": ("coverage_fallback_below_mm2", non_negative),
             "coverage_fallback_reach_vox": ("coverage_fallback_reach_vox", _whole(1, 20)),
             "tour": ("tour", lambda value, where: TourSettings.from_mapping(_mapping(value, where))),

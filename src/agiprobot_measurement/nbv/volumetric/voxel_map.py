@@ -161,6 +161,26 @@ def _neighbourhood_moments(points, starts, ends, n_query, n_nb):
     return out
 
 
+def _near_mesh(mesh, margin_m: float, points: np.ndarray) -> np.ndarray:
+    """(N,) whether ``mesh`` (trimesh or None) lies within ``margin_m`` of each point along one of the six axis
+    directions (Embree ray casts through trimesh)."""
+    near = np.zeros(len(points), dtype=bool)
+    if mesh is None or not len(points) or margin_m <= 0:
+        return near
+    for axis in range(3):
+        for sign in (1.0, -1.0):
+            d = np.zeros(3)
+            d[axis] = sign
+            left = np.flatnonzero(~near)
+            if not len(left):
+                return near
+            loc, ray, _ = mesh.ray.intersects_location(points[left], np.tile(d, (len(left), 1)), multiple_hits=False)
+            if len(ray):
+                dist = np.linalg.norm(loc - points[left][ray], axis=1)
+                near[left[ray[dist < margin_m]]] = True
+    return near
+
+
 class VoxelMap:
     """Dense probabilistic voxel map over an axis-aligned ROI (see the module docstring).
 
@@ -225,6 +245,11 @@ class VoxelMap:
         self._version += 1
         self._cache.clear()
 
+    @property
+    def version(self) -> int:
+        """Counts the changes of the map (fusion, static geometry, edits made known by :meth:`invalidate`)."""
+        return self._version
+
     def invalidate(self) -> None:
         """Drop derived data (labels, masks, planning grid) after editing the arrays directly."""
         self._changed()
@@ -285,28 +310,22 @@ class VoxelMap:
         self._static_mesh = mesh_world if len(mesh_world.faces) else None
         self._apply_static(static)
 
-    def _near_static_mesh(self, points: np.ndarray) -> np.ndarray:
-        """(N,) whether static geometry lies within ``static_margin_m`` of each point along one of the six axis
-        directions (Embree ray casts through trimesh)."""
-        near = np.zeros(len(points), dtype=bool)
-        mesh = self._static_mesh
-        margin = self.config.static_margin_m
-        if mesh is None or not len(points) or margin <= 0:
-            return near
-        for axis in range(3):
-            for sign in (1.0, -1.0):
-                d = np.zeros(3)
-                d[axis] = sign
-                left = np.flatnonzero(~near)
-                if not len(left):
-                    return near
-                loc, ray, _ = mesh.ray.intersects_location(
-                    points[left], np.tile(d, (len(left), 1)), multiple_hits=False
-                )
-                if len(ray):
-                    dist = np.linalg.norm(loc - points[left][ray], axis=1)
-                    near[left[ray[dist < margin]]] = True
-        return near
+    def on_static_scene(self, points_m: np.ndarray) -> np.ndarray:
+        """(N,) whether world points (m) inside the grid lie on the static scene as fusion judges it (in a static
+        voxel, or in the margin band with the static mesh within ``static_margin_m``): fusion drops them."""
+        points = np.asarray(points_m, dtype=float).reshape(-1, 3)
+        idx = self.world_to_index(points)
+        out = np.zeros(len(points), dtype=bool)
+        inside = self.in_grid(idx)
+        out[inside] = self._on_static_scene(points[inside], self.flat_index(idx[inside]))
+        return out
+
+    def _on_static_scene(self, points: np.ndarray, flat: np.ndarray) -> np.ndarray:
+        on = self.static.reshape(-1)[flat].copy()
+        band = self._static_near.reshape(-1)[flat] & ~on
+        if band.any():
+            on[band] = _near_mesh(self._static_mesh, self.config.static_margin_m, points[band])
+        return on
 
     def _inside_by_columns(self, mesh) -> np.ndarray:
         """Voxels whose centre is inside a watertight mesh: one +z ray per (x, y) column, parity of the crossings
@@ -395,11 +414,7 @@ class VoxelMap:
         end_flat = np.full(len(points), -1, dtype=np.int64)
         end_flat[inside] = self.flat_index(idx[inside])
         near_static = np.zeros(len(points), dtype=bool)
-        band = np.zeros(len(points), dtype=bool)
-        near_static[inside] = self.static.reshape(-1)[end_flat[inside]]
-        band[inside] = self._static_near.reshape(-1)[end_flat[inside]] & ~near_static[inside]
-        if band.any():
-            near_static[band] = self._near_static_mesh(points[band])
+        near_static[inside] = self._on_static_scene(points[inside], end_flat[inside])
         kept = inside & ~near_static
         nx, ny, nz = self.shape
         args = (

@@ -139,13 +139,13 @@ def test_each_filter_rejects_with_its_reason(station, generator):
 
     # an obstacle where the wrist is at that joint state: scene collision
     wrist = station.link_poses(q)["wrist_2_link"]
-    generator.checker.add_box("probe", [0.05, 0.05, 0.05], wrist)
+    generator.scene_checker.add_box("probe", [0.05, 0.05, 0.05], wrist)
     try:
         blocked = Candidates(good[None], center[None], np.array([-1]), np.array(["sphere"], dtype=object))
         generator.filter(blocked, grid, lo, hi, home)
         assert blocked.reason.tolist() == ["collision_scene"]
     finally:
-        generator.checker.remove_object("probe")
+        generator.scene_checker.remove_object("probe")
 
     # an unknown region around the forearm (the sensor itself outside it): collision with the not-known-free space
     elbow = station.link_poses(q)["forearm_link"][:3, 3]
@@ -198,3 +198,30 @@ def test_phoxi_tool_urdf_mounts_the_models_housing_and_sensor_frame():
         assert box.type == "box" and box.size[0] == pytest.approx(length_m)
     with pytest.raises(InputError, match="unknown PhoXi model"):
         phoxi_station_urdf(model="XL")
+
+
+def test_the_unknown_region_tree_is_kept_while_the_map_has_not_changed(generator, monkeypatch):
+    from agiprobot_measurement.nbv.volumetric import candidates as module
+    from agiprobot_measurement.nbv.volumetric.voxel_map import MapConfig, VoxelMap
+
+    built = []
+    real = module.unknown_region_mesh
+
+    def counting(grid, pool=1):
+        built.append(grid.version)
+        return real(grid, pool)
+
+    monkeypatch.setattr(module, "unknown_region_mesh", counting)
+    grid = VoxelMap([0.3, -0.7, 1.0], [0.6, -0.4, 1.3], MapConfig(resolution_m=0.01, planning_resolution_m=0.01))
+    try:
+        generator.update_unknown_obstacle(grid)
+        generator.update_unknown_obstacle(grid)  # a second pool in the same view
+        assert len(built) == 1
+        assert module.UNKNOWN_OBSTACLE in generator.checker.object_names()
+        assert module.UNKNOWN_OBSTACLE not in generator.scene_checker.object_names()
+        grid.invalidate()  # the map changed: built again
+        generator.update_unknown_obstacle(grid)
+        assert len(built) == 2
+    finally:
+        generator.update_unknown_obstacle(None)
+    assert module.UNKNOWN_OBSTACLE not in generator.checker.object_names()

@@ -4,6 +4,7 @@ not stop ("frontier exhausted") while views from low elevations would still see 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import trimesh
 
 from agiprobot_measurement.nbv.simulation.ground_truth import GroundTruth, simulate
@@ -23,6 +24,34 @@ def test_a_plate_thinner_than_a_voxel_keeps_its_points_on_the_fixture():
     stats = grid.integrate([0.05, 0.05, 0.5], [[0.05, 0.05, 0.004], [0.06, 0.05, 0.001], [0.07, 0.05, -0.003]])
     assert stats["points_kept"] == 1 and stats["points_static"] == 2
     assert grid.full_mask().sum() == 1
+
+
+def test_the_top_of_a_plate_on_the_fixture_counts_as_new_surface():
+    from types import SimpleNamespace
+
+    from agiprobot_measurement.common.geometry import look_at
+    from agiprobot_measurement.nbv.volumetric.novelty import NoveltyTracker
+
+    # the output map's resolution: a 3 mm plate lies within two voxels of the table (a voxel band around the
+    # static scene once dropped all of it, so its views added nothing and the realised-gain stop fired)
+    grid = VoxelMap([0, 0, -0.01], [0.1, 0.1, 0.09], MapConfig(resolution_m=0.002, planning_resolution_m=0.005))
+    table = trimesh.creation.box(extents=[0.3, 0.3, 0.02])
+    table.apply_translation([0.05, 0.05, -0.01])  # top face at z = 0
+    grid.set_static(table)
+    novelty = NoveltyTracker(grid.roi_min_m, grid.roi_max_m, grid, default_fx=400.0)  # 1 mm pixels at 0.4 m
+    ax = np.arange(0.02, 0.08, 0.001)
+    x, y = (a.ravel() for a in np.meshgrid(ax, ax, indexing="ij"))
+
+    def frame(z_m):
+        points = np.stack([x, y, np.full(len(x), z_m)], axis=1)
+        pose = look_at([0.05, 0.05, 0.4], [0.05, 0.05, 0.0], up=[0.0, 1.0, 0.0])
+        return SimpleNamespace(points_m=points, normals=np.tile([0.0, 0.0, 1.0], (len(x), 1)), camera_pose=pose,
+                               intrinsics=None)  # fmt: skip
+
+    assert novelty.add(frame(0.001)) == 0.0  # on the fixture's top (within the static margin): not the part
+    plate = novelty.add(frame(0.003))
+    assert plate == pytest.approx(0.06 * 0.06, rel=0.05)  # the plate's 60 x 60 mm
+    assert novelty.add(frame(0.003)) == 0.0  # seen before
 
 
 def test_ours_does_not_quit_early_on_a_thin_plate():

@@ -97,3 +97,30 @@ def test_replanning_keeps_views_that_still_promise_their_gain_and_drops_the_othe
     # a view looking elsewhere from the same place is another view
     turned = np.stack([_pose(0.0, axis=(1.0, 0.0, 0.0))])
     assert plan.kept(turned, np.array([50.0]), keep_share=0.5) == []
+
+
+@pytest.mark.parametrize("greedy_share, first", [(0.5, 0), (1.0, 1)])
+def test_the_tour_takes_a_concentrated_gain_first(monkeypatch, greedy_share, first):
+    from types import SimpleNamespace
+
+    from agiprobot_measurement.nbv.volumetric.policies import touring
+    from agiprobot_measurement.nbv.volumetric.settings import TourSettings
+
+    # view 0 is ours' best and promises most of the plan's gain, far from the current joints; views 1 and 2 are
+    # small and on the way: the shortest tour visits them first, a concentrated gain goes first
+    joints = np.array([np.full(6, 1.0), np.full(6, 0.1), np.full(6, 0.2)])
+    poses = np.stack([_pose(0.0), _pose(0.1), _pose(0.2)])
+    sets = np.eye(3, dtype=bool)  # disjoint: every view is in the plan
+    monkeypatch.setattr(touring, "coverage_sets", lambda *args: sets)
+    policy = touring.TourPolicy.__new__(touring.TourPolicy)
+    policy.tour = TourSettings(max_branches=1, min_marginal_share=0.0, greedy_share=greedy_share)
+    policy.plan = TourPlan()
+    policy.context = SimpleNamespace(view_model=None, motion_cost=l1)
+    policy._elements = lambda: (np.zeros((3, 3)), np.zeros((3, 3)))
+    policy._branches = lambda q, cands, picked: [cands.joints[i][None] for i in picked]
+    cands = SimpleNamespace(poses=poses, joints=joints, targets_m=np.zeros((3, 3)),
+                            source=np.array(["sphere"] * 3, dtype=object))  # fmt: skip
+    area = np.array([10.0, 2.0, 2.0])
+    choice, _, stats = policy._tour_choice(np.zeros(6), cands, {}, np.arange(3), area, area, np.array([3.0, 1.0, 1.0]))
+    assert choice.index == first and stats["tour_views"] == 3
+    assert len(policy.plan.planned_gains) == 3  # the rest of the plan is kept for the next view either way

@@ -17,7 +17,9 @@ the tail a greedy planner shuttles between the sides of the part. So:
    collision-free IK branches each, from the current joints (open tour, exact for small plans:
    :func:`~agiprobot_measurement.nbv.volumetric.tour.order_tour`; views whose marginal value is below
    ``min_marginal_share`` of the first pick's are left out of the plan); the first stop is executed (the other stops and
-   then ours' ranking are its fallbacks), the map fused, and the plan re-made.
+   then ours' ranking are its fallbacks), the map fused, and the plan re-made. When ours' best view alone promises
+   ``greedy_share`` of the plan's predicted new surface, it is the first stop and the tour goes on from it (a plan of
+   nearby small views first left the tail's big view for later and lost coverage).
 3. Where the predicted surface runs out, ours' coverage fallback and stopping rule apply unchanged.
 """
 
@@ -133,8 +135,14 @@ class TourPolicy(OursPolicy):
         if not picked:
             return self.choose_from(q, cands, stats, idx, exp_gain, exp_area, utilities)
         branches = self._branches(q, cands, idx[picked])
-        _, order, choice = order_tour(q, branches, c.motion_cost)
-        stops = [(picked[v], branches[v][b]) for v, b in zip(order, choice, strict=True)]
+        stops = []
+        if len(picked) > 1 and exp_area[best] >= self.tour.greedy_share * float(exp_area[picked].sum()):
+            # the gain is concentrated in ours' best view: it goes first, the tour goes on from there
+            stops = [(best, cands.joints[idx[best]])]
+            rest = [k for k, p in enumerate(picked) if p != best]
+            picked, branches = [picked[k] for k in rest], [branches[k] for k in rest]
+        _, order, choice = order_tour(stops[0][1] if stops else q, branches, c.motion_cost)
+        stops += [(picked[v], branches[v][b]) for v, b in zip(order, choice, strict=True)]
         self.plan = TourPlan(poses[[p for p, _ in stops]], exp_area[[p for p, _ in stops]])
         options = [self._option(cands, idx, j, joints, exp_gain, utilities, exp_area) for j, joints in stops]
         ranked = [j for j in np.argsort(-utilities, kind="stable") if j not in {p for p, _ in stops}]
