@@ -16,6 +16,7 @@ Modules (imported on demand; this file stays light):
 - :mod:`.visibility` the circle of visibility;
 - :mod:`.scoring` Viditelnost x Kolmost x Pohyb;
 - :mod:`.strategies` strategies 0/1/2 as a state machine with the outcome classes;
+- :mod:`.reacquisition` views onto the model's frontier next to the known body, once the growth points are exhausted;
 - :mod:`.run_config` the parameters of one run;
 - :mod:`.loop` initial search, the scripts and their termination;
 - :mod:`.objects` the six substitute bodies and bodies from images;

@@ -86,10 +86,17 @@ Documented choices where the report is silent:
   lap that could measure nothing. The candidates still left then cannot be planned from the circle: they are marked
   unmeasurable (the report's rule for a candidate without a plannable view), which exhausts the growth points.
 
+- Re-acquisition once the growth points are exhausted: sweeps round the known body (``reacquire_sweeps``, see
+  :func:`.reacquisition.reacquire_sweep`), then views onto the model's frontier next to the known body
+  (``reacquire_frontier``, :mod:`.reacquisition`); each hit that leaves growth points starts a new expansion. With
+  edge-midpoint aiming a candidate that ends unmeasurable is planned once more onto its centre
+  (``aim_fallback_centre``).
+
 Termination: each candidate is chosen once, and for one candidate every failed measurement forbids its configuration
 (at most 2 x 360 per aim point and strategy), strategy 2 stops after a full turn, and strategy switches are capped;
 so the number of measurements is finite on any finite grid (and ``max_measurements_per_candidate`` caps it further);
-with noise the expansion runs at most ``1 + noise_reopen_passes`` times.
+with noise the expansion runs at most ``1 + noise_reopen_passes`` times; a candidate falls back to the centre aim
+once, and the frontier pass tries each cell once and takes at most ``reacquire_frontier_max_views`` views.
 """
 
 from __future__ import annotations
@@ -125,6 +132,7 @@ from agiprobot_measurement.nbv.planar.range_finder import (
     noisy_return_margin_cells,
     scan,
 )
+from agiprobot_measurement.nbv.planar.reacquisition import reacquire_frontier, reacquire_sweep
 from agiprobot_measurement.nbv.planar.run_config import RunConfig
 from agiprobot_measurement.nbv.planar.scoring import aim_points
 from agiprobot_measurement.nbv.planar.strategies import (
@@ -232,7 +240,7 @@ class _Engine:
         if cfg.max_time_s is not None and time.perf_counter() - self.t0 > cfg.max_time_s:
             raise _BudgetExceeded("time_budget")
 
-    def measure(self, pos: np.ndarray, target, strategy: Strategy | None):
+    def measure(self, pos: np.ndarray, target, strategy: Strategy | None, untargeted_label: str = "search"):
         """Measure on the ground truth, classify against the model before the update, fuse the return."""
         self._check_budget()
         reading = scan(self.truth, pos, self.rf, self.cfg.eight_connected)
@@ -254,7 +262,7 @@ class _Engine:
             if not (0 <= cell[0] < self.shape[0] and 0 <= cell[1] < self.shape[1]):
                 point = cell = None
         kind = classify(cell, target, self.m, self.w, strategy == Strategy.S2 and self.cfg.s2_general_candidates)
-        label = label_of(strategy, kind) if strategy is not None else "search"
+        label = label_of(strategy, kind) if strategy is not None else untargeted_label
         self.outcomes[label] += 1
         self.records.append(MeasurementRecord(np.array(pos, dtype=float), point, cell, label, target))
         self.current_source = np.array(pos[0], dtype=float)
@@ -310,7 +318,7 @@ class _Engine:
                 update_circ(circ, np.array(xs), newly_full, in_place=True)
 
     # --- planner state --------------------------------------------------------------------------------------
-    def _window(self, margin: int = 2):
+    def window(self, margin: int = 2):
         i0, i1, j0, j1 = self.bbox
         return (
             max(i0 - margin, 0),
@@ -322,13 +330,13 @@ class _Engine:
     def growth_points(self) -> np.ndarray:
         if self.bbox is None:
             return np.zeros((0, 2), dtype=int)
-        i0, i1, j0, j1 = self._window()
+        i0, i1, j0, j1 = self.window()
         return np.argwhere(growth_mask(self.w[i0:i1, j0:j1])) + np.array([i0, j0])
 
     def possible_improvement(self) -> int:
         if self.bbox is None:
             return 0
-        i0, i1, j0, j1 = self._window()
+        i0, i1, j0, j1 = self.window()
         return int(driving_candidate_mask(self.w[i0:i1, j0:j1]).sum())
 
     def nearest_growth_point(self, pp_old):
@@ -354,7 +362,7 @@ class _Engine:
         return out
 
     def forbid_array(self, strategy: Strategy, cc, n_aims: int) -> np.ndarray:
-        key = (int(strategy), int(cc[0]), int(cc[1]))
+        key = (int(strategy), int(cc[0]), int(cc[1]), int(n_aims))
         if key not in self.forbidden:
             self.forbidden[key] = np.zeros((n_aims, N_SECTORS, 2), dtype=bool)
         return self.forbidden[key]
@@ -416,7 +424,24 @@ class _Engine:
         return hit
 
     def resolve(self, cc, pp, transitions) -> tuple[int, int]:
-        """Run the strategy state machine on ``cc``; returns the growth point to continue from."""
+        """Run the strategy state machine on ``cc``; returns the growth point to continue from. With edge-midpoint
+        aiming and ``aim_fallback_centre``, a candidate that ends unmeasurable is planned once more with centre aim
+        (its mark lifted): a narrow spike's cell can lack a view onto any edge midpoint and still have one onto its
+        centre."""
+        n_before = len(self.unmeasurable)
+        out = self._resolve(cc, pp, transitions, self.cfg.aim)
+        if self.cfg.aim == "centre" or not self.cfg.aim_fallback_centre or len(self.unmeasurable) <= n_before:
+            return out
+        last = self.unmeasurable[-1]
+        if self.m[last] != UNKNOWN:
+            return out
+        self.unmeasurable.pop()
+        self.marks[last] = 0.0
+        self.w[last] = UNKNOWN
+        self.outcomes["aim fallback: centre"] += 1
+        return self._resolve(last, pp, transitions, "centre")
+
+    def _resolve(self, cc, pp, transitions, aim: str) -> tuple[int, int]:
         cfg = self.cfg
         strategy = Strategy.S0
         switches = 0
@@ -433,7 +458,7 @@ class _Engine:
                 # another measurement of this candidate's cycle already decided it
                 self.outcomes["resolved on the way"] += 1
                 return cc if self.m[cc] == FULL else pp
-            aims = aim_points(cc, cfg.aim)
+            aims = aim_points(cc, aim)
             direction = compute_direction(self.w, pp, cfg.contour_points)
             normal = outward_normal(self.w, pp, direction)
             # a contour end's general candidate lies where the outer side is not known yet (beyond an apex): the
@@ -582,59 +607,21 @@ class _Engine:
     def expand(self, first_hit) -> str:
         """Expand growth points until they are exhausted; with depth noise, then reopen the marked candidates and
         expand again, while a pass adds full cells (``noise_reopen_passes``); then, while full cells border unknown
-        ones, sweep round the body for a new hit and expand from it (``reacquire_sweeps``)."""
-        reason = self._expand_with_reopening(first_hit)
+        ones, sweep round the body for a new hit and expand from it (``reacquire_sweeps``); then views onto the
+        frontier (``reacquire_frontier``)."""
+        reason = self.expand_with_reopening(first_hit)
         for _ in range(self.cfg.reacquire_sweeps):
             if reason != "growth_points_exhausted":
                 break
             full_before = int(np.count_nonzero(self.m == FULL))
-            reason = self._reacquire_sweep()
+            reason = reacquire_sweep(self)
             if int(np.count_nonzero(self.m == FULL)) <= full_before:
                 break
+        if reason == "growth_points_exhausted" and self.cfg.reacquire_frontier:
+            reason = reacquire_frontier(self)
         return reason
 
-    def _reacquire_sweep(self) -> str:
-        """One sweep round the known body (see ``RunConfig.reacquire_sweeps``): per direction, sources on rings at the
-        standoff beyond the known cells' radius (and half that radius nearer) round the known cells' centre, then
-        round the scene centre, the laser through the ring's centre, either camera side, until one measures; a view is taken only where the
-        laser's first cell that is not known empty is unknown (otherwise it could only return a seen cell). Every
-        hit that leaves growth points starts an expansion."""
-        rf, cfg = self.rf, self.cfg
-        # rings round the known cells' centre and round the scene centre (where the a-priori search expects the
-        # body), each reaching the known cells: with only a spike tip known, the first ring lies inside the body
-        full = np.argwhere(self.m == FULL).astype(float)
-        rings = []
-        for centre in (full.mean(axis=0), (np.array(self.shape, dtype=float) - 1) / 2):
-            radius = float(np.sqrt(((full - centre) ** 2).sum(axis=1).max()))
-            rings += [(centre, radius), (centre, 0.5 * radius)]
-        reach = float(self.shape[0] + self.shape[1])
-        reason = "growth_points_exhausted"
-        self.outcomes["reacquire: sweep"] += 1
-        for psi in np.arange(0.0, 360.0, cfg.reacquire_step_deg):
-            u = np.array([math.cos(math.radians(psi)), math.sin(math.radians(psi))])
-            for centre, ring in rings:
-                src = centre + (ring + rf.standoff_cells) * u
-                if not (0 <= src[0] <= self.shape[0] - 1 and 0 <= src[1] <= self.shape[1] - 1):
-                    continue
-                bi, bj = first_blocking(self.m != EMPTY, src, src - reach * u)
-                if bi < 0 or self.m[bi, bj] != UNKNOWN:
-                    continue
-                hit = None
-                for side in (1, -1):
-                    _, hit, _ = self.measure(rf.pose_through(src, centre, side), None, None)
-                    if hit is not None:
-                        break
-                if hit is None:
-                    continue
-                if len(self.growth_points()):
-                    self.outcomes["reacquire: new contour"] += 1
-                    reason = self._expand_with_reopening(hit)
-                    if reason != "growth_points_exhausted":
-                        return reason
-                break
-        return reason
-
-    def _expand_with_reopening(self, first_hit) -> str:
+    def expand_with_reopening(self, first_hit) -> str:
         reason = self._expand_pass(first_hit)
         if self.cfg.noise_sigma_cells <= 0:
             return reason
@@ -700,7 +687,7 @@ class _Engine:
                 break
         # a whole lap planned no view of the candidates left: from the circle they cannot be planned, which is the
         # report's "unmeasurable"; marking them exhausts the growth points
-        i0, i1, j0, j1 = self._window()
+        i0, i1, j0, j1 = self.window()
         while True:  # marking the candidates of a contour end may expose the end's other unknown neighbours
             left = np.argwhere(driving_candidate_mask(self.w[i0:i1, j0:j1])) + np.array([i0, j0])
             if len(left) == 0:
@@ -710,7 +697,7 @@ class _Engine:
         return "growth_points_exhausted" if len(self.growth_points()) == 0 else "circle_completed"
 
     def _circ_plan(self, src, near, far):
-        i0, i1, j0, j1 = self._window()
+        i0, i1, j0, j1 = self.window()
         cands = np.argwhere(driving_candidate_mask(self.w[i0:i1, j0:j1])) + np.array([i0, j0])
         if len(cands) == 0:
             return None

@@ -83,6 +83,17 @@ class RunConfig:
     # (0: the report's single expansion), in steps of ``reacquire_step_deg``
     reacquire_sweeps: int = 6
     reacquire_step_deg: float = 5.0
+    # after the sweeps, views onto the frontier (unknown cells next to known empty ones) within
+    # ``reacquire_frontier_max_distance_cells`` of a known full cell, nearest to the body first, planned on the model
+    # (nbv.planar.reacquisition); each hit that leaves growth points starts a new expansion. At most
+    # ``reacquire_frontier_max_views`` views per run; ``reacquire_frontier_checks`` frontier cells are tried for a
+    # plannable view per view
+    reacquire_frontier: bool = True
+    # with edge-midpoint aiming, a candidate that ends unmeasurable is planned once more onto its centre
+    aim_fallback_centre: bool = True
+    reacquire_frontier_max_distance_cells: float = 20.0
+    reacquire_frontier_max_views: int = 1500
+    reacquire_frontier_checks: int = 50
     # fullpix: after a strategy finds no view, one that planned before may plan again (see ``_Engine.resolve``)
     retry_planned_strategies: bool = True
     # strategy 0 may take a view whose first not-known-empty cell behind cc is not known full when no view has a
@@ -154,6 +165,10 @@ class RunConfig:
             raise NbvInputError(f"reacquire_sweeps must be >= 0, got {self.reacquire_sweeps!r}")
         if not (math.isfinite(self.reacquire_step_deg) and 0.5 <= self.reacquire_step_deg <= 90.0):
             raise NbvInputError(f"reacquire_step_deg must be in [0.5, 90], got {self.reacquire_step_deg!r}")
+        _positive("reacquire_frontier_max_distance_cells", self.reacquire_frontier_max_distance_cells)
+        for name in ("reacquire_frontier_max_views", "reacquire_frontier_checks"):
+            if int(getattr(self, name)) < 0:
+                raise NbvInputError(f"{name} must be >= 0, got {getattr(self, name)!r}")
         for name in ("contour_points", "max_switches_per_candidate", "max_measurements_per_candidate", "circ_max_laps"):
             if int(getattr(self, name)) < 1:
                 raise NbvInputError(f"{name} must be >= 1, got {getattr(self, name)!r}")

@@ -130,12 +130,15 @@ def score_views(
     cfg: ScoreConfig,
     forbidden: np.ndarray | None = None,
     term: np.ndarray | None = None,
+    camera_circles: np.ndarray | None = None,
 ) -> ViewSet:
     """Score every (aim, sector, side) view.
 
     ``circles`` (a x 360) are the circles of visibility of the aims; ``forbidden`` (a x 360 x 2, side +1 at 0) zeroes
     configurations banned after D0/E0; ``term`` (a x 360, optional) replaces Kolmost (strategy 1 uses the
-    visibility of nearby full cells through the candidate instead).
+    visibility of nearby full cells through the candidate instead); ``camera_circles`` (a x 360, optional) are
+    used for the camera's sector instead of ``circles`` (the frontier re-acquisition blocks the laser on every cell
+    that is not known empty, the camera on fewer).
     """
     aims = np.asarray(aims, dtype=float).reshape(-1, 2)
     na = len(aims)
@@ -149,7 +152,8 @@ def score_views(
     src, cam = poses[:, 0], poses[:, 1]
     cam_dir = np.arctan2(cam[:, 1] - aims[a_idx, 1], cam[:, 0] - aims[a_idx, 0])
     cam_sec = sector_of(cam_dir)
-    vis = (circles[a_idx, sec] > 0) & (circles[a_idx, cam_sec] > 0)
+    cam_circles = circles if camera_circles is None else camera_circles
+    vis = (circles[a_idx, sec] > 0) & (cam_circles[a_idx, cam_sec] > 0)
     if forbidden is not None:
         vis &= ~forbidden[a_idx, sec, (1 - side) // 2]
     if term is None and normal is not None and cfg.front_only:

@@ -3,6 +3,8 @@ the planner must not give up after a spike with either aim."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -35,14 +37,38 @@ def test_the_halves_are_disjoint_cover_every_family_and_are_reproducible():
 
 @pytest.mark.parametrize("aim", ["centre", "edge_midpoints"])
 def test_the_star_is_followed_round_its_acute_spikes(aim):
-    # before the re-acquisition sweeps the contour chain ended at a spike tip: 31 % (centre) and 29 % (edge
-    # midpoints) of the plannable boundary with stratpix, 41 % / 58 % with fullpix
+    # without re-acquisition the contour chain ends at a spike tip: 31 % (centre) and 29 % (edge midpoints) of the
+    # plannable boundary with stratpix; the sweeps round the body brought it to 0.95 / 0.98, the frontier views on top
+    # must not lose that
     rf = RangeFinder2D.from_config().with_length(250.0)
     truth = make_body("star5")
+    plannable = plannable_boundary(truth, rf, aim)
     result = run(truth, rf, RunConfig(script="stratpix", aim=aim))
     assert result.termination == "growth_points_exhausted"
-    assert result.outcomes["reacquire: new contour"] >= 1
-    assert coverage(result.model, plannable_boundary(truth, rf, aim)) >= 0.85
-    # without the sweeps the same run stops early
-    single = run(truth, rf, RunConfig(script="stratpix", aim=aim, reacquire_sweeps=0))
-    assert coverage(single.model, plannable_boundary(truth, rf, aim)) < 0.6
+    assert result.outcomes["reacquire: new contour"] + result.outcomes["reacquire: frontier contour"] >= 1
+    assert coverage(result.model, plannable) >= 0.95
+    # without either re-acquisition (and the centre fallback) the same run stops early
+    bare = RunConfig(
+        script="stratpix", aim=aim, reacquire_sweeps=0, reacquire_frontier=False, aim_fallback_centre=False
+    )
+    single = run(truth, rf, bare)
+    assert coverage(single.model, plannable) < 0.6
+    if aim == "edge_midpoints":
+        # a candidate without an edge-midpoint view is planned onto its centre: the chain goes on past the spikes
+        fallback = run(truth, rf, replace(bare, aim_fallback_centre=True))
+        assert fallback.outcomes["aim fallback: centre"] >= 1
+        assert coverage(fallback.model, plannable) >= coverage(single.model, plannable) + 0.2
+
+
+def test_frontier_views_recover_a_spiked_star_the_sweeps_leave():
+    # the tuning body with seven narrow spikes: the sweeps look along rays through the body's centre only and leave
+    # the spikes' flanks unseen (fullpix, centre aim: 0.50 of the plannable boundary); the frontier views after
+    # them find the flanks (0.98). Alone, without the sweeps, they do not (0.27): they stay near the known body
+    rf = RangeFinder2D.from_config().with_length(250.0)
+    truth = make_body("star_4")
+    plannable = plannable_boundary(truth, rf, "centre")
+    sweeps_only = run(truth, rf, RunConfig(script="fullpix", reacquire_frontier=False))
+    both = run(truth, rf, RunConfig(script="fullpix"))
+    assert coverage(sweeps_only.model, plannable) < 0.8
+    assert both.outcomes["reacquire: frontier contour"] >= 1
+    assert coverage(both.model, plannable) >= 0.95

@@ -201,8 +201,15 @@ def test_with_noise_marked_candidates_are_reopened_until_a_pass_adds_nothing():
     rf = RangeFinder2D.from_config().with_length(40.0)
     truth = make_object("u_shape")
     measurable = plannable_boundary(truth, rf, "edge_midpoints")
-    # the re-acquisition sweeps would find the wall too: left out, to judge the reopening alone
-    noisy = RunConfig(script="fullpix", aim="edge_midpoints", noise_sigma_cells=0.3, seed=0, reacquire_sweeps=0)
+    # the re-acquisition sweeps and the frontier views would find the wall too: left out, to judge the reopening alone
+    noisy = RunConfig(
+        script="fullpix",
+        aim="edge_midpoints",
+        noise_sigma_cells=0.3,
+        seed=0,
+        reacquire_sweeps=0,
+        reacquire_frontier=False,
+    )
     single = run(truth, rf, replace(noisy, noise_reopen_passes=0))
     reopened = run(truth, rf, noisy)
     assert single.outcomes["noise: reopening pass"] == 0

@@ -167,8 +167,8 @@ def test_noise_with_a_long_baseline_keeps_the_surface():
     meas = measurable_boundary(np.where(truth, FULL, EMPTY), rf)
     cov = {}
     for k in (0.0, 2.0):
-        # a single pass: reopening the marked candidates (or a re-acquisition sweep) would also win back what the
-        # missing margin erased
+        # a single pass: reopening the marked candidates (or re-acquisition by sweeps or frontier views) would also
+        # win back what the missing margin erased
         config = RunConfig(
             script="fullpix",
             noise_sigma_cells=0.3,
@@ -176,6 +176,7 @@ def test_noise_with_a_long_baseline_keeps_the_surface():
             noise_return_margin_sigmas=k,
             noise_reopen_passes=0,
             reacquire_sweeps=0,
+            reacquire_frontier=False,
         )
         cov[k] = summarize(run(truth, rf, config), meas, "disc")["coverage"]
     assert cov[2.0] >= 0.9
