@@ -27,7 +27,7 @@ import trimesh
 
 from agiprobot_measurement.inspection import actual, cases
 from agiprobot_measurement.inspection.decision import CONFORM, NOT_CONFORM
-from agiprobot_measurement.inspection.instrument import InstrumentUncertainty, load_instrument
+from agiprobot_measurement.inspection.instrument import InstrumentUncertainty, known_error_models, load_instrument
 from agiprobot_measurement.inspection.pipeline import inspect_cloud
 from agiprobot_measurement.inspection.registration import transform_error
 
@@ -249,6 +249,22 @@ def speed(seed: int = 0) -> dict:
             "flags": result.flags}  # fmt: skip
 
 
+def _check_arguments(parser: argparse.ArgumentParser, args) -> None:
+    """Unknown error models, sensors, cases or magnitudes are a usage error (exit 2) naming the known ones."""
+    models = known_error_models()
+    if args.error_model not in models:
+        parser.error(f"--error-model: unknown sensor error model {args.error_model!r} (known: {', '.join(models)})")
+    for option, given, known in (("--sensors", args.sensors, SCANNER), ("--cases", args.cases, MAGNITUDES)):
+        unknown = [name for name in given.split(",") if name not in known]
+        if unknown:
+            parser.error(f"{option}: unknown {', '.join(unknown)} (known: {', '.join(known)})")
+    if args.magnitudes is not None:
+        try:
+            [float(m) for m in args.magnitudes.split(",")]
+        except ValueError:
+            parser.error(f"--magnitudes: not a comma list of numbers: {args.magnitudes!r}")
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seeds", type=int, default=20, help="seeds per case and magnitude")
@@ -260,6 +276,7 @@ def main(argv=None) -> int:
     parser.add_argument("--speed", action="store_true", help="also time a 1 M-point inspection (100 k faces)")
     parser.add_argument("--json", default=None, help="write rows, summary and targets here")
     args = parser.parse_args(argv)
+    _check_arguments(parser, args)
     rows = []
     only = None if args.magnitudes is None else {float(m) for m in args.magnitudes.split(",")}
     for sensor in args.sensors.split(","):

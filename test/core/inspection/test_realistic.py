@@ -119,3 +119,15 @@ def test_realistic_laser_hole_against_datums_of_other_sweeps_is_not_called_wrong
     assert position.verdict != "not conform"
     assert abs(position.value_mm - c.truth["hole_position_deviation_mm"]) <= position.uncertainty_mm
     assert position.uncertainty_mm >= 2 * COVERAGE_FACTOR * terms.stitching_mm
+
+
+def test_the_benchmark_refuses_an_unknown_error_model_naming_the_known_ones(capsys):
+    from benchmarks.inspection.run import main
+
+    for argv, named in ((["--error-model", "NOSUCH"], "ideal, realistic"), (["--sensors", "phoxi,foo"], "laser"),
+                        (["--cases", "dent,bend"], "warp")):  # fmt: skip
+        with pytest.raises(SystemExit) as exit_info:
+            main(argv)
+        assert exit_info.value.code == 2
+        err = capsys.readouterr().err
+        assert argv[1].split(",")[-1] in err and named in err and "Traceback" not in err
