@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from agiprobot_measurement.inspection.decision import Decision, decide, expanded
 from agiprobot_measurement.inspection.deviation import patches
@@ -30,6 +31,12 @@ __all__ = ["FeatureContext", "FeatureResult", "evaluate_feature"]
 
 #: flatness: the face's heights are averaged within this radius (mm) before the minimum zone (noise filter)
 FLATNESS_FILTER_RADIUS_MM = 5.0
+#: flatness: of the points the face's edge margin masks, those at least this many point spacings from the CAD edge
+#: are kept (the scanners' edge errors -- mixed pixels, mixed line points -- are one point wide): the zone's ends
+#: lie at the face's edges
+FLATNESS_EDGE_SPACINGS = 2.0
+#: points sampled to estimate the face's point spacing (median distance to the nearest other point)
+SPACING_SAMPLE = 20_000
 #: hole edge ring: angular bins of the edge points
 HOLE_EDGE_BINS = 90
 #: hole wall: fewest points and smallest arc (deg, in 10-deg bins holding at least WALL_BIN_POINTS points) for the
@@ -70,7 +77,9 @@ class FeatureResult:
 @dataclass
 class FeatureContext:
     """What the evaluators share: the registered points (CAD, mm), their noise sigma (mm), a mask of points
-    usable for fits, the points of each named face, and the registration's displacement sigma function."""
+    usable for fits, the points of each named face, and the registration's displacement sigma function; the
+    points of each face that only the edge margin masks and each point's distance to the nearest CAD edge (mm, inf
+    beyond the margin)."""
 
     points: np.ndarray
     sigma: np.ndarray
@@ -80,6 +89,8 @@ class FeatureContext:
     registration_sigma: object  # callable(points (N, 3), normals (N, 3)) -> (N,) mm
     instrument: InstrumentUncertainty = field(default_factory=InstrumentUncertainty)
     registration_centre_mm: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    edge_points: dict = field(default_factory=dict)
+    edge_distance_mm: np.ndarray | None = None
 
 
 def _face(ctx: FeatureContext, name: str, feature: str) -> np.ndarray:
@@ -90,7 +101,7 @@ def _face(ctx: FeatureContext, name: str, feature: str) -> np.ndarray:
 
 
 def _flatness(feature: Feature, ctx: FeatureContext) -> FeatureResult:
-    idx = _face(ctx, feature.faces[0], feature.name)
+    idx, margin = _flatness_points(ctx, feature.faces[0], feature.name)
     pts = ctx.points[idx]
     plane = fit_plane(pts, ctx.face_planes[feature.faces[0]][1])
     u, v = plane_basis(plane.normal)
@@ -98,8 +109,8 @@ def _flatness(feature: Feature, ctx: FeatureContext) -> FeatureResult:
     h = plane.heights(pts)
     voxel = FLATNESS_FILTER_RADIUS_MM / 2
     pat = patches(flat, h, ctx.sigma[idx], np.ones(len(idx), dtype=bool), voxel, FLATNESS_FILTER_RADIUS_MM)
-    heights = _local_linear(flat[:, :2], h, pat)
-    filtered = plane.centroid + pat.centre_mm[:, :1] * u + pat.centre_mm[:, 1:2] * v + heights[:, None] * plane.normal
+    xy, heights = _local_linear(flat[:, :2], h, pat)
+    filtered = plane.centroid + xy[:, :1] * u + xy[:, 1:2] * v + heights[:, None] * plane.normal
     value = min_zone_flatness(filtered, plane.normal)
     raw = min_zone_flatness(pts, plane.normal)
     sigma_f = float(np.median(pat.sigma_mm))
@@ -108,18 +119,38 @@ def _flatness(feature: Feature, ctx: FeatureContext) -> FeatureResult:
     tol = feature.params["tolerance_mm"]
     return FeatureResult(
         feature.name, "flatness",
-        {"flatness_mm": value, "raw_flatness_mm": raw, "ls_rms_mm": plane.rms_mm, "filter_radius_mm": FLATNESS_FILTER_RADIUS_MM},
+        {"flatness_mm": value, "raw_flatness_mm": raw, "ls_rms_mm": plane.rms_mm, "filter_radius_mm": FLATNESS_FILTER_RADIUS_MM,
+         "edge_margin_mm": margin},
         [decide("flatness", value, tol, expanded(u_f, ctx.instrument.form_mm))], len(idx),
-        [f"minimum zone of the heights filtered by local LS planes within {FLATNESS_FILTER_RADIUS_MM} mm; raw "
-         "(unfiltered) zone "
-         "includes about 6 sigma of noise"],
+        [f"minimum zone of the heights filtered by local LS planes within {FLATNESS_FILTER_RADIUS_MM} mm, evaluated "
+         "at each patch's centroid and its outermost points; raw (unfiltered) zone includes about 6 sigma of noise; "
+         f"points from {margin:.2f} mm of the CAD edges ({FLATNESS_EDGE_SPACINGS:g} point spacings)"],
     )  # fmt: skip
 
 
-def _local_linear(xy: np.ndarray, h: np.ndarray, pat) -> np.ndarray:
-    """Per patch, the height at its voxel's centroid from an LS plane through the patch's points (a local linear
-    filter): a patch mean at the face's border averages one side only and reads a sloped face's height short there,
-    a local plane does not. The patch mean where the points do not determine a plane."""
+def _flatness_points(ctx: FeatureContext, name: str, feature: str) -> tuple[np.ndarray, float]:
+    """The face's points for its flatness and the edge margin (mm) used: the face's points plus those of its edge
+    band at least ``FLATNESS_EDGE_SPACINGS`` point spacings from the CAD edge. The surface's edge margin guards
+    the deviation map against closest points sliding over an edge; a flatness needs only the scanner's edge errors
+    left out, and a margin of fixed width leaves the zone's ends unmeasured (a bow reads short by about
+    2 x margin / length of itself)."""
+    idx = _face(ctx, name, feature)
+    band = ctx.edge_points.get(name, np.zeros(0, dtype=int))
+    if ctx.edge_distance_mm is None or not len(band):
+        return idx, float("nan")
+    face = ctx.points[idx]
+    sample = face[np.random.default_rng(0).choice(len(face), min(len(face), SPACING_SAMPLE), replace=False)]
+    spacing = float(np.median(cKDTree(face).query(sample, k=2)[0][:, 1]))
+    margin = FLATNESS_EDGE_SPACINGS * spacing
+    return np.union1d(idx, band[ctx.edge_distance_mm[band] >= margin]), margin
+
+
+def _local_linear(xy: np.ndarray, h: np.ndarray, pat) -> tuple[np.ndarray, np.ndarray]:
+    """Positions (M, 2) and heights (M,) of the face filtered by local planes: per patch an LS plane through the
+    patch's points (a local linear filter) evaluated at its voxel's centroid and at the voxel's points of smallest
+    and largest x and y, so the filtered face reaches as far as the points do. A patch mean at the face's border
+    averages one side only and reads a sloped face's height short there, a local plane does not. The patch mean
+    at its centroid where the points do not determine a plane."""
     x, y = xy[:, 0], xy[:, 1]
     voxel = pat.voxel_of_point
     m = len(pat.mean_mm)
@@ -128,11 +159,25 @@ def _local_linear(xy: np.ndarray, h: np.ndarray, pat) -> np.ndarray:
     s = pat.neighbours.tocsr() @ moments
     normal = np.stack([s[:, [0, 1, 2]], s[:, [1, 3, 4]], s[:, [2, 4, 5]]], axis=1)
     rhs = s[:, 6:9]
-    out = pat.mean_mm.copy()
     ok = np.linalg.cond(normal) < 1e10
     coef = np.linalg.solve(normal[ok], rhs[ok][:, :, None])[:, :, 0]
-    out[ok] = coef[:, 0] + coef[:, 1] * pat.centre_mm[ok, 0] + coef[:, 2] * pat.centre_mm[ok, 1]
-    return out
+    centre = pat.centre_mm[:, :2]
+    heights = pat.mean_mm.copy()
+    heights[ok] = coef[:, 0] + coef[:, 1] * centre[ok, 0] + coef[:, 2] * centre[ok, 1]
+    # each determined patch's outermost points: first and last of its points sorted by x, then by y
+    plane_of = np.full(m, -1)
+    plane_of[ok] = np.arange(int(ok.sum()))
+    inside = voxel >= 0
+    ends = []
+    for key in (x, y):
+        order = np.flatnonzero(inside)[np.lexsort((key[inside], voxel[inside]))]
+        starts = np.r_[True, voxel[order][1:] != voxel[order][:-1]]
+        ends += [order[starts], order[np.r_[starts[1:], True]]]
+    ends = np.unique(np.concatenate(ends))
+    ends = ends[plane_of[voxel[ends]] >= 0]
+    c = coef[plane_of[voxel[ends]]]
+    positions = np.vstack([centre, xy[ends]])
+    return positions, np.concatenate([heights, c[:, 0] + c[:, 1] * x[ends] + c[:, 2] * y[ends]])
 
 
 def _size(feature: Feature, ctx: FeatureContext) -> FeatureResult:
