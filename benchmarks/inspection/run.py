@@ -61,17 +61,17 @@ IDEAL_CENTRE_MM = {"phoxi_S": 0.03, "laser_line": 0.05}
 RADIUS_95_SIGMAS = float(np.sqrt(-2.0 * np.log(0.05)))
 
 
-def centre_limit_mm(scanner: str, error_model: str = "realistic") -> float:
+def centre_limit_mm(scanner: str, stitching_mm: float) -> float:
     """The stated bound (mm) on a hole centre's error with the realistic ``scanner``: a number of
     :data:`REALISTIC_LIMITS`, or (``pose_chain``) derived a priori from the error model: the centre, seen by some
     sweeps and located against datums seen by others, moves with their relative pose error, per axis the
-    instrument's stitching term s (:func:`~agiprobot_measurement.inspection.instrument.pose_chain_stitching_mm`);
-    its 95 % radius RADIUS_95_SIGMAS x s, with the ideal sensor's centre bound in quadrature."""
+    instrument's stitching term ``stitching_mm``
+    (:func:`~agiprobot_measurement.inspection.instrument.pose_chain_stitching_mm`); its 95 % radius
+    RADIUS_95_SIGMAS x that, with the ideal sensor's centre bound in quadrature."""
     limit = REALISTIC_LIMITS[scanner]["position_mm"]
     if limit != FROM_POSE_CHAIN:
         return float(limit)
-    stitching = load_instrument(error_model, scanner).stitching_mm
-    return float(np.hypot(RADIUS_95_SIGMAS * stitching, IDEAL_CENTRE_MM[scanner]))
+    return float(np.hypot(RADIUS_95_SIGMAS * stitching_mm, IDEAL_CENTRE_MM[scanner]))
 
 
 def _dent_region(result, truth):
@@ -215,7 +215,8 @@ def _realistic_targets(summary: list[dict], sensor: str) -> list[tuple[str, bool
     """The stated limits of :data:`REALISTIC_LIMITS` for the benchmark sensor ``sensor``."""
     limits = REALISTIC_LIMITS[SCANNER[sensor]]
     rows = []
-    bounds = {"position": ("centre_error_mm_max", round(centre_limit_mm(SCANNER[sensor]), 3)), "flatness": ("flatness_error_mm_max",
+    centre = centre_limit_mm(SCANNER[sensor], load_instrument("realistic", SCANNER[sensor]).stitching_mm)
+    bounds = {"position": ("centre_error_mm_max", round(centre, 3)), "flatness": ("flatness_error_mm_max",
               limits["flatness_mm"]), "size": ("size_error_mm_max", limits["size_mm"])}  # fmt: skip
     for e in summary:
         if e["sensor"] != sensor:
