@@ -27,6 +27,7 @@ import trimesh
 
 from agiprobot_measurement.inspection import actual, cases
 from agiprobot_measurement.inspection.decision import CONFORM, NOT_CONFORM
+from agiprobot_measurement.inspection.errors import InspectionInputError
 from agiprobot_measurement.inspection.instrument import (
     FROM_POSE_CHAIN,
     InstrumentUncertainty,
@@ -83,8 +84,13 @@ def _dent_region(result, truth):
 def evaluate(case: cases.Case, instrument: InstrumentUncertainty | None = None) -> dict:
     """One run's figures against the truth (``instrument``: the scanner's systematic terms, None = none)."""
     t0 = time.perf_counter()
-    result = inspect_cloud(case.points_mm, case.nominal, case.spec, case.part.nominal_placement, case.sigma_mm,
-                           instrument=instrument)  # fmt: skip
+    try:
+        result = inspect_cloud(case.points_mm, case.nominal, case.spec, case.part.nominal_placement, case.sigma_mm,
+                               instrument=instrument)  # fmt: skip
+    except InspectionInputError as exc:  # the part's own cloud refused: a failed run, not a verdict
+        return {"case": case.name, "magnitude": case.magnitude, "seed": case.seed, "sensor": case.sensor,
+                "error_model": case.error_model, "points": len(case.points_mm), "time_s": time.perf_counter() - t0,
+                "refused": str(exc), "ok": False, "wrong": False}  # fmt: skip
     elapsed = time.perf_counter() - t0
     truth = case.truth
     cad_from_world = np.linalg.inv(case.part.actual_placement)
@@ -147,14 +153,16 @@ def _summary(rows: list[dict]) -> list[dict]:
     for row in rows:
         groups.setdefault((row["sensor"], row["case"], row["magnitude"]), []).append(row)
     out = []
-    for (sensor, case, magnitude), group in groups.items():
-        entry = {"sensor": sensor, "case": case, "magnitude": magnitude, "runs": len(group),
-                 "error_model": group[0]["error_model"], "ok_share": float(np.mean([r["ok"] for r in group])),
-                 "wrong_share": float(np.mean([r["wrong"] for r in group])),
-                 "registration_mm_max": float(max(r["registration_mm"] for r in group)),
-                 "registration_deg_max": float(max(r["registration_deg"] for r in group)),
-                 "time_s_median": float(np.median([r["time_s"] for r in group])),
-                 "points_median": int(np.median([r["points"] for r in group]))}  # fmt: skip
+    for (sensor, case, magnitude), runs in groups.items():
+        group = [r for r in runs if "refused" not in r] or runs
+        entry = {"sensor": sensor, "case": case, "magnitude": magnitude, "runs": len(runs),
+                 "error_model": runs[0]["error_model"], "ok_share": float(np.mean([r["ok"] for r in runs])),
+                 "wrong_share": float(np.mean([r["wrong"] for r in runs])),
+                 "refused_share": float(np.mean(["refused" in r for r in runs])),
+                 "registration_mm_max": float(max(r.get("registration_mm", np.nan) for r in group)),
+                 "registration_deg_max": float(max(r.get("registration_deg", np.nan) for r in group)),
+                 "time_s_median": float(np.median([r["time_s"] for r in runs])),
+                 "points_median": int(np.median([r["points"] for r in runs]))}  # fmt: skip
         for key in ("depth_error_mm", "position_error_mm", "centre_error_mm", "flatness_error_mm", "size_error_mm",
                     "diameter_error_mm"):  # fmt: skip
             values = [abs(r[key]) for r in group if key in r]
@@ -166,8 +174,8 @@ def _summary(rows: list[dict]) -> list[dict]:
             entry["position_U_mm_max"] = float(max(r["position_U_mm"] for r in group if "position_U_mm" in r))
             entry["within_U_share"] = float(np.mean([r["within_U"] for r in group if "within_U" in r]))
         if case == "dent":
-            entry["flag_share"] = float(np.mean([r["flagged"] for r in group]))
-            entry["false_flag_share"] = float(np.mean([r["other_flags"] > 0 for r in group]))
+            entry["flag_share"] = float(np.mean([r.get("flagged", False) for r in runs]))
+            entry["false_flag_share"] = float(np.mean([r.get("other_flags", 0) > 0 for r in runs]))
         out.append(entry)
     return out
 
@@ -223,6 +231,7 @@ def _realistic_targets(summary: list[dict], sensor: str) -> list[tuple[str, bool
             continue
         c, m = e["case"], e["magnitude"]
         rows.append((f"{c} {m}: no wrong definitive verdict", e["wrong_share"] == 0.0, f"{e['wrong_share']:.2f}"))
+        rows.append((f"{c} {m}: no cloud of the part refused", e["refused_share"] == 0.0, f"{e['refused_share']:.2f}"))
         if c == "null":
             rows.append((f"null: registration <= {limits['registration_mm']} mm / {limits['registration_deg']} deg",
                          e["registration_mm_max"] <= limits["registration_mm"]

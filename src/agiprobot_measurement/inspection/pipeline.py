@@ -32,7 +32,8 @@ __all__ = ["MIN_POINTS", "STAGES", "InspectionResult", "SurfaceRegion", "inspect
 STAGES = ("check", "register", "deviations", "regions", "features", "done")
 #: fewer measured points than this is not an inspection
 MIN_POINTS = 500
-#: a registration whose robust residual exceeds this many times the points' noise is a wrong part
+#: a registration whose robust residual exceeds this many times the scatter the scanner explains (the points' noise
+#: with its systematic surface and view-stitching terms, in quadrature) is a wrong part
 MAX_RESIDUAL_OVER_NOISE = 6.0
 
 
@@ -183,9 +184,11 @@ def inspect_cloud(points_world_mm, nominal: trimesh.Trimesh, spec: InspectionSpe
         local = patches(cp.closest_mm, cp.signed_mm, np.zeros(len(cad)), use, s.voxel_mm, 0.5 * s.voxel_mm)
         scatter = cp.signed_mm[use] - local.mean_mm[local.voxel_of_point[use]]
         sigma = np.where(np.isnan(sigma), 1.4826 * float(np.median(np.abs(scatter))), sigma)
-    if reg.residual_mm > MAX_RESIDUAL_OVER_NOISE * max(float(np.median(sigma[use])), 1e-3):
-        raise RegistrationError(f"the registration's residual ({reg.residual_mm:.3g} mm) is far above the noise "
-                                f"({float(np.median(sigma[use])):.3g} mm): a cloud of another part?")  # fmt: skip
+    # views stitched with a relative pose error (stitching_mm) disagree by about that much where they meet the fit
+    scatter = float(np.hypot(np.median(sigma[use]), np.hypot(instrument.surface_mm, instrument.stitching_mm)))
+    if reg.residual_mm > MAX_RESIDUAL_OVER_NOISE * max(scatter, 1e-3):
+        raise RegistrationError(f"the registration's residual ({reg.residual_mm:.3g} mm) is far above the noise and "
+                                f"the scanner's systematic terms ({scatter:.3g} mm): a cloud of another part?")  # fmt: skip
     timings["deviations"] = time.perf_counter() - t
     report("regions", 0.0)
     t = time.perf_counter()
