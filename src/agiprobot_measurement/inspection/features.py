@@ -135,13 +135,13 @@ def _flatness_points(ctx: FeatureContext, name: str, feature: str) -> tuple[np.n
     left out, and a margin of fixed width leaves the zone's ends unmeasured (a bow reads short by about
     2 x margin / length of itself)."""
     idx = _face(ctx, name, feature)
-    band = ctx.edge_points.get(name, np.zeros(0, dtype=int))
-    if ctx.edge_distance_mm is None or not len(band):
-        return idx, float("nan")
     face = ctx.points[idx]
     sample = face[np.random.default_rng(0).choice(len(face), min(len(face), SPACING_SAMPLE), replace=False)]
     spacing = float(np.median(cKDTree(face).query(sample, k=2)[0][:, 1]))
     margin = FLATNESS_EDGE_SPACINGS * spacing
+    band = ctx.edge_points.get(name, np.zeros(0, dtype=int))
+    if ctx.edge_distance_mm is None or not len(band):
+        return idx, margin
     return np.union1d(idx, band[ctx.edge_distance_mm[band] >= margin]), margin
 
 
