@@ -49,10 +49,12 @@ EVALUATION_SEED0 = 100
 #: the scanner of each benchmark sensor in config/inspection/instruments.yaml
 SCANNER = {"phoxi": "phoxi_S", "phoxi_low": "phoxi_S", "laser": "laser_line"}
 #: stated limits with the realistic sensor models (mm; the detection limit is a dent depth): the systematic errors
-#: the best fit leaves (calibration, fixed pattern, hand-eye) bound what the realistic scanners can decide
+#: the best fit leaves (calibration, fixed pattern, hand-eye) bound what the realistic scanners can decide. PhoXi S
+#: flatness: 2 x the instrument's form_mm (0.099, the flat 200 mm plate of the development seeds) with the ideal
+#: sensor's 0.03 in quadrature
 REALISTIC_LIMITS = {
     "phoxi_S": {"registration_mm": 0.1, "registration_deg": 0.01, "detection_limit_mm": 0.3, "depth_mm": 0.03,
-                "position_mm": 0.06, "flatness_mm": 0.04, "size_mm": 0.12},
+                "position_mm": 0.06, "flatness_mm": 0.2, "size_mm": 0.12},
     "laser_line": {"registration_mm": 0.1, "registration_deg": 0.01, "detection_limit_mm": 0.3, "depth_mm": 0.03,
                    "position_mm": FROM_POSE_CHAIN, "flatness_mm": 0.04, "size_mm": 0.12},
 }  # fmt: skip

@@ -189,8 +189,11 @@ def test_flatness_of_a_bowed_face_measured_to_its_edges_reads_the_whole_bow():
     x, y = np.meshgrid(np.arange(-99.95, 100.0, 0.3), np.arange(-49.95, 50.0, 0.3), indexing="ij")
     x, y = x.ravel(), y.ravel()
     z = 2.5 + bow * (1 - (2 * x / 200.0) ** 2) + RNG.normal(0, sigma, x.size)
+    hover = np.flatnonzero(x > 99.0)[::3]  # mixed points off the face near its edge: left out
+    z[hover] += RNG.uniform(0.3, 2.0, hover.size)
     spec = load_spec(CONFIG_DIR / "inspection" / "plate_warp.yaml")
     result = inspect_cloud(np.c_[x, y, z], part.nominal, spec, np.eye(4), np.full(x.size, sigma))
     flat = next(f for f in result.features if f.type == "flatness")
     assert flat.values["edge_margin_mm"] == pytest.approx(0.6, rel=0.05)  # two point spacings
     assert abs(flat.values["flatness_mm"] - bow) <= 0.006
+    assert flat.values["dropped_points"] >= np.count_nonzero(x[hover] <= 100.0 - flat.values["edge_margin_mm"])
