@@ -27,7 +27,13 @@ import trimesh
 
 from agiprobot_measurement.inspection import actual, cases
 from agiprobot_measurement.inspection.decision import CONFORM, NOT_CONFORM
-from agiprobot_measurement.inspection.instrument import InstrumentUncertainty, load_instrument
+from agiprobot_measurement.inspection.errors import InspectionInputError
+from agiprobot_measurement.inspection.instrument import (
+    FROM_POSE_CHAIN,
+    InstrumentUncertainty,
+    known_error_models,
+    load_instrument,
+)
 from agiprobot_measurement.inspection.pipeline import inspect_cloud
 from agiprobot_measurement.inspection.registration import transform_error
 
@@ -43,13 +49,32 @@ EVALUATION_SEED0 = 100
 #: the scanner of each benchmark sensor in config/inspection/instruments.yaml
 SCANNER = {"phoxi": "phoxi_S", "phoxi_low": "phoxi_S", "laser": "laser_line"}
 #: stated limits with the realistic sensor models (mm; the detection limit is a dent depth): the systematic errors
-#: the best fit leaves (calibration, fixed pattern, hand-eye) bound what the realistic scanners can decide
+#: the best fit leaves (calibration, fixed pattern, hand-eye) bound what the realistic scanners can decide. PhoXi S
+#: flatness: 2 x the instrument's form_mm (0.099, the flat 200 mm plate of the development seeds) with the ideal
+#: sensor's 0.03 in quadrature
 REALISTIC_LIMITS = {
     "phoxi_S": {"registration_mm": 0.1, "registration_deg": 0.01, "detection_limit_mm": 0.3, "depth_mm": 0.03,
-                "position_mm": 0.06, "flatness_mm": 0.04, "size_mm": 0.12},
+                "position_mm": 0.06, "flatness_mm": 0.2, "size_mm": 0.12},
     "laser_line": {"registration_mm": 0.1, "registration_deg": 0.01, "detection_limit_mm": 0.3, "depth_mm": 0.03,
-                   "position_mm": 0.06, "flatness_mm": 0.04, "size_mm": 0.12},
+                   "position_mm": FROM_POSE_CHAIN, "flatness_mm": 0.04, "size_mm": 0.12},
 }  # fmt: skip
+#: the ideal sensors' hole centre bounds (mm, the inspection issue's targets)
+IDEAL_CENTRE_MM = {"phoxi_S": 0.03, "laser_line": 0.05}
+#: radius holding 95 % of a 2-D isotropic Gaussian, in units of its per-axis sigma: sqrt(-2 ln 0.05)
+RADIUS_95_SIGMAS = float(np.sqrt(-2.0 * np.log(0.05)))
+
+
+def centre_limit_mm(scanner: str, stitching_mm: float) -> float:
+    """The stated bound (mm) on a hole centre's error with the realistic ``scanner``: a number of
+    :data:`REALISTIC_LIMITS`, or (``pose_chain``) derived a priori from the error model: the centre, seen by some
+    sweeps and located against datums seen by others, moves with their relative pose error, per axis the
+    instrument's stitching term ``stitching_mm``
+    (:func:`~agiprobot_measurement.inspection.instrument.pose_chain_stitching_mm`); its 95 % radius
+    RADIUS_95_SIGMAS x that, with the ideal sensor's centre bound in quadrature."""
+    limit = REALISTIC_LIMITS[scanner]["position_mm"]
+    if limit != FROM_POSE_CHAIN:
+        return float(limit)
+    return float(np.hypot(RADIUS_95_SIGMAS * stitching_mm, IDEAL_CENTRE_MM[scanner]))
 
 
 def _dent_region(result, truth):
@@ -61,8 +86,13 @@ def _dent_region(result, truth):
 def evaluate(case: cases.Case, instrument: InstrumentUncertainty | None = None) -> dict:
     """One run's figures against the truth (``instrument``: the scanner's systematic terms, None = none)."""
     t0 = time.perf_counter()
-    result = inspect_cloud(case.points_mm, case.nominal, case.spec, case.part.nominal_placement, case.sigma_mm,
-                           instrument=instrument)  # fmt: skip
+    try:
+        result = inspect_cloud(case.points_mm, case.nominal, case.spec, case.part.nominal_placement, case.sigma_mm,
+                               instrument=instrument)  # fmt: skip
+    except InspectionInputError as exc:  # the part's own cloud refused: a failed run, not a verdict
+        return {"case": case.name, "magnitude": case.magnitude, "seed": case.seed, "sensor": case.sensor,
+                "error_model": case.error_model, "points": len(case.points_mm), "time_s": time.perf_counter() - t0,
+                "refused": str(exc), "ok": False, "wrong": False}  # fmt: skip
     elapsed = time.perf_counter() - t0
     truth = case.truth
     cad_from_world = np.linalg.inv(case.part.actual_placement)
@@ -125,14 +155,16 @@ def _summary(rows: list[dict]) -> list[dict]:
     for row in rows:
         groups.setdefault((row["sensor"], row["case"], row["magnitude"]), []).append(row)
     out = []
-    for (sensor, case, magnitude), group in groups.items():
-        entry = {"sensor": sensor, "case": case, "magnitude": magnitude, "runs": len(group),
-                 "error_model": group[0]["error_model"], "ok_share": float(np.mean([r["ok"] for r in group])),
-                 "wrong_share": float(np.mean([r["wrong"] for r in group])),
-                 "registration_mm_max": float(max(r["registration_mm"] for r in group)),
-                 "registration_deg_max": float(max(r["registration_deg"] for r in group)),
-                 "time_s_median": float(np.median([r["time_s"] for r in group])),
-                 "points_median": int(np.median([r["points"] for r in group]))}  # fmt: skip
+    for (sensor, case, magnitude), runs in groups.items():
+        group = [r for r in runs if "refused" not in r] or runs
+        entry = {"sensor": sensor, "case": case, "magnitude": magnitude, "runs": len(runs),
+                 "error_model": runs[0]["error_model"], "ok_share": float(np.mean([r["ok"] for r in runs])),
+                 "wrong_share": float(np.mean([r["wrong"] for r in runs])),
+                 "refused_share": float(np.mean(["refused" in r for r in runs])),
+                 "registration_mm_max": float(max(r.get("registration_mm", np.nan) for r in group)),
+                 "registration_deg_max": float(max(r.get("registration_deg", np.nan) for r in group)),
+                 "time_s_median": float(np.median([r["time_s"] for r in runs])),
+                 "points_median": int(np.median([r["points"] for r in runs]))}  # fmt: skip
         for key in ("depth_error_mm", "position_error_mm", "centre_error_mm", "flatness_error_mm", "size_error_mm",
                     "diameter_error_mm"):  # fmt: skip
             values = [abs(r[key]) for r in group if key in r]
@@ -144,8 +176,8 @@ def _summary(rows: list[dict]) -> list[dict]:
             entry["position_U_mm_max"] = float(max(r["position_U_mm"] for r in group if "position_U_mm" in r))
             entry["within_U_share"] = float(np.mean([r["within_U"] for r in group if "within_U" in r]))
         if case == "dent":
-            entry["flag_share"] = float(np.mean([r["flagged"] for r in group]))
-            entry["false_flag_share"] = float(np.mean([r["other_flags"] > 0 for r in group]))
+            entry["flag_share"] = float(np.mean([r.get("flagged", False) for r in runs]))
+            entry["false_flag_share"] = float(np.mean([r.get("other_flags", 0) > 0 for r in runs]))
         out.append(entry)
     return out
 
@@ -193,13 +225,15 @@ def _realistic_targets(summary: list[dict], sensor: str) -> list[tuple[str, bool
     """The stated limits of :data:`REALISTIC_LIMITS` for the benchmark sensor ``sensor``."""
     limits = REALISTIC_LIMITS[SCANNER[sensor]]
     rows = []
-    bounds = {"position": ("centre_error_mm_max", limits["position_mm"]), "flatness": ("flatness_error_mm_max",
+    centre = centre_limit_mm(SCANNER[sensor], load_instrument("realistic", SCANNER[sensor]).stitching_mm)
+    bounds = {"position": ("centre_error_mm_max", round(centre, 3)), "flatness": ("flatness_error_mm_max",
               limits["flatness_mm"]), "size": ("size_error_mm_max", limits["size_mm"])}  # fmt: skip
     for e in summary:
         if e["sensor"] != sensor:
             continue
         c, m = e["case"], e["magnitude"]
         rows.append((f"{c} {m}: no wrong definitive verdict", e["wrong_share"] == 0.0, f"{e['wrong_share']:.2f}"))
+        rows.append((f"{c} {m}: no cloud of the part refused", e["refused_share"] == 0.0, f"{e['refused_share']:.2f}"))
         if c == "null":
             rows.append((f"null: registration <= {limits['registration_mm']} mm / {limits['registration_deg']} deg",
                          e["registration_mm_max"] <= limits["registration_mm"]
@@ -225,7 +259,8 @@ def _realistic_targets(summary: list[dict], sensor: str) -> list[tuple[str, bool
         kind = {"hole": "position", "warp": "flatness", "scale": "size"}.get(c)
         if kind and bounds[kind][0] in e:
             key, bound = bounds[kind]
-            rows.append((f"{c} {m}: {kind} error <= {bound} mm (max)", e[key] <= bound, f"{e[key]:.4f}"))
+            label = "centre" if kind == "position" else kind
+            rows.append((f"{c} {m}: {label} error <= {bound} mm (max)", e[key] <= bound, f"{e[key]:.4f}"))
     return rows
 
 
@@ -249,6 +284,22 @@ def speed(seed: int = 0) -> dict:
             "flags": result.flags}  # fmt: skip
 
 
+def _check_arguments(parser: argparse.ArgumentParser, args) -> None:
+    """Unknown error models, sensors, cases or magnitudes are a usage error (exit 2) naming the known ones."""
+    models = known_error_models()
+    if args.error_model not in models:
+        parser.error(f"--error-model: unknown sensor error model {args.error_model!r} (known: {', '.join(models)})")
+    for option, given, known in (("--sensors", args.sensors, SCANNER), ("--cases", args.cases, MAGNITUDES)):
+        unknown = [name for name in given.split(",") if name not in known]
+        if unknown:
+            parser.error(f"{option}: unknown {', '.join(unknown)} (known: {', '.join(known)})")
+    if args.magnitudes is not None:
+        try:
+            [float(m) for m in args.magnitudes.split(",")]
+        except ValueError:
+            parser.error(f"--magnitudes: not a comma list of numbers: {args.magnitudes!r}")
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seeds", type=int, default=20, help="seeds per case and magnitude")
@@ -260,6 +311,7 @@ def main(argv=None) -> int:
     parser.add_argument("--speed", action="store_true", help="also time a 1 M-point inspection (100 k faces)")
     parser.add_argument("--json", default=None, help="write rows, summary and targets here")
     args = parser.parse_args(argv)
+    _check_arguments(parser, args)
     rows = []
     only = None if args.magnitudes is None else {float(m) for m in args.magnitudes.split(",")}
     for sensor in args.sensors.split(","):

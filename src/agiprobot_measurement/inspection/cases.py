@@ -118,15 +118,15 @@ def _scan(mesh_world, origin, case: str, sensor: str, seed: int, error_model, pr
         offset = 0.5 * depth.max() * unit
         step, noise = (PRESCAN_STEP_MM, 0.0) if prescan else (LASER_STEP_MM, 1.0)
         clouds.append(simulate.scan_laser(mesh_world, v, sweep, length, origin, step, seed + 1000 * k, noise, offset,
-                                          error_model))  # fmt: skip
+                                          error_model, device_serial(seed)))  # fmt: skip
     return simulate.ScannedCloud(np.vstack([c.points_mm for c in clouds]), np.concatenate([c.sigma_mm for c in clouds]),
                                  "laser_line")  # fmt: skip
 
 
 def device_serial(seed: int) -> str:
-    """The simulated PhoXi of a run: each seed scans with another device (its own per-device errors). The laser
-    head is the error model's configured one (``laser.serial``) in every run: the sensors' speckle hash overflows
-    for about a fifth of the serials (reported to the sensors' owners)."""
+    """The simulated scanner of a run, PhoXi or laser head: each seed scans with another device (its own
+    per-device errors: calibration, fixed pattern, speckle, hand-eye), so the seeds sample the error model's
+    spread of devices, not one draw."""
     return f"inspection-sim-{int(seed):04d}"
 
 

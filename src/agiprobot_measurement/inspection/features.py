@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from agiprobot_measurement.inspection.decision import Decision, decide, expanded
 from agiprobot_measurement.inspection.deviation import patches
@@ -30,6 +31,14 @@ __all__ = ["FeatureContext", "FeatureResult", "evaluate_feature"]
 
 #: flatness: the face's heights are averaged within this radius (mm) before the minimum zone (noise filter)
 FLATNESS_FILTER_RADIUS_MM = 5.0
+#: flatness: of the points the face's edge margin masks, those at least this many point spacings from the CAD edge
+#: are kept (the scanners' edge errors -- mixed pixels, mixed line points -- are one point wide): the zone's ends
+#: lie at the face's edges
+FLATNESS_EDGE_SPACINGS = 2.0
+#: points sampled to estimate the face's point spacing (median distance to the nearest other point)
+SPACING_SAMPLE = 20_000
+#: flatness: points farther than this many robust sigma from the local plane of the face's interior are left out
+FLATNESS_OUTLIER_SIGMAS = 4.0
 #: hole edge ring: angular bins of the edge points
 HOLE_EDGE_BINS = 90
 #: hole wall: fewest points and smallest arc (deg, in 10-deg bins holding at least WALL_BIN_POINTS points) for the
@@ -70,7 +79,9 @@ class FeatureResult:
 @dataclass
 class FeatureContext:
     """What the evaluators share: the registered points (CAD, mm), their noise sigma (mm), a mask of points
-    usable for fits, the points of each named face, and the registration's displacement sigma function."""
+    usable for fits, the points of each named face, and the registration's displacement sigma function; the
+    points of each face that only the edge margin masks and each point's distance to the nearest CAD edge (mm, inf
+    beyond the margin)."""
 
     points: np.ndarray
     sigma: np.ndarray
@@ -80,6 +91,8 @@ class FeatureContext:
     registration_sigma: object  # callable(points (N, 3), normals (N, 3)) -> (N,) mm
     instrument: InstrumentUncertainty = field(default_factory=InstrumentUncertainty)
     registration_centre_mm: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    edge_points: dict = field(default_factory=dict)
+    edge_distance_mm: np.ndarray | None = None
 
 
 def _face(ctx: FeatureContext, name: str, feature: str) -> np.ndarray:
@@ -90,16 +103,21 @@ def _face(ctx: FeatureContext, name: str, feature: str) -> np.ndarray:
 
 
 def _flatness(feature: Feature, ctx: FeatureContext) -> FeatureResult:
-    idx = _face(ctx, feature.faces[0], feature.name)
-    pts = ctx.points[idx]
-    plane = fit_plane(pts, ctx.face_planes[feature.faces[0]][1])
+    interior, band, margin = _flatness_points(ctx, feature.faces[0], feature.name)
+    plane = fit_plane(ctx.points[interior], ctx.face_planes[feature.faces[0]][1])
     u, v = plane_basis(plane.normal)
-    flat = np.stack([(pts - plane.centroid) @ u, (pts - plane.centroid) @ v, np.zeros(len(pts))], axis=1)
+    idx = np.concatenate([interior, band])
+    pts = ctx.points[idx]
+    xy = np.stack([(pts - plane.centroid) @ u, (pts - plane.centroid) @ v], axis=1)
     h = plane.heights(pts)
+    keep = _on_local_planes(xy, h, ctx.sigma[idx], np.arange(len(idx)) < len(interior))
+    dropped = int(len(idx) - keep.sum())
+    idx, pts, xy, h = idx[keep], pts[keep], xy[keep], h[keep]
     voxel = FLATNESS_FILTER_RADIUS_MM / 2
-    pat = patches(flat, h, ctx.sigma[idx], np.ones(len(idx), dtype=bool), voxel, FLATNESS_FILTER_RADIUS_MM)
-    heights = _local_linear(flat[:, :2], h, pat)
-    filtered = plane.centroid + pat.centre_mm[:, :1] * u + pat.centre_mm[:, 1:2] * v + heights[:, None] * plane.normal
+    pat = patches(np.c_[xy, np.zeros(len(xy))], h, ctx.sigma[idx], np.ones(len(idx), dtype=bool), voxel,
+                  FLATNESS_FILTER_RADIUS_MM)  # fmt: skip
+    at, heights = _local_linear(xy, h, pat)
+    filtered = plane.centroid + at[:, :1] * u + at[:, 1:2] * v + heights[:, None] * plane.normal
     value = min_zone_flatness(filtered, plane.normal)
     raw = min_zone_flatness(pts, plane.normal)
     sigma_f = float(np.median(pat.sigma_mm))
@@ -108,18 +126,56 @@ def _flatness(feature: Feature, ctx: FeatureContext) -> FeatureResult:
     tol = feature.params["tolerance_mm"]
     return FeatureResult(
         feature.name, "flatness",
-        {"flatness_mm": value, "raw_flatness_mm": raw, "ls_rms_mm": plane.rms_mm, "filter_radius_mm": FLATNESS_FILTER_RADIUS_MM},
+        {"flatness_mm": value, "raw_flatness_mm": raw, "ls_rms_mm": plane.rms_mm, "filter_radius_mm": FLATNESS_FILTER_RADIUS_MM,
+         "edge_margin_mm": margin, "dropped_points": dropped},
         [decide("flatness", value, tol, expanded(u_f, ctx.instrument.form_mm))], len(idx),
-        [f"minimum zone of the heights filtered by local LS planes within {FLATNESS_FILTER_RADIUS_MM} mm; raw "
-         "(unfiltered) zone "
-         "includes about 6 sigma of noise"],
+        [f"minimum zone of the heights filtered by local LS planes within {FLATNESS_FILTER_RADIUS_MM} mm, evaluated "
+         "at each patch's centroid and its outermost points; raw (unfiltered) zone includes about 6 sigma of noise; "
+         f"points from {margin:.2f} mm of the CAD edges ({FLATNESS_EDGE_SPACINGS:g} point spacings); {dropped} points "
+         f"off the face's local planes by more than {FLATNESS_OUTLIER_SIGMAS:g} sigma left out (mixed edge points)"],
     )  # fmt: skip
 
 
-def _local_linear(xy: np.ndarray, h: np.ndarray, pat) -> np.ndarray:
-    """Per patch, the height at its voxel's centroid from an LS plane through the patch's points (a local linear
-    filter): a patch mean at the face's border averages one side only and reads a sloped face's height short there,
-    a local plane does not. The patch mean where the points do not determine a plane."""
+def _on_local_planes(xy: np.ndarray, h: np.ndarray, sigma: np.ndarray, inner: np.ndarray) -> np.ndarray:
+    """True for points whose height lies within ``FLATNESS_OUTLIER_SIGMAS`` robust sigma (1.4826 x the median
+    absolute residual of the ``inner`` points) of the local LS plane of the nearest patch of the ``inner`` points
+    (the face away from its edges): a scanner's mixed points hover off the face near its measured edge (up to the
+    depth jump there), and a CAD edge margin does not hold them out where the registration leaves the part's edge
+    off the CAD's (locked in-plane DOFs)."""
+    voxel = FLATNESS_FILTER_RADIUS_MM / 2
+    n = int(inner.sum())
+    pat = patches(np.c_[xy[inner], np.zeros(n)], h[inner], sigma[inner], np.ones(n, dtype=bool), voxel,
+                  FLATNESS_FILTER_RADIUS_MM)  # fmt: skip
+    coef, ok = _local_planes(xy[inner], h[inner], pat)
+    if not ok.any():
+        return np.ones(len(h), dtype=bool)
+    _, nearest = cKDTree(pat.centre_mm[ok, :2]).query(xy)
+    c = coef[ok][nearest]
+    residual = h - (c[:, 0] + c[:, 1] * xy[:, 0] + c[:, 2] * xy[:, 1])
+    scale = 1.4826 * float(np.median(np.abs(residual[inner])))
+    return np.abs(residual) <= FLATNESS_OUTLIER_SIGMAS * max(scale, 1e-6)
+
+
+def _flatness_points(ctx: FeatureContext, name: str, feature: str) -> tuple[np.ndarray, np.ndarray, float]:
+    """The face's points for its flatness: those the surface's masks leave (interior), those of its edge band at
+    least ``FLATNESS_EDGE_SPACINGS`` point spacings from the CAD edge, and that margin (mm). The surface's edge
+    margin guards the deviation map against closest points sliding over an edge; a flatness needs only the
+    scanner's edge errors left out, and a margin of fixed width leaves the zone's ends unmeasured (a bow reads
+    short by about 2 x margin / length of itself)."""
+    idx = _face(ctx, name, feature)
+    face = ctx.points[idx]
+    sample = face[np.random.default_rng(0).choice(len(face), min(len(face), SPACING_SAMPLE), replace=False)]
+    spacing = float(np.median(cKDTree(face).query(sample, k=2)[0][:, 1]))
+    margin = FLATNESS_EDGE_SPACINGS * spacing
+    band = ctx.edge_points.get(name, np.zeros(0, dtype=int))
+    if ctx.edge_distance_mm is not None and len(band):
+        band = band[ctx.edge_distance_mm[band] >= margin]
+    return idx, band, margin
+
+
+def _local_planes(xy: np.ndarray, h: np.ndarray, pat) -> tuple[np.ndarray, np.ndarray]:
+    """Per patch the LS plane h = a + b x + c y through the points of the patch and its neighbours (M, 3) and
+    whether the points determine it (M,)."""
     x, y = xy[:, 0], xy[:, 1]
     voxel = pat.voxel_of_point
     m = len(pat.mean_mm)
@@ -127,12 +183,34 @@ def _local_linear(xy: np.ndarray, h: np.ndarray, pat) -> np.ndarray:
                         for w in (np.ones_like(x), x, y, x * x, x * y, y * y, h, x * h, y * h)], axis=1)  # fmt: skip
     s = pat.neighbours.tocsr() @ moments
     normal = np.stack([s[:, [0, 1, 2]], s[:, [1, 3, 4]], s[:, [2, 4, 5]]], axis=1)
-    rhs = s[:, 6:9]
-    out = pat.mean_mm.copy()
     ok = np.linalg.cond(normal) < 1e10
-    coef = np.linalg.solve(normal[ok], rhs[ok][:, :, None])[:, :, 0]
-    out[ok] = coef[:, 0] + coef[:, 1] * pat.centre_mm[ok, 0] + coef[:, 2] * pat.centre_mm[ok, 1]
-    return out
+    coef = np.full((m, 3), np.nan)
+    coef[ok] = np.linalg.solve(normal[ok], s[ok, 6:9][:, :, None])[:, :, 0]
+    return coef, ok
+
+
+def _local_linear(xy: np.ndarray, h: np.ndarray, pat) -> tuple[np.ndarray, np.ndarray]:
+    """Positions (M, 2) and heights (M,) of the face filtered by local planes (:func:`_local_planes`, a local
+    linear filter) evaluated at each patch's centroid and at the patch's points of smallest and largest x and y,
+    so the filtered face reaches as far as the points do. A patch mean at the face's border averages one side only
+    and reads a sloped face's height short there, a local plane does not. The patch mean at its centroid where
+    the points do not determine a plane."""
+    x, y = xy[:, 0], xy[:, 1]
+    voxel = pat.voxel_of_point
+    coef, ok = _local_planes(xy, h, pat)
+    centre = pat.centre_mm[:, :2]
+    heights = pat.mean_mm.copy()
+    heights[ok] = coef[ok, 0] + coef[ok, 1] * centre[ok, 0] + coef[ok, 2] * centre[ok, 1]
+    inside = voxel >= 0
+    ends = []
+    for key in (x, y):  # each patch's first and last point sorted by x, then by y
+        order = np.flatnonzero(inside)[np.lexsort((key[inside], voxel[inside]))]
+        starts = np.r_[True, voxel[order][1:] != voxel[order][:-1]]
+        ends += [order[starts], order[np.r_[starts[1:], True]]]
+    ends = np.unique(np.concatenate(ends))
+    ends = ends[ok[voxel[ends]]]
+    c = coef[voxel[ends]]
+    return np.vstack([centre, xy[ends]]), np.concatenate([heights, c[:, 0] + c[:, 1] * x[ends] + c[:, 2] * y[ends]])
 
 
 def _size(feature: Feature, ctx: FeatureContext) -> FeatureResult:

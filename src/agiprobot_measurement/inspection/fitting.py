@@ -180,6 +180,10 @@ def fit_cylinder(points, point0, axis0, radius0) -> CylinderFit:
     return CylinderFit(p, axis, float(r), float(np.sqrt(variance)), sig[:2], float(sig[4]), len(points))
 
 
+#: minimum zone: points this far (mm) outside the zone count as inside (the LP solver's feasibility tolerance)
+MIN_ZONE_TOLERANCE_MM = 1e-7
+
+
 def min_zone_flatness(points, normal) -> float:
     """Width (mm) of the narrowest pair of parallel planes containing ``points``, near-perpendicular to ``normal``.
 
@@ -198,10 +202,13 @@ def min_zone_flatness(points, normal) -> float:
         a, b, c, w = _zone(x[active], y[active], h[active])
         r = h - (a * x + b * y + c)
         violation = np.maximum(r - w, -r)
-        if violation.max() <= 1e-9:
-            return float(w)
         worst = np.argsort(violation)[-k:]
-        active = np.union1d(active, worst[violation[worst] > 1e-9])
+        worst = worst[violation[worst] > MIN_ZONE_TOLERANCE_MM]
+        if not len(worst):
+            return float(w)
+        if np.isin(worst, active).all():  # only the LP's own tolerance left: the zone widened to hold every point
+            return float(w + 2.0 * violation.max())
+        active = np.union1d(active, worst)
     raise InspectionInternalError("minimum-zone flatness: the constraint generation did not converge")
 
 

@@ -27,7 +27,13 @@ from agiprobot_measurement.sensors.error_models import load_error_model
 from agiprobot_measurement.sensors.laser_line.model import SensorModel
 from agiprobot_measurement.station.config import load_scanner_config
 
-__all__ = ["INSTRUMENTS_FILE", "InstrumentUncertainty", "load_instrument", "pose_chain_stitching_mm"]
+__all__ = [
+    "INSTRUMENTS_FILE",
+    "InstrumentUncertainty",
+    "known_error_models",
+    "load_instrument",
+    "pose_chain_stitching_mm",
+]
 
 INSTRUMENTS_FILE = CONFIG_DIR / "inspection" / "instruments.yaml"
 _KEYS = ("surface_mm", "form_mm", "length_rel", "stitching_mm")
@@ -67,13 +73,18 @@ def _stitching(value, error_model: str, where: str) -> float:
     return pose_chain_stitching_mm(load_error_model(error_model).laser.get("pose_chain"), standoff)
 
 
+def known_error_models(path: str | Path = INSTRUMENTS_FILE) -> list[str]:
+    """The error models the instruments file states terms for (sorted)."""
+    data = read_yaml(path)
+    return sorted(data) if isinstance(data, dict) else []
+
+
 def load_instrument(error_model: str, scanner: str, path: str | Path = INSTRUMENTS_FILE) -> InstrumentUncertainty:
     """The terms of ``scanner`` (e.g. ``phoxi_S``, ``laser_line``) under the named ``error_model``."""
     data = read_yaml(path)
     where = f"{path}"
     if not isinstance(data, dict) or error_model not in data:
-        known = sorted(data) if isinstance(data, dict) else []
-        raise InspectionInputError(f"{where}: no error model {error_model!r} (known: {known})")
+        raise InspectionInputError(f"{where}: no error model {error_model!r} (known: {known_error_models(path)})")
     scanners = data[error_model]
     if not isinstance(scanners, dict) or scanner not in scanners:
         known = sorted(scanners) if isinstance(scanners, dict) else []

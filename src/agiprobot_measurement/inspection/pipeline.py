@@ -13,7 +13,7 @@ import numpy as np
 import trimesh
 
 from agiprobot_measurement.inspection.decision import CONFORM, COVERAGE_FACTOR, INDETERMINATE, NOT_CONFORM
-from agiprobot_measurement.inspection.deviation import closest_points, edge_mask, no_data_mask, patches
+from agiprobot_measurement.inspection.deviation import closest_points, edge_distance, edge_mask, no_data_mask, patches
 from agiprobot_measurement.inspection.errors import InspectionInputError, RegistrationError
 from agiprobot_measurement.inspection.features import FeatureContext, FeatureResult, evaluate_feature
 from agiprobot_measurement.inspection.instrument import InstrumentUncertainty
@@ -32,7 +32,8 @@ __all__ = ["MIN_POINTS", "STAGES", "InspectionResult", "SurfaceRegion", "inspect
 STAGES = ("check", "register", "deviations", "regions", "features", "done")
 #: fewer measured points than this is not an inspection
 MIN_POINTS = 500
-#: a registration whose robust residual exceeds this many times the points' noise is a wrong part
+#: a registration whose robust residual exceeds this many times the scatter the scanner explains (the points' noise
+#: with its systematic surface and view-stitching terms, in quadrature) is a wrong part
 MAX_RESIDUAL_OVER_NOISE = 6.0
 
 
@@ -176,26 +177,30 @@ def inspect_cloud(points_world_mm, nominal: trimesh.Trimesh, spec: InspectionSpe
     if outlier.mean() > 0.5:
         raise RegistrationError(f"{100 * outlier.mean():.0f} % of the points lie farther than {s.max_distance_mm} mm "
                                 "from the nominal surface after registration: a cloud of another part?")  # fmt: skip
-    edge = edge_mask(nominal, cp.closest_mm, s.edge_margin_mm)
+    to_edge = edge_distance(nominal, cp.closest_mm, s.edge_margin_mm)
+    edge = np.isfinite(to_edge)
     use = ~outlier & ~edge
     if np.isnan(sigma).any():  # no noise model given: the points' scatter about their voxel's mean
         local = patches(cp.closest_mm, cp.signed_mm, np.zeros(len(cad)), use, s.voxel_mm, 0.5 * s.voxel_mm)
         scatter = cp.signed_mm[use] - local.mean_mm[local.voxel_of_point[use]]
         sigma = np.where(np.isnan(sigma), 1.4826 * float(np.median(np.abs(scatter))), sigma)
-    if reg.residual_mm > MAX_RESIDUAL_OVER_NOISE * max(float(np.median(sigma[use])), 1e-3):
-        raise RegistrationError(f"the registration's residual ({reg.residual_mm:.3g} mm) is far above the noise "
-                                f"({float(np.median(sigma[use])):.3g} mm): a cloud of another part?")  # fmt: skip
+    # views stitched with a relative pose error (stitching_mm) disagree by about that much where they meet the fit
+    scatter = float(np.hypot(np.median(sigma[use]), np.hypot(instrument.surface_mm, instrument.stitching_mm)))
+    if reg.residual_mm > MAX_RESIDUAL_OVER_NOISE * max(scatter, 1e-3):
+        raise RegistrationError(f"the registration's residual ({reg.residual_mm:.3g} mm) is far above the noise and "
+                                f"the scanner's systematic terms ({scatter:.3g} mm): a cloud of another part?")  # fmt: skip
     timings["deviations"] = time.perf_counter() - t
     report("regions", 0.0)
     t = time.perf_counter()
     regions, u_surface, smoothed = _regions(nominal, cp, sigma, use, reg, s, instrument.surface_mm)
-    face_of_point, face_stats, face_points = _faces(nominal, spec, cp, use, s.tolerance_mm)
+    face_of_point, face_stats, face_points, edge_points = _faces(nominal, spec, cp, use, ~outlier & edge,
+                                                                 s.tolerance_mm)  # fmt: skip
     coverage = _coverage(nominal, spec, cp.closest_mm[use], s.no_data_radius_mm)
     timings["regions"] = time.perf_counter() - t
     report("features", 0.0)
     t = time.perf_counter()
     ctx = FeatureContext(cad, sigma, ~outlier, face_points, {n: (f.point, f.normal) for n, f in spec.faces.items()},
-                         reg.displacement_sigma, instrument, reg.centre_mm)  # fmt: skip
+                         reg.displacement_sigma, instrument, reg.centre_mm, edge_points, to_edge)  # fmt: skip
     results = [evaluate_feature(feature, ctx) for feature in spec.features]
     timings["features"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
@@ -269,15 +274,19 @@ def _stats(values: np.ndarray, tolerance: float) -> dict:
             "in_tolerance_percent": float(100 * np.mean(np.abs(values) <= tolerance))}  # fmt: skip
 
 
-def _faces(mesh, spec, cp, use, tolerance):
+def _faces(mesh, spec, cp, use, edge_band, tolerance):
+    """Per named face: the points' face names, statistics, the face's points (masks applied) and its points in the
+    edge band (masked only for being near an edge)."""
     face_of_point = np.full(len(cp.face), "", dtype=object)
-    stats, members = {"all": _stats(cp.signed_mm[use], tolerance)}, {}
+    stats, members, near_edge = {"all": _stats(cp.signed_mm[use], tolerance)}, {}, {}
     for name in spec.faces:
-        on = spec.on_face(mesh, name, cp.face) & use
+        face = spec.on_face(mesh, name, cp.face)
+        on = face & use
         face_of_point[on] = name
         members[name] = np.flatnonzero(on)
+        near_edge[name] = np.flatnonzero(face & edge_band)
         stats[name] = _stats(cp.signed_mm[on], tolerance)
-    return face_of_point, stats, members
+    return face_of_point, stats, members, near_edge
 
 
 def _coverage(mesh, spec, closest_used, radius) -> dict:

@@ -153,10 +153,7 @@ def scan_laser(mesh_world_mm, view_direction, sweep_direction, length_mm: float,
     cloud = np.vstack([p.points_mm for _, p in kept])
     origins = np.vstack([np.repeat(poses[k, :3, 3][None], len(p), axis=0) for k, p in kept])
     cosines = _ray_cosines(mesh_world_mm, cloud, origins)
-    if errors is not None and errors.noise is not None:  # the error model's noise along the ray, at the true hits
-        hits = np.vstack([p.true_points_mm for _, p in kept])
-        depth = np.einsum("ij,j->i", hits - origins, z)
-        sigma_ray = errors.sigma_mm(depth, cosines, model.optimal_standoff)
-    else:
-        sigma_ray = np.concatenate([p.uncertainties_mm * noise_scale for _, p in kept])
+    # sigma along the ray: the error model's noise (depth and incidence dependent, not scaled) or the planning u
+    scale = 1.0 if errors is not None and errors.noise is not None else noise_scale
+    sigma_ray = np.concatenate([p.uncertainties_mm for _, p in kept]) * scale
     return ScannedCloud(cloud, sigma_ray * cosines, "laser_line")

@@ -127,3 +127,19 @@ def test_rps_alignment_of_a_scanned_part_meets_its_reference_points(null_case):
     assert max(abs(v) for v in r.registration.rps.residual_mm.values()) < 1e-4
     error_mm, error_deg = transform_error(r.transform, np.linalg.inv(c.part.actual_placement), c.nominal.vertices)
     assert error_mm < 0.05 and error_deg < 0.02 and r.flags == 0
+
+
+def test_views_stitched_with_a_stated_pose_error_are_not_refused_as_another_part(null_case):
+    # one half of the cloud shifted against the other, as two views with a relative pose error: the residual is then
+    # far above the noise alone, but not above the noise with the stated stitching term
+    from agiprobot_measurement.inspection.instrument import InstrumentUncertainty
+
+    c = null_case
+    points = c.points_mm.copy()
+    half = points[:, 0] > np.median(points[:, 0])
+    points[half] += [1.0, -1.0, 1.0]  # mm, per axis
+    with pytest.raises(RegistrationError, match="another part"):
+        inspect_cloud(points, c.nominal, c.spec, c.part.nominal_placement, c.sigma_mm)
+    stitched = InstrumentUncertainty(stitching_mm=1.0)
+    result = inspect_cloud(points, c.nominal, c.spec, c.part.nominal_placement, c.sigma_mm, instrument=stitched)
+    assert result.registration.residual_mm > 6 * np.median(c.sigma_mm)

@@ -119,3 +119,28 @@ def test_realistic_laser_hole_against_datums_of_other_sweeps_is_not_called_wrong
     assert position.verdict != "not conform"
     assert abs(position.value_mm - c.truth["hole_position_deviation_mm"]) <= position.uncertainty_mm
     assert position.uncertainty_mm >= 2 * COVERAGE_FACTOR * terms.stitching_mm
+
+
+def test_the_benchmark_refuses_an_unknown_error_model_naming_the_known_ones(capsys):
+    from benchmarks.inspection.run import main
+
+    for argv, named in ((["--error-model", "NOSUCH"], "ideal, realistic"), (["--sensors", "phoxi,foo"], "laser"),
+                        (["--cases", "dent,bend"], "warp")):  # fmt: skip
+        with pytest.raises(SystemExit) as exit_info:
+            main(argv)
+        assert exit_info.value.code == 2
+        err = capsys.readouterr().err
+        assert argv[1].split(",")[-1] in err and named in err and "Traceback" not in err
+
+
+def test_the_lasers_centre_bound_is_the_95_percent_radius_of_its_pose_chain_stitching():
+    from benchmarks.inspection.run import IDEAL_CENTRE_MM, centre_limit_mm
+
+    stitching = load_instrument("realistic", "laser_line").stitching_mm
+    bound = centre_limit_mm("laser_line", stitching)
+    assert centre_limit_mm("laser_line", 0.0) == IDEAL_CENTRE_MM["laser_line"]
+    assert centre_limit_mm("laser_line", 2 * stitching) > 1.9 * bound  # it scales with the pose chain
+    # 95 % of centres shifted by a 2-D Gaussian of per-axis sigma = the stitching term lie within the bound
+    shifts = np.random.default_rng(3).normal(0.0, stitching, (100_000, 2))
+    assert np.mean(np.linalg.norm(shifts, axis=1) <= bound) == pytest.approx(0.955, abs=0.01)
+    assert centre_limit_mm("phoxi_S", stitching) == 0.06  # a stated number where no pose chain stitches views

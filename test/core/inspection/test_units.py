@@ -177,3 +177,23 @@ def test_rps_spec_errors_name_the_problem():
     with pytest.raises(RegistrationError, match="RPS point far"):
         registration.rps_alignment(_cube_surface(2000), [registration.RpsPoint("far", np.array([0, 0, 80.0]),
                                                                                   np.array([0, 0, 1.0]))])  # fmt: skip
+
+
+def test_flatness_of_a_bowed_face_measured_to_its_edges_reads_the_whole_bow():
+    # the top face of the warped plate measured everywhere (0.3 mm grid, 30 um noise): the zone's ends lie at the
+    # face's edges; a fixed 1 mm edge margin and patch centroids as the filter's ends read a bow ~4 % short
+    from agiprobot_measurement.inspection.pipeline import inspect_cloud
+
+    bow, sigma = 0.5, 0.03
+    part = actual.warped(bow_mm=bow)
+    x, y = np.meshgrid(np.arange(-99.95, 100.0, 0.3), np.arange(-49.95, 50.0, 0.3), indexing="ij")
+    x, y = x.ravel(), y.ravel()
+    z = 2.5 + bow * (1 - (2 * x / 200.0) ** 2) + RNG.normal(0, sigma, x.size)
+    hover = np.flatnonzero(x > 99.0)[::3]  # mixed points off the face near its edge: left out
+    z[hover] += RNG.uniform(0.3, 2.0, hover.size)
+    spec = load_spec(CONFIG_DIR / "inspection" / "plate_warp.yaml")
+    result = inspect_cloud(np.c_[x, y, z], part.nominal, spec, np.eye(4), np.full(x.size, sigma))
+    flat = next(f for f in result.features if f.type == "flatness")
+    assert flat.values["edge_margin_mm"] == pytest.approx(0.6, rel=0.05)  # two point spacings
+    assert abs(flat.values["flatness_mm"] - bow) <= 0.006
+    assert flat.values["dropped_points"] >= np.count_nonzero(x[hover] <= 100.0 - flat.values["edge_margin_mm"])

@@ -194,6 +194,24 @@ def test_laser_noise_grows_with_incidence_unlike_the_planning_u(realistic, senso
     assert sigma["realistic", 0.0] == pytest.approx(expected, rel=0.25)
 
 
+def test_laser_profiles_report_the_error_models_noise_not_the_planning_u(realistic, sensor):
+    noise_only = realistic.with_blocks("laser", calibration=None, material=None, edges=None, pose_chain=None)
+    errors = LaserErrors.create(sensor, noise_only)
+    for tilt in (0.0, 40.0):
+        mesh, _ = _plane(182.0, tilt)
+        planning = np.concatenate([p.uncertainties_mm for p in _sweep(
+            LaserLineScannerSimulator(sensor, points_per_profile=320, seed=2), mesh)])  # fmt: skip
+        profiles = _sweep(LaserLineScannerSimulator(sensor, points_per_profile=320, seed=2, errors=errors), mesh)
+        reported = np.concatenate([p.uncertainties_mm for p in profiles])
+        hits = np.concatenate([p.true_points_mm for p in profiles])
+        rays = hits * [0.0, 1.0, 1.0]  # from the emitter at (x, 0, 0): the fan lies in its y-z plane
+        normal = np.array([0.0, math.sin(math.radians(tilt)), -math.cos(math.radians(tilt))])
+        cosines = np.abs(rays @ normal) / np.linalg.norm(rays, axis=1)
+        expected = errors.sigma_mm(hits[:, 2], cosines, sensor.optimal_standoff)
+        assert np.allclose(reported, expected, rtol=0.02)
+        assert not np.allclose(np.median(reported), np.median(planning), rtol=0.05)
+
+
 def test_laser_speckle_follows_the_dorsch_law_and_does_not_shrink_as_z_squared(realistic, sensor):
     errors = LaserErrors.create(sensor, realistic)
     noise = realistic.laser["noise"]

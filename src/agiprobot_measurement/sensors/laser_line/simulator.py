@@ -10,9 +10,9 @@ displaced along the laser ray by Gaussian noise of that standard deviation (seed
 With an error model (``errors``: :class:`~agiprobot_measurement.sensors.error_models.LaserErrors`) the measured
 point is instead reconstructed with the nominal triangulation geometry from what the true head saw (calibration
 error), displaced along the ray by the measurement noise (static speckle + temporal, growing with depth and
-incidence; the planning ``u`` stays the reported uncertainty), dropped when the signal is too weak or saturated
-(material), mixed at depth jumps along the line (edges), and reported through the nominal pose when the caller
-passes one (pose chain: :func:`pose_chain_poses`). See ``docs/sensor-errors.md``.
+incidence; with a ``noise`` block its sigma along the ray is the reported uncertainty, not the planning ``u``),
+dropped when the signal is too weak or saturated (material), mixed at depth jumps along the line (edges), and
+reported through the nominal pose when the caller passes one (pose chain: :func:`pose_chain_poses`). See ``docs/sensor-errors.md``.
 
 Everything here is in mm and in the world frame; the ROS node converts to metres.
 """
@@ -182,6 +182,9 @@ class LaserLineScannerSimulator:
             keep, measured = self._measure_with_errors(
                 poses, which, hits, normals_v, ray_dirs, z, ray_in_profile, detector[visible]
             )
+            if self.errors.noise is not None:  # the error model's noise along the ray, not the planning u
+                cos_inc = -np.einsum("ij,ij->i", ray_dirs, normals_v)
+                uncertainty = self.errors.sigma_mm(z, cos_inc, sensor.optimal_standoff)
             hits, uncertainty, which, ray_in_profile, measured = (
                 a[keep] for a in (hits, uncertainty, which, ray_in_profile, measured)
             )
