@@ -15,7 +15,6 @@ from agiprobot_measurement.planning.cover.columns import ColumnSets
 __all__ = [
     "MAX_REDUCTION_ROUNDS",
     "Reduction",
-    "column_bitsets",
     "dominated_columns",
     "duplicate_columns",
     "implied_rows",
@@ -27,22 +26,38 @@ __all__ = [
 MAX_REDUCTION_ROUNDS = 10
 # once the rows were reduced, a round that removed less than this share of the programme's entries is the last
 REDUCTION_MIN_CHANGE = 0.02
-# candidate row pairs checked between two looks at the deadline in :func:`implied_rows`
-IMPLIED_GROUP_PAIRS = 200_000
 
 
 def restrict(cols: ColumnSets, row_keep: np.ndarray, which: np.ndarray) -> ColumnSets:
     """Columns ``which`` restricted to the rows where the mask ``row_keep`` holds, rows renumbered."""
-    part = cols.take(which)
     if row_keep.all():
-        return part
-    keep = row_keep[part.indices]
-    col_of_entry = np.repeat(np.arange(which.size), part.sizes())
-    counts = np.bincount(col_of_entry[keep], minlength=which.size)
-    indptr = np.zeros(which.size + 1, dtype=np.int64)
-    np.cumsum(counts, out=indptr[1:])
-    row_map = (np.cumsum(row_keep) - 1).astype(np.int32)
-    return ColumnSets(indptr, row_map[part.indices[keep]], int(np.count_nonzero(row_keep)))
+        return cols.take(which)
+    row_map = np.where(row_keep, np.cumsum(row_keep) - 1, -1).astype(np.int64)
+    indptr, indices = _restrict_kernel(cols.indptr, cols.indices, np.asarray(which, dtype=np.int64), row_map)
+    return ColumnSets(indptr, indices, int(np.count_nonzero(row_keep)))
+
+
+@numba.njit(cache=True)
+def _restrict_kernel(indptr, indices, which, row_map):  # pragma: no cover - compiled
+    """:func:`restrict` in two passes over the chosen columns' entries (count, then fill): (indptr, indices)."""
+    out_ptr = np.zeros(which.size + 1, np.int64)
+    for k in range(which.size):
+        c = which[k]
+        n = 0
+        for e in range(indptr[c], indptr[c + 1]):
+            if row_map[indices[e]] >= 0:
+                n += 1
+        out_ptr[k + 1] = out_ptr[k] + n
+    out = np.empty(out_ptr[-1], indices.dtype)
+    for k in range(which.size):
+        c = which[k]
+        f = out_ptr[k]
+        for e in range(indptr[c], indptr[c + 1]):
+            r = row_map[indices[e]]
+            if r >= 0:
+                out[f] = r
+                f += 1
+    return out_ptr, out
 
 
 def duplicate_columns(cols: ColumnSets, order: np.ndarray) -> np.ndarray:
@@ -166,68 +181,70 @@ def _dominated_kernel(indptr, indices, order, row_ptr, row_ranks, costs, dominat
                 break
 
 
-def column_bitsets(cols: ColumnSets) -> np.ndarray:
-    """Each column's rows packed into uint64 words, one row of words per column."""
-    n_words = max(1, -(-cols.n_rows // 64))
-    out = np.zeros((cols.n_cols, n_words * 8), dtype=np.uint8)
-    step = max(1, 8_000_000 // max(cols.n_rows, 1))
-    for start in range(0, cols.n_cols, step):
-        which = np.arange(start, min(start + step, cols.n_cols))
-        part = cols.take(which)
-        dense = np.zeros((which.size, cols.n_rows), dtype=bool)
-        dense[np.repeat(np.arange(which.size), part.sizes()), part.indices] = True
-        out[start : start + which.size, : -(-cols.n_rows // 8)] = np.packbits(dense, axis=1, bitorder="little")
-    return out.view(np.uint64)
-
-
 def implied_rows(rows: ColumnSets, candidates: np.ndarray, deadline: float) -> tuple[np.ndarray, bool]:
     """Mask of rows (as sets of views) whose views include all views of another candidate row.
 
-    Any cover of the smaller row also covers the larger one, so the larger is implied and can go. The rows
-    that include row a all hold a's rarest view, so they are sought among that view's rows only; identical
-    rows must have been merged already (equal sizes are skipped).
+    Any cover of the smaller row also covers the larger one, so the larger is implied and can go (a chain of
+    strict subsets ends at a row that is not implied, so all of them can go at once). The rows that include row a
+    all hold a's rarest view, so they are sought among that view's rows only; identical rows must have been merged
+    already (equal sizes are skipped). The subset test merges the two sorted view lists and stops at the first
+    view the larger row lacks; compiled (:func:`_implied_kernel`, :data:`IMPLIED_CHUNK_ROWS` rows per call, the
+    deadline checked between calls).
     """
     implied = np.zeros(rows.n_cols, dtype=bool)
     if candidates.size < 2:
         return implied, True
-    sub = rows.take(candidates)
-    by_col = sub.transpose()  # column -> candidate positions
-    degree = by_col.sizes()
-    sizes = sub.sizes()
-    seg = np.repeat(np.arange(candidates.size), sizes)
-    ordered = np.lexsort((degree[sub.indices], seg))
-    rarest = sub.indices[ordered[sub.indptr[:-1]]]
     if time.perf_counter() > deadline:
-        return implied, False  # the bitsets alone cost seconds at tilt full
-    bits = column_bitsets(sub)
-    work = degree[rarest]
+        return implied, False
+    sub = rows.take(np.asarray(candidates, dtype=np.int64))
+    by_col = sub.transpose()  # view -> candidate positions holding it
+    found = np.zeros(candidates.size, dtype=bool)
     complete = True
-    # groups of rows of about IMPLIED_GROUP_PAIRS candidate pairs: the deadline is checked between groups, and
-    # at tilt full one row's rarest view still holds thousands of rows
-    cum_work = np.cumsum(work)
-    start = 0
-    while start < candidates.size:
+    for begin in range(0, candidates.size, IMPLIED_CHUNK_ROWS):
         if time.perf_counter() > deadline:
             complete = False
             break
-        done = int(cum_work[start - 1]) if start else 0
-        stop = int(np.searchsorted(cum_work, done + IMPLIED_GROUP_PAIRS, side="right"))
-        stop = min(max(stop, start + 1), start + 256)
-        group = np.arange(start, stop)
-        start = stop
-        counts = work[group]
-        offsets = np.zeros(group.size, dtype=np.int64)
-        np.cumsum(counts[:-1], out=offsets[1:])
-        pos = np.repeat(by_col.indptr[rarest[group]] - offsets, counts) + np.arange(int(counts.sum()))
-        b = by_col.indices[pos].astype(np.int64)
-        a = np.repeat(group, counts)
-        keep = sizes[b] > sizes[a]  # equal sizes would be identical rows
-        a, b = a[keep], b[keep]
-        ok = np.ones(a.size, dtype=bool)
-        for w in range(bits.shape[1]):
-            ok &= (bits[a, w] & ~bits[b, w]) == 0
-        implied[candidates[b[ok]]] = True
+        end = min(candidates.size, begin + IMPLIED_CHUNK_ROWS)
+        _implied_kernel(sub.indptr, sub.indices, by_col.indptr, by_col.indices, found, begin, end)
+    implied[candidates[found]] = True
     return implied, complete
+
+
+#: candidate rows visited by one call of the compiled implied-row search: the deadline is checked between calls
+IMPLIED_CHUNK_ROWS = 4096
+
+
+@numba.njit(cache=True)
+def _implied_kernel(indptr, indices, by_ptr, by_rows, implied, begin, end):  # pragma: no cover - compiled
+    """:func:`implied_rows` for the rows ``begin:end`` as the smaller row: sets ``implied`` of every larger row
+    holding all of its views, in place."""
+    for a in range(begin, end):
+        a0, a1 = indptr[a], indptr[a + 1]
+        size = a1 - a0
+        if size == 0:
+            continue
+        rare = indices[a0]
+        for e in range(a0 + 1, a1):
+            v = indices[e]
+            if by_ptr[v + 1] - by_ptr[v] < by_ptr[rare + 1] - by_ptr[rare]:
+                rare = v
+        for q in range(by_ptr[rare], by_ptr[rare + 1]):
+            b = by_rows[q]
+            b0, b1 = indptr[b], indptr[b + 1]
+            if implied[b] or b1 - b0 <= size:
+                continue
+            j = b0
+            subset = True
+            for e in range(a0, a1):
+                v = indices[e]
+                while j < b1 and indices[j] < v:
+                    j += 1
+                if j == b1 or indices[j] != v:
+                    subset = False
+                    break
+                j += 1
+            if subset:
+                implied[b] = True
 
 
 @dataclass

@@ -434,3 +434,17 @@ def test_realistic_instance(cube_9k):
     # Targets are 1 s and 10 s; the bounds here only catch gross regressions on a loaded test machine.
     assert greedy.solve_time_s < 5.0
     assert basic.solve_time_s < 30.0
+
+
+def test_restrict_matches_the_dense_submatrix():
+    rng = np.random.default_rng(11)
+    for trial in range(20):
+        mask = rng.random((int(rng.integers(1, 60)), int(rng.integers(1, 40)))) < rng.uniform(0.05, 0.6)
+        columns, _ = cover_columns.measurable_columns(sparse.csc_array(mask))
+        row_keep = rng.random(mask.shape[0]) < (1.0 if trial % 5 == 0 else 0.6)
+        which = rng.permutation(mask.shape[1])[: int(rng.integers(0, mask.shape[1] + 1))]
+        got = cover_reduction.restrict(columns, row_keep, which)
+        expected = mask[row_keep][:, which]
+        assert got.n_rows == expected.shape[0] and got.n_cols == which.size
+        for k in range(which.size):
+            np.testing.assert_array_equal(got.col(k), np.flatnonzero(expected[:, k]))
