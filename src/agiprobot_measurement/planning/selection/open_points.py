@@ -81,19 +81,25 @@ def substitute_views(matrix, views: list[ViewPoint], columns: np.ndarray, per_vi
     columns = np.asarray(columns, dtype=np.int64)
     if columns.size == 0 or per_view <= 0:
         return np.zeros(0, dtype=np.int64)
-    measurable = (scipy.sparse.csc_matrix(matrix) != 0).astype(np.float32)
-    overlap = (measurable[:, columns].T.tocsr() @ measurable).tocoo()  # len(columns) x views
+    indptr, indices, _ = measurable_structure(matrix)
+    n_points, n_views = matrix.shape
+    # the transpose of the measurable structure (views x points, CSR) is the CSC's own arrays: no conversion of
+    # the whole matrix (tens of millions of entries); only the picked rows are turned round
+    ones = np.ones(indices.size, dtype=np.float32)
+    by_view = scipy.sparse.csr_matrix((ones, indices, indptr), shape=(n_views, n_points))
+    overlap = (by_view @ by_view[columns].T.tocsr()).tocoo()  # views x len(columns): shared points
     unverified = np.array([v.mechanics_verified is False for v in views], dtype=bool)
-    keep = unverified[overlap.col] & (overlap.col != columns[overlap.row])
-    r, c, w = overlap.row[keep], overlap.col[keep], overlap.data[keep]
+    keep = unverified[overlap.row] & (overlap.row != columns[overlap.col])
+    r, c, w = overlap.col[keep], overlap.row[keep], overlap.data[keep]
     if r.size == 0:
         return np.zeros(0, dtype=np.int64)
-    order = np.lexsort((-w, r))
+    # per picked view: the largest overlaps first (equal overlaps: the lower column first)
+    order = np.lexsort((c, -w, r))
     r, c, w = r[order], c[order], w[order]
     rank = np.arange(r.size) - np.searchsorted(r, r, side="left")
     chosen = rank < per_view
-    # best overlaps first across all picked views, each column once
+    # best overlaps first across all picked views (then the lower column), each column once
     c, w = c[chosen], w[chosen]
-    c = c[np.argsort(-w, kind="stable")]
+    c = c[np.lexsort((c, -w))]
     _, first = np.unique(c, return_index=True)
     return c[np.sort(first)]

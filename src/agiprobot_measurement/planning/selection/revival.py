@@ -7,6 +7,7 @@ from __future__ import annotations
 import logging
 import time
 
+import numba
 import numpy as np
 
 from agiprobot_measurement.planning.candidates.generation import attach_unverified
@@ -109,11 +110,20 @@ def _measured_counts(run: PlanningRun) -> np.ndarray:
     """Per point, how many views that may still be executable measure it: live store entries and revived
     views not rejected."""
     store = run.measurability
-    measured = np.bincount(store.point_indices[run.entry_alive], minlength=store.n_points)
-    for view in run.last_viewpoints[len(run.generation_views) :]:
-        if view.mechanics_valid:
-            measured[np.asarray(view.measurable_indices, dtype=np.int64)] += 1
+    measured = np.zeros(store.n_points, dtype=np.int64)
+    _count_alive(np.asarray(store.point_indices), run.entry_alive, measured)
+    revived = [v.measurable_indices for v in run.last_viewpoints[len(run.generation_views) :] if v.mechanics_valid]
+    if revived:
+        measured += np.bincount(np.concatenate(revived).astype(np.int64), minlength=store.n_points)
     return measured
+
+
+@numba.njit(cache=True)
+def _count_alive(point_indices, alive, counts):  # pragma: no cover - compiled
+    """``counts[p] += 1`` for every live entry of point p: one pass over the store, no gathered copy."""
+    for e in range(point_indices.size):
+        if alive[e]:
+            counts[point_indices[e]] += 1
 
 
 def _has_open_points(run: PlanningRun, columns: np.ndarray, measured: np.ndarray) -> np.ndarray:

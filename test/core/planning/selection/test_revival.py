@@ -92,6 +92,13 @@ def test_a_failed_dominator_revives_its_dominated_candidates_once_when_its_point
         lo, hi = candidate_view.scan_line
         assert lo < hi and candidate_view.estimated_duration_s > 0
     assert revival.revive_dominated(manager.run, manager.tools()) == []  # the same failure revives nothing twice
+    # the per-point count of views that may still be executable: live store entries plus revived valid views
+    revived[0].mechanics_valid = False
+    expected_counts = np.bincount(store.point_indices[manager.run.entry_alive], minlength=store.n_points)
+    for v in revived[1:]:
+        expected_counts[np.asarray(v.measurable_indices, dtype=np.int64)] += 1
+    np.testing.assert_array_equal(revival._measured_counts(manager.run), expected_counts)
+    revived[0].mechanics_valid = True
     # the coverage problem takes the store's columns and the revived views together, in the views' order
     mixed = views[:50] + revived + views[50:100]
     matrix, worst, _ = coverage_problem(manager.run, mixed, len(manager.samples))

@@ -120,3 +120,32 @@ def test_compiled_branch_walk_follows_the_same_branches(monkeypatch):
         compiled = cartesian._follow_all_solutions(ik, start, np.zeros((n, 4, 4)))
         assert compiled[1] == plain[1]
         np.testing.assert_array_equal(compiled[0], plain[0])
+
+
+def _reference_substitutes(dense, verified, columns, per_view):
+    """One picked view at a time: its unverified others by (most shared points, lower column), ``per_view`` each;
+    then all of them by (overlap, column), each column once."""
+    mask = dense != 0
+    entries = []
+    for p in columns:
+        shared = (mask & mask[:, [p]]).sum(axis=0)
+        others = [(int(shared[c]), c) for c in range(mask.shape[1]) if c != p and not verified[c] and shared[c] > 0]
+        others.sort(key=lambda t: (-t[0], t[1]))
+        entries += others[:per_view]
+    entries.sort(key=lambda t: (-t[0], t[1]))
+    return list(dict.fromkeys(c for _, c in entries))
+
+
+def test_substitutes_match_the_one_view_at_a_time_reference_on_random_matrices():
+    rng = np.random.default_rng(5)
+    for _ in range(30):
+        n_points, n_views = int(rng.integers(5, 40)), int(rng.integers(2, 30))
+        dense = (rng.random((n_points, n_views)) < rng.uniform(0.1, 0.6)) * rng.uniform(0.5, 2.0, (n_points, n_views))
+        dense[rng.random((n_points, n_views)) < 0.05] = 0.0
+        verified = rng.random(n_views) < 0.3
+        views = [_View(bool(v)) for v in verified]
+        columns = rng.choice(n_views, size=int(rng.integers(1, min(n_views, 6) + 1)), replace=False)
+        per_view = int(rng.integers(1, 6))
+        matrix = scipy.sparse.csc_matrix(dense)
+        got = substitute_views(matrix, views, columns, per_view).tolist()
+        assert got == _reference_substitutes(dense, verified, columns.tolist(), per_view)
