@@ -26,6 +26,8 @@ __all__ = [
 MAX_REDUCTION_ROUNDS = 10
 # once the rows were reduced, a round that removed less than this share of the programme's entries is the last
 REDUCTION_MIN_CHANGE = 0.02
+# candidate rows visited by one call of the compiled implied-row search: the deadline is checked between calls
+IMPLIED_CHUNK_ROWS = 4096
 
 
 def restrict(cols: ColumnSets, row_keep: np.ndarray, which: np.ndarray) -> ColumnSets:
@@ -143,6 +145,32 @@ def _rank_lists(indptr, indices, order, n_rows):  # pragma: no cover - compiled
     return row_ptr, ranks
 
 
+@numba.njit(cache=True, inline="always")
+def _rarest(indices, a, b, owner_ptr):  # pragma: no cover - compiled
+    """Of the entries ``indices[a:b]``, the one held by the fewest sets (``owner_ptr`` of the transpose)."""
+    rare = indices[a]
+    for e in range(a + 1, b):
+        r = indices[e]
+        if owner_ptr[r + 1] - owner_ptr[r] < owner_ptr[rare + 1] - owner_ptr[rare]:
+            rare = r
+    return rare
+
+
+@numba.njit(cache=True, inline="always")
+def _sorted_subset(indices, a0, a1, b0, b1):  # pragma: no cover - compiled
+    """Whether the sorted ``indices[a0:a1]`` all occur in the sorted ``indices[b0:b1]``: one merge, stopped at
+    the first one missing."""
+    j = b0
+    for e in range(a0, a1):
+        v = indices[e]
+        while j < b1 and indices[j] < v:
+            j += 1
+        if j == b1 or indices[j] != v:
+            return False
+        j += 1
+    return True
+
+
 @numba.njit(cache=True)
 def _dominated_kernel(indptr, indices, order, row_ptr, row_ranks, costs, dominated, begin, end):  # pragma: no cover
     """:func:`dominated_columns` for the ranks ``begin:end`` (rank p is column ``order[p]``; larger first; ``costs``
@@ -153,11 +181,7 @@ def _dominated_kernel(indptr, indices, order, row_ptr, row_ranks, costs, dominat
         size = b - a
         if size == 0:
             continue
-        rare = indices[a]
-        for e in range(a + 1, b):
-            r = indices[e]
-            if row_ptr[r + 1] - row_ptr[r] < row_ptr[rare + 1] - row_ptr[rare]:
-                rare = r
+        rare = _rarest(indices, a, b, row_ptr)
         for q in range(row_ptr[rare], row_ptr[rare + 1]):
             rank = row_ranks[q]
             if rank >= p:
@@ -166,17 +190,7 @@ def _dominated_kernel(indptr, indices, order, row_ptr, row_ranks, costs, dominat
             if dominated[rank] or indptr[d + 1] - indptr[d] <= size or costs[rank] > costs[p]:
                 continue
             # rows(c) within rows(d)? both sorted: one merge, stopped at the first row d lacks
-            j, stop = indptr[d], indptr[d + 1]
-            subset = True
-            for i in range(a, b):
-                row = indices[i]
-                while j < stop and indices[j] < row:
-                    j += 1
-                if j == stop or indices[j] != row:
-                    subset = False
-                    break
-                j += 1
-            if subset:
+            if _sorted_subset(indices, a, b, indptr[d], indptr[d + 1]):
                 dominated[p] = True
                 break
 
@@ -210,10 +224,6 @@ def implied_rows(rows: ColumnSets, candidates: np.ndarray, deadline: float) -> t
     return implied, complete
 
 
-#: candidate rows visited by one call of the compiled implied-row search: the deadline is checked between calls
-IMPLIED_CHUNK_ROWS = 4096
-
-
 @numba.njit(cache=True)
 def _implied_kernel(indptr, indices, by_ptr, by_rows, implied, begin, end):  # pragma: no cover - compiled
     """:func:`implied_rows` for the rows ``begin:end`` as the smaller row: sets ``implied`` of every larger row
@@ -223,27 +233,13 @@ def _implied_kernel(indptr, indices, by_ptr, by_rows, implied, begin, end):  # p
         size = a1 - a0
         if size == 0:
             continue
-        rare = indices[a0]
-        for e in range(a0 + 1, a1):
-            v = indices[e]
-            if by_ptr[v + 1] - by_ptr[v] < by_ptr[rare + 1] - by_ptr[rare]:
-                rare = v
+        rare = _rarest(indices, a0, a1, by_ptr)
         for q in range(by_ptr[rare], by_ptr[rare + 1]):
             b = by_rows[q]
             b0, b1 = indptr[b], indptr[b + 1]
             if implied[b] or b1 - b0 <= size:
                 continue
-            j = b0
-            subset = True
-            for e in range(a0, a1):
-                v = indices[e]
-                while j < b1 and indices[j] < v:
-                    j += 1
-                if j == b1 or indices[j] != v:
-                    subset = False
-                    break
-                j += 1
-            if subset:
+            if _sorted_subset(indices, a0, a1, b0, b1):
                 implied[b] = True
 
 
