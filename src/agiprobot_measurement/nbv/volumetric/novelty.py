@@ -11,13 +11,13 @@ __all__ = ["NoveltyTracker"]
 class NoveltyTracker:
     """Surface added per frame (m^2) inside the ROI ``[roi_min_m, roi_max_m]`` of the output map ``voxel_map``.
 
-    A frame's point counts when no earlier point lies within one novelty cell (the ROI's largest edge / 300, at least
-    1 mm; 26-neighbourhood), weighted by the surface a pixel covers there ((depth / f)^2 / cos incidence, the
-    incidence clipped at cos 0.2). Noise does not move a point by a cell, and a face first seen grazing still counts
-    when a later view samples it densely. Points on the static scene (the fixture's top) do not count, judged as fusion
-judges them (:meth:`~.voxel_map.VoxelMap.on_static_scene`: a band of voxels around the static scene dropped all of a
-plate thinner than the band lying on the fixture, so its views added nothing and the run stopped after three). ``default_fx``:
-    the focal length (px) of frames without intrinsics."""
+        A frame's point counts when no earlier point lies within one novelty cell (the ROI's largest edge / 300, at least
+        1 mm; 26-neighbourhood), weighted by the surface a pixel covers there ((depth / f)^2 / cos incidence, the
+        incidence clipped at cos 0.2). Noise does not move a point by a cell, and a face first seen grazing still counts
+        when a later view samples it densely. Points on the static scene (the fixture's top) do not count, judged as fusion
+    judges them (:meth:`~.voxel_map.VoxelMap.on_static_scene`: a band of voxels around the static scene dropped all of a
+    plate thinner than the band lying on the fixture, so its views added nothing and the run stopped after three). ``default_fx``:
+        the focal length (px) of frames without intrinsics."""
 
     def __init__(self, roi_min_m: np.ndarray, roi_max_m: np.ndarray, voxel_map, default_fx: float):
         self.roi_min_m = np.asarray(roi_min_m, dtype=float)

@@ -68,8 +68,8 @@ def test_the_expected_surface_counts_open_faces_for_a_view_that_faces_them():
     view = ViewModel(fov_h_rad=np.radians(30.0), fov_v_rad=np.radians(30.0), range_min_m=0.05, range_max_m=1.0,
                      projector_offset_m=np.zeros(3), rays_h=32, rays_v=32, max_incidence_rad=np.radians(75.0))  # fmt: skip
     rim = np.array([PLATE_LO, 0.05, PLATE_Z - 0.005])
-    side = look_at(rim + [-0.3, 0.0, 0.05], rim)
-    above = look_at(rim + [0.0, 0.0, 0.3], rim, up=[1.0, 0.0, 0.0])
+    side = look_at(rim + np.array([-0.3, 0.0, 0.05]), rim)
+    above = look_at(rim + np.array([0.0, 0.0, 0.3]), rim, up=[1.0, 0.0, 0.0])
     _, area = expected_surface(grid, np.stack([side, above]), view, ExpectedSurfaceModel())
     assert area[0] > 0.0 and area[1] == 0.0
     _, without = expected_surface(grid, side[None], view, ExpectedSurfaceModel(open_face_angle_deg=0.0))
