@@ -149,15 +149,6 @@ class _WorldObject:
     mesh: object = None  # closed trimesh (object frame) for the inside test FCL's BVH cannot do
 
 
-def _centres_in_boxes(rotation, translation, box_center, box_half, centres) -> tuple[np.ndarray, np.ndarray]:
-    """Per row k: the point ``centres[k]`` (world) in the frame of an object posed by ``rotation[k]``,
-    ``translation[k]``, and whether it lies in that object's bounding box (centre ``box_center[k]`` in the world,
-    half extents ``box_half[k]`` along the object's axes, m)."""
-    local = np.einsum("kji,kj->ki", rotation, centres - translation)
-    box_local = np.einsum("kji,kj->ki", rotation, box_center - translation)
-    return local, np.all(np.abs(local - box_local) <= box_half, axis=1)
-
-
 class Clearance(NamedTuple):
     """Smallest distance (m, between padded shapes; <= 0 in collision) and the pair it belongs to."""
 
@@ -615,21 +606,18 @@ class CollisionChecker:
         self_pairs = self._self_pairs.tolist()
         objects, shapes, request = self._object_list, self.shapes, self._request
         collide, result = fcl.collide, fcl.CollisionResult
-        # the inside-a-closed-mesh test's bounding-box stage for every candidate row at once
-        local, in_box = self._centres_in_mesh_boxes(poses[env[:, 0], env[:, 1], :3, 3], env[:, 2])
         for k, state in enumerate(states.tolist()):
             state_poses = poses[state]
             posed_world, posed_own = set(), set()
             hit = False
-            for e in range(env_lo[k], env_hi[k]):
-                s, o = env_rows[e]
+            for s, o in env_rows[env_lo[k] : env_hi[k]]:
                 if s not in posed_world:
                     self._pose_shapes(state_poses[s], shapes[s].world)
                     posed_world.add(s)
                 obj = objects[o]
                 mine = shapes[s].world.obj
                 if any(collide(mine, piece, request, result()) for piece in obj.pieces) or (
-                    in_box[e] and bool(obj.mesh.contains(local[e : e + 1])[0])
+                    obj.mesh is not None and self._inside_mesh(state_poses[s], obj)
                 ):
                     hit = True
                     break
@@ -653,32 +641,12 @@ class CollisionChecker:
         Called only after FCL found no surface contact: then the shape is either wholly inside or wholly
         outside, and its centre decides. The bounding-box test first, as it is rare that the mesh test is needed.
         """
-        local, in_box = _centres_in_boxes(
-            obj.pose[None, :3, :3],
-            obj.pose[None, :3, 3],
-            obj.box_center[None],
-            obj.box_half[None],
-            shape_pose[None, :3, 3],
-        )
-        return bool(in_box[0]) and bool(obj.mesh.contains(local)[0])
-
-    def _centres_in_mesh_boxes(self, centres: np.ndarray, objects: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """For (K, 3) shape centres (world, m) against the world objects ``objects`` (K,): the centres in each
-        object's frame and whether they lie in the bounding box of an object with a closed mesh (the mesh's
-        inside test is needed only then)."""
-        local = np.zeros((len(objects), 3))
-        in_box = np.zeros(len(objects), dtype=bool)
-        listed = self._object_list
-        if not len(objects) or all(o.mesh is None for o in listed):
-            return local, in_box
-        rows = np.flatnonzero(np.array([o.mesh is not None for o in listed], dtype=bool)[objects])
-        which = objects[rows]
-        stacked = [np.stack([getattr(o, name) for o in listed]) for name in ("pose", "box_center", "box_half")]
-        pose, box_center, box_half = (a[which] for a in stacked)
-        local[rows], in_box[rows] = _centres_in_boxes(
-            pose[:, :3, :3], pose[:, :3, 3], box_center, box_half, centres[rows]
-        )
-        return local, in_box
+        rotation, translation = obj.pose[:3, :3], obj.pose[:3, 3]
+        center_local = rotation.T @ (shape_pose[:3, 3] - translation)
+        box_center_local = rotation.T @ (obj.box_center - translation)
+        if np.any(np.abs(center_local - box_center_local) > obj.box_half):
+            return False
+        return bool(obj.mesh.contains(center_local[None])[0])
 
     def _all_pairs(self, include_allowed: bool):
         """(shape index, padded shape, the other's FCL objects, other, names) of every pair for the diagnostic
