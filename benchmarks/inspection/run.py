@@ -49,15 +49,26 @@ EVALUATION_SEED0 = 100
 DERIVED = "derived"
 #: the scanner of each benchmark sensor in config/inspection/instruments.yaml
 SCANNER = {"phoxi": "phoxi_S", "phoxi_low": "phoxi_S", "laser": "laser_line"}
-#: the realistic PhoXi S's stated registration rotation (deg, 95 %): PLACEHOLDER
-PHOXI_REGISTRATION_DEG = 0.01
+#: the realistic PhoXi S's registration error on the null cube that its calibration error alone leaves, 95th
+#: percentiles over 60 development devices (translation over the part's vertices, mm; rotation, deg): propagated
+#: from the error model by Monte Carlo (`python -m benchmarks.inspection.derive --devices 60 --first-seed 0`:
+#: noise-free scans, calibration block only, the inspection's own best fit); the stated limits add the ideal
+#: sensor's registration targets (0.01 mm / 0.005 deg) in quadrature
+PHOXI_CALIBRATION_REGISTRATION_P95 = (0.0539, 0.0191)
+#: the ideal sensors' registration targets (mm, deg; the inspection issue's)
+IDEAL_REGISTRATION = (0.01, 0.005)
+PHOXI_REGISTRATION_MM, PHOXI_REGISTRATION_DEG = (
+    float(np.ceil(1000.0 * np.hypot(a, b)) / 1000.0) for a, b in zip(PHOXI_CALIBRATION_REGISTRATION_P95,
+                                                                      IDEAL_REGISTRATION, strict=True)
+)  # fmt: skip
 #: stated limits with the realistic sensor models (mm; the detection limit is a dent depth): the systematic errors
 #: the best fit leaves (calibration, fixed pattern, hand-eye) bound what the realistic scanners can decide. PhoXi S
 #: flatness: 2 x the instrument's form_mm (0.099, the flat 200 mm plate of the development seeds) with the ideal
 #: sensor's 0.03 in quadrature. ``position_mm: derived`` is :func:`centre_limit_mm` (from the instrument's centre
-#: and stitching terms, themselves derived from the error model). PhoXi S registration: see PHOXI_REGISTRATION_DEG
+#: and stitching terms, themselves derived from the error model). PhoXi S registration: 95 % limits derived from
+#: the error model (PHOXI_CALIBRATION_REGISTRATION_P95); the laser's 0.1 mm / 0.01 deg are stated numbers
 REALISTIC_LIMITS = {
-    "phoxi_S": {"registration_mm": 0.1, "registration_deg": PHOXI_REGISTRATION_DEG, "detection_limit_mm": 0.3, "depth_mm": 0.03,
+    "phoxi_S": {"registration_mm": PHOXI_REGISTRATION_MM, "registration_deg": PHOXI_REGISTRATION_DEG, "detection_limit_mm": 0.3, "depth_mm": 0.03,
                 "position_mm": DERIVED, "flatness_mm": 0.2, "size_mm": 0.12},
     "laser_line": {"registration_mm": 0.1, "registration_deg": 0.01, "detection_limit_mm": 0.3, "depth_mm": 0.03,
                    "position_mm": DERIVED, "flatness_mm": 0.04, "size_mm": 0.12},
@@ -252,8 +263,8 @@ def _share_within(rows: list[dict], sensor: str, case: str, magnitude: float, ke
 
 def _realistic_targets(summary: list[dict], sensor: str, rows: list[dict]) -> list[tuple[str, bool, str]]:
     """The stated limits of :data:`REALISTIC_LIMITS` for the benchmark sensor ``sensor`` (``rows``: the runs).
-    Limits stated as 95 % quantities (the derived hole centre and registration rotation, U with k = 2) must hold
-    in COVERED_SHARE of the runs; the others in every run."""
+    Limits stated as 95 % quantities (the derived hole centre and registration, U with k = 2) must hold in
+    COVERED_SHARE of the runs; the others in every run."""
     limits = REALISTIC_LIMITS[SCANNER[sensor]]
     out = []
     instrument = load_instrument("realistic", SCANNER[sensor])
@@ -268,11 +279,15 @@ def _realistic_targets(summary: list[dict], sensor: str, rows: list[dict]) -> li
         out.append((f"{c} {m}: no wrong definitive verdict", e["wrong_share"] == 0.0, f"{e['wrong_share']:.2f}"))
         out.append((f"{c} {m}: no cloud of the part refused", e["refused_share"] == 0.0, f"{e['refused_share']:.2f}"))
         if c == "null":
-            out.append((f"null: registration <= {limits['registration_mm']} mm (max)",
-                        e["registration_mm_max"] <= limits["registration_mm"], f"{e['registration_mm_max']:.4f}"))
-            share, top = _share_within(rows, sensor, c, m, "registration_deg", limits["registration_deg"])
-            out.append((f"null: registration rotation <= {limits['registration_deg']} deg in >= "
-                        f"{COVERED_SHARE:.0%} of runs", share >= COVERED_SHARE, f"{share:.2f} (max {top:.4f})"))
+            for key, unit in (("registration_mm", "mm"), ("registration_deg", "deg")):
+                share, top = _share_within(rows, sensor, c, m, key, limits[key])
+                out.append(
+                    (
+                        f"null: {key.replace('_', ' ')[:-4]} <= {limits[key]} {unit} in >= {COVERED_SHARE:.0%} of runs",
+                        share >= COVERED_SHARE,
+                        f"{share:.2f} (max {top:.4f})",
+                    )
+                )
         elif c == "dent" and m >= limits["detection_limit_mm"]:
             out.append((f"dent {m} (at or above the stated detection limit {limits['detection_limit_mm']} mm): "
                         "flagged >= 95 %", e["flag_share"] >= 0.95, f"{e['flag_share']:.2f}"))  # fmt: skip
@@ -283,18 +298,32 @@ def _realistic_targets(summary: list[dict], sensor: str, rows: list[dict]) -> li
         elif c == "dent" and m < 0.1:
             out.append((f"dent {m}: flagged <= 5 %", e["flag_share"] <= 0.05, f"{e['flag_share']:.2f}"))
         if "within_U_share" in e:
-            out.append((f"{c} {m}: position error within its U in >= {COVERED_SHARE:.0%} of runs",
-                        e["within_U_share"] >= COVERED_SHARE,
-                        f"{e['within_U_share']:.2f} (U {e['position_U_mm_min']:.3f}-{e['position_U_mm_max']:.3f})"))
+            out.append(
+                (
+                    f"{c} {m}: position error within its U in >= {COVERED_SHARE:.0%} of runs",
+                    e["within_U_share"] >= COVERED_SHARE,
+                    f"{e['within_U_share']:.2f} (U {e['position_U_mm_min']:.3f}-{e['position_U_mm_max']:.3f})",
+                )
+            )
         if c == "hole" and m >= detection:
             detected = float(np.mean([r.get("verdict") == NOT_CONFORM for r in rows
                                       if (r["sensor"], r["case"], r["magnitude"]) == (sensor, c, m)]))  # fmt: skip
-            out.append((f"hole {m} (at or above the stated detection limit {detection} mm): not conform >= 95 %",
-                        detected >= 0.95, f"{detected:.2f}"))
+            out.append(
+                (
+                    f"hole {m} (at or above the stated detection limit {detection} mm): not conform >= 95 %",
+                    detected >= 0.95,
+                    f"{detected:.2f}",
+                )
+            )
         if c == "hole" and "centre_error_mm_max" in e:
             share, top = _share_within(rows, sensor, c, m, "centre_error_mm", centre)
-            out.append((f"hole {m}: centre error <= {centre} mm in >= {COVERED_SHARE:.0%} of runs",
-                        share >= COVERED_SHARE, f"{share:.2f} (max {top:.4f})"))
+            out.append(
+                (
+                    f"hole {m}: centre error <= {centre} mm in >= {COVERED_SHARE:.0%} of runs",
+                    share >= COVERED_SHARE,
+                    f"{share:.2f} (max {top:.4f})",
+                )
+            )
         if c in bounds and bounds[c][0] in e:
             key, bound = bounds[c]
             out.append((f"{c} {m}: {'flatness' if c == 'warp' else 'size'} error <= {bound} mm (max)", e[key] <= bound,
@@ -345,8 +374,11 @@ def main(argv=None) -> int:
     parser.add_argument("--sensors", default="phoxi", help="comma list of phoxi, phoxi_low, laser")
     parser.add_argument("--cases", default=",".join(MAGNITUDES), help="comma list of " + ", ".join(MAGNITUDES))
     parser.add_argument("--error-model", default="ideal", help="sensor error model: ideal (noise only) or realistic")
-    parser.add_argument("--magnitudes", default=None, help="comma list: these magnitudes of the cases instead of "
-                        "their defaults (e.g. a stated detection limit)")
+    parser.add_argument(
+        "--magnitudes",
+        default=None,
+        help="comma list: these magnitudes of the cases instead of their defaults (e.g. a stated detection limit)",
+    )
     parser.add_argument("--speed", action="store_true", help="also time a 1 M-point inspection (100 k faces)")
     parser.add_argument("--json", default=None, help="write rows, summary and targets here")
     args = parser.parse_args(argv)
