@@ -279,11 +279,12 @@ def _realistic_targets(summary: list[dict], sensor: str, rows: list[dict]) -> li
         out.append((f"{c} {m}: no wrong definitive verdict", e["wrong_share"] == 0.0, f"{e['wrong_share']:.2f}"))
         out.append((f"{c} {m}: no cloud of the part refused", e["refused_share"] == 0.0, f"{e['refused_share']:.2f}"))
         if c == "null":
-            for key, unit in (("registration_mm", "mm"), ("registration_deg", "deg")):
+            for key, label in (("registration_mm", "translation"), ("registration_deg", "rotation")):
                 share, top = _share_within(rows, sensor, c, m, key, limits[key])
+                unit = key.rsplit("_", 1)[1]
                 out.append(
                     (
-                        f"null: {key.replace('_', ' ')[:-4]} <= {limits[key]} {unit} in >= {COVERED_SHARE:.0%} of runs",
+                        f"null: registration {label} <= {limits[key]} {unit} in >= {COVERED_SHARE:.0%} of runs",
                         share >= COVERED_SHARE,
                         f"{share:.2f} (max {top:.4f})",
                     )
