@@ -57,7 +57,8 @@ def device_run(seed: int, model) -> dict:
     reg = inspect_cloud(null.points_mm, null.nominal, null.spec, null.part.nominal_placement, null.sigma_mm)
     reg_mm, reg_deg = transform_error(reg.transform, np.linalg.inv(null.part.actual_placement), null.nominal.vertices)
     return {"seed": seed, "serial": cases.device_serial(seed), "centre_error_mm": error.tolist(),
-            "hole_method": feature.values["method"], "registration_mm": reg_mm, "registration_deg": reg_deg}  # fmt: skip
+            "hole_method": feature.values["method"], "registration_mm": reg_mm,
+            "registration_deg": reg_deg}  # fmt: skip
 
 
 def summarise(runs: list[dict]) -> dict:
@@ -67,7 +68,8 @@ def summarise(runs: list[dict]) -> dict:
     per_axis = float(np.sqrt(np.mean(e * e)))
     out = {"devices": len(runs), "centre_mm": per_axis, "centre_mean_mm": e.mean(axis=0).tolist(),
            "centre_radius95_gauss_mm": RADIUS_95_SIGMAS * per_axis,
-           "centre_radius_p95_mm": float(np.percentile(radial, 95)), "centre_radius_max_mm": float(radial.max())}  # fmt: skip
+           "centre_radius_p95_mm": float(np.percentile(radial, 95)),
+           "centre_radius_max_mm": float(radial.max())}  # fmt: skip
     for key in ("registration_mm", "registration_deg"):
         v = np.array([r[key] for r in runs])
         out.update({f"{key}_rms": float(np.sqrt(np.mean(v * v))), f"{key}_p95": float(np.percentile(v, 95)),

@@ -68,8 +68,9 @@ PHOXI_REGISTRATION_MM, PHOXI_REGISTRATION_DEG = (
 #: and stitching terms, themselves derived from the error model). PhoXi S registration: 95 % limits derived from
 #: the error model (PHOXI_CALIBRATION_REGISTRATION_P95); the laser's 0.1 mm / 0.01 deg are stated numbers
 REALISTIC_LIMITS = {
-    "phoxi_S": {"registration_mm": PHOXI_REGISTRATION_MM, "registration_deg": PHOXI_REGISTRATION_DEG, "detection_limit_mm": 0.3, "depth_mm": 0.03,
-                "position_mm": DERIVED, "flatness_mm": 0.2, "size_mm": 0.12},
+    "phoxi_S": {"registration_mm": PHOXI_REGISTRATION_MM, "registration_deg": PHOXI_REGISTRATION_DEG,
+                "detection_limit_mm": 0.3, "depth_mm": 0.03, "position_mm": DERIVED, "flatness_mm": 0.2,
+                "size_mm": 0.12},
     "laser_line": {"registration_mm": 0.1, "registration_deg": 0.01, "detection_limit_mm": 0.3, "depth_mm": 0.03,
                    "position_mm": DERIVED, "flatness_mm": 0.04, "size_mm": 0.12},
 }  # fmt: skip
@@ -77,8 +78,6 @@ REALISTIC_LIMITS = {
 HOLE_POSITION_TOLERANCE_MM = 0.2
 #: the ideal sensors' hole centre bounds (mm, the inspection issue's targets)
 IDEAL_CENTRE_MM = {"phoxi_S": 0.03, "laser_line": 0.05}
-#: the ideal sensors' registration rotation bound (deg, the inspection issue's target)
-IDEAL_REGISTRATION_DEG = 0.005
 #: radius holding 95 % of a 2-D isotropic Gaussian, in units of its per-axis sigma: sqrt(-2 ln 0.05)
 RADIUS_95_SIGMAS = float(np.sqrt(-2.0 * np.log(0.05)))
 #: share of the runs a 95 % bound (a stated limit derived as a 95 % quantity, or U with k = 2) must hold in

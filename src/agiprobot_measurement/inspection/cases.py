@@ -121,8 +121,8 @@ def _scan(mesh_world, origin, case: str, sensor: str, seed: int, error_model, pr
         depth = (np.asarray(mesh_world.vertices) - origin) @ unit
         offset = 0.5 * depth.max() * unit
         step = PRESCAN_STEP_MM if prescan else LASER_STEP_MM
-        clouds.append(simulate.scan_laser(mesh_world, v, sweep, length, origin, step, seed + 1000 * k, float(noise), offset,
-                                          error_model, device_serial(seed)))  # fmt: skip
+        clouds.append(simulate.scan_laser(mesh_world, v, sweep, length, origin, step, seed + 1000 * k, float(noise),
+                                          offset, error_model, device_serial(seed)))  # fmt: skip
     return simulate.ScannedCloud(np.vstack([c.points_mm for c in clouds]), np.concatenate([c.sigma_mm for c in clouds]),
                                  "laser_line")  # fmt: skip
 

@@ -6,8 +6,8 @@ every decision's uncertainty as a fully correlated term: ``surface_mm`` (1 sigma
 ``form_mm`` on a flatness value, ``length_rel`` (relative, 1 sigma) on a size and, times the distance from the
 registration's centre, on a hole's position; ``centre_mm`` (1 sigma per in-plane axis) on a fitted hole's centre
 against its datums: what the device's calibration error moves the hole's points by against the datum faces'
-points (they lie elsewhere in the field of view, and the hole is seen by other views than some datums). The values per error model and scanner are an uncertainty
-evaluation with calibrated parts (ISO 15530-3 style): the null parts of the development seeds scanned with that
+points (they lie elsewhere in the field of view, and the hole is seen by other views than some datums). The values
+per error model and scanner are an uncertainty evaluation with calibrated parts (ISO 15530-3 style): the null parts of the development seeds scanned with that
 error model (see the file's comments); ``centre_mm`` of the PhoXi is propagated from the error model by Monte Carlo
 (``python -m benchmarks.inspection.derive``: devices of the model's calibration draws, noise-free scans, the
 inspection's own datum alignment and circle fit). An unknown scanner or error model is an error; ``None`` is no term.

@@ -175,3 +175,16 @@ def test_the_derivation_stays_off_the_evaluation_seeds_and_summarises_per_axis()
     assert s["centre_mm"] == pytest.approx(0.03 / np.sqrt(2))  # RMS per axis over both axes
     assert s["centre_radius_max_mm"] == pytest.approx(0.03)
     assert s["registration_deg_max"] == pytest.approx(0.004)
+
+
+def test_a_case_scanned_without_noise_keeps_only_the_devices_systematic_errors():
+    from benchmarks.inspection.derive import calibration_only
+
+    def off_surface(c):
+        return np.abs(deviation.closest_points(c.part.placed_actual(), c.points_mm[::50]).signed_mm)
+
+    assert np.percentile(off_surface(cases.build_case("null", 0.0, 2, "phoxi_low", "ideal", noise=False)), 99) < 1e-3
+    assert np.percentile(off_surface(cases.build_case("null", 0.0, 2, "phoxi_low", "ideal")), 99) > 1e-2
+    # the calibration's field alone: smooth, of the order of the stated accuracy (0.05 mm), not noise-like
+    calibrated = off_surface(cases.build_case("null", 0.0, 2, "phoxi_low", calibration_only(), noise=False))
+    assert 5e-3 < np.sqrt(np.mean(calibrated**2)) < 0.2
