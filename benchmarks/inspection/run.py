@@ -26,10 +26,9 @@ import numpy as np
 import trimesh
 
 from agiprobot_measurement.inspection import actual, cases
-from agiprobot_measurement.inspection.decision import CONFORM, NOT_CONFORM
+from agiprobot_measurement.inspection.decision import CONFORM, COVERAGE_FACTOR, NOT_CONFORM
 from agiprobot_measurement.inspection.errors import InspectionInputError
 from agiprobot_measurement.inspection.instrument import (
-    FROM_POSE_CHAIN,
     InstrumentUncertainty,
     known_error_models,
     load_instrument,
@@ -46,35 +45,68 @@ MAGNITUDES = {
     "scale": (0.0005, 0.002, 0.005),
 }
 EVALUATION_SEED0 = 100
+#: a stated limit derived from the error model (see :func:`centre_limit_mm`)
+DERIVED = "derived"
 #: the scanner of each benchmark sensor in config/inspection/instruments.yaml
 SCANNER = {"phoxi": "phoxi_S", "phoxi_low": "phoxi_S", "laser": "laser_line"}
+#: the realistic PhoXi S's registration error on the null cube that its calibration error alone leaves, 95th
+#: percentiles over 60 development devices (translation over the part's vertices, mm; rotation, deg): propagated
+#: from the error model by Monte Carlo (`python -m benchmarks.inspection.derive --devices 60 --first-seed 0`:
+#: noise-free scans, calibration block only, the inspection's own best fit); the stated limits add the ideal
+#: sensor's registration targets (0.01 mm / 0.005 deg) in quadrature
+PHOXI_CALIBRATION_REGISTRATION_P95 = (0.0539, 0.0191)
+#: the ideal sensors' registration targets (mm, deg; the inspection issue's)
+IDEAL_REGISTRATION = (0.01, 0.005)
+PHOXI_REGISTRATION_MM, PHOXI_REGISTRATION_DEG = (
+    float(np.ceil(1000.0 * np.hypot(a, b)) / 1000.0) for a, b in zip(PHOXI_CALIBRATION_REGISTRATION_P95,
+                                                                      IDEAL_REGISTRATION, strict=True)
+)  # fmt: skip
 #: stated limits with the realistic sensor models (mm; the detection limit is a dent depth): the systematic errors
 #: the best fit leaves (calibration, fixed pattern, hand-eye) bound what the realistic scanners can decide. PhoXi S
 #: flatness: 2 x the instrument's form_mm (0.099, the flat 200 mm plate of the development seeds) with the ideal
-#: sensor's 0.03 in quadrature
+#: sensor's 0.03 in quadrature. ``position_mm: derived`` is :func:`centre_limit_mm` (from the instrument's centre
+#: and stitching terms, themselves derived from the error model). PhoXi S registration: 95 % limits derived from
+#: the error model (PHOXI_CALIBRATION_REGISTRATION_P95); the laser's 0.1 mm / 0.01 deg are stated numbers
 REALISTIC_LIMITS = {
-    "phoxi_S": {"registration_mm": 0.1, "registration_deg": 0.01, "detection_limit_mm": 0.3, "depth_mm": 0.03,
-                "position_mm": 0.06, "flatness_mm": 0.2, "size_mm": 0.12},
+    "phoxi_S": {"registration_mm": PHOXI_REGISTRATION_MM, "registration_deg": PHOXI_REGISTRATION_DEG,
+                "detection_limit_mm": 0.3, "depth_mm": 0.03, "position_mm": DERIVED, "flatness_mm": 0.2,
+                "size_mm": 0.12},
     "laser_line": {"registration_mm": 0.1, "registration_deg": 0.01, "detection_limit_mm": 0.3, "depth_mm": 0.03,
-                   "position_mm": FROM_POSE_CHAIN, "flatness_mm": 0.04, "size_mm": 0.12},
+                   "position_mm": DERIVED, "flatness_mm": 0.04, "size_mm": 0.12},
 }  # fmt: skip
+#: the hole case's position tolerance (mm, diameter; config/inspection/plate_hole.yaml)
+HOLE_POSITION_TOLERANCE_MM = 0.2
 #: the ideal sensors' hole centre bounds (mm, the inspection issue's targets)
 IDEAL_CENTRE_MM = {"phoxi_S": 0.03, "laser_line": 0.05}
 #: radius holding 95 % of a 2-D isotropic Gaussian, in units of its per-axis sigma: sqrt(-2 ln 0.05)
 RADIUS_95_SIGMAS = float(np.sqrt(-2.0 * np.log(0.05)))
+#: share of the runs a 95 % bound (a stated limit derived as a 95 % quantity, or U with k = 2) must hold in
+COVERED_SHARE = 0.95
 
 
-def centre_limit_mm(scanner: str, stitching_mm: float) -> float:
-    """The stated bound (mm) on a hole centre's error with the realistic ``scanner``: a number of
-    :data:`REALISTIC_LIMITS`, or (``pose_chain``) derived a priori from the error model: the centre, seen by some
-    sweeps and located against datums seen by others, moves with their relative pose error, per axis the
-    instrument's stitching term ``stitching_mm``
-    (:func:`~agiprobot_measurement.inspection.instrument.pose_chain_stitching_mm`); its 95 % radius
-    RADIUS_95_SIGMAS x that, with the ideal sensor's centre bound in quadrature."""
+def centre_limit_mm(scanner: str, instrument: InstrumentUncertainty) -> float:
+    """The stated bound (mm, 95 %) on a hole centre's error with the realistic ``scanner``: a number of
+    :data:`REALISTIC_LIMITS`, or (``derived``) from the instrument's terms, themselves derived a priori from the
+    error model: the centre moves against its datums per axis by the stitching term (views in different head
+    orientations, :func:`~agiprobot_measurement.inspection.instrument.pose_chain_stitching_mm`) and the centre
+    term (the device's calibration error at the hole against that at the datums, ``benchmarks.inspection.derive``);
+    the 95 % radius RADIUS_95_SIGMAS x their quadrature sum, with the ideal sensor's centre bound in quadrature."""
     limit = REALISTIC_LIMITS[scanner]["position_mm"]
-    if limit != FROM_POSE_CHAIN:
+    if limit != DERIVED:
         return float(limit)
-    return float(np.hypot(RADIUS_95_SIGMAS * stitching_mm, IDEAL_CENTRE_MM[scanner]))
+    per_axis = float(np.hypot(instrument.stitching_mm, instrument.centre_mm))
+    return float(np.hypot(RADIUS_95_SIGMAS * per_axis, IDEAL_CENTRE_MM[scanner]))
+
+
+def hole_detection_limit_mm(scanner: str, instrument: InstrumentUncertainty) -> float:
+    """The stated detection limit (mm, hole shift, rounded up to 0.01) for the benchmark's position tolerance
+    HOLE_POSITION_TOLERANCE_MM: a position 2 |offset| is not conform once it reaches T + U, U = 2 k u with u the
+    per-axis systematic term (the instrument's centre and stitching terms); the measured offset is at least the
+    shift less the centre error, within :func:`centre_limit_mm` in 95 % of runs: detection >= 95 % from the shift
+    T / 2 + k u + centre_limit_mm on."""
+    u = float(np.hypot(instrument.stitching_mm, instrument.centre_mm))
+    limit = HOLE_POSITION_TOLERANCE_MM / 2 + COVERAGE_FACTOR * u + centre_limit_mm(scanner, instrument)
+    return float(np.ceil(limit * 100.0 - 1e-9) / 100.0)
 
 
 def _dent_region(result, truth):
@@ -118,7 +150,7 @@ def evaluate(case: cases.Case, instrument: InstrumentUncertainty | None = None) 
     elif case.name == "hole":
         f = features["hole_1"]
         row["verdict"] = f.verdict
-        row["expected"] = CONFORM if truth["hole_position_deviation_mm"] < 0.2 else NOT_CONFORM
+        row["expected"] = CONFORM if truth["hole_position_deviation_mm"] < HOLE_POSITION_TOLERANCE_MM else NOT_CONFORM
         row["ok"] = f.verdict == row["expected"]
         if f.values:
             row["position_error_mm"] = f.values["position_mm"] - truth["hole_position_deviation_mm"]
@@ -221,47 +253,82 @@ def _targets(summary: list[dict], sensor: str) -> list[tuple[str, bool, str]]:
     return rows
 
 
-def _realistic_targets(summary: list[dict], sensor: str) -> list[tuple[str, bool, str]]:
-    """The stated limits of :data:`REALISTIC_LIMITS` for the benchmark sensor ``sensor``."""
+def _share_within(rows: list[dict], sensor: str, case: str, magnitude: float, key: str, bound: float) -> tuple:
+    """(share of the group's runs with |key| <= bound, max |key|); refused runs count as outside."""
+    runs = [r for r in rows if (r["sensor"], r["case"], r["magnitude"]) == (sensor, case, magnitude)]
+    values = [abs(r[key]) if key in r else np.inf for r in runs]
+    return float(np.mean([v <= bound for v in values])), float(max(values))
+
+
+def _realistic_targets(summary: list[dict], sensor: str, rows: list[dict]) -> list[tuple[str, bool, str]]:
+    """The stated limits of :data:`REALISTIC_LIMITS` for the benchmark sensor ``sensor`` (``rows``: the runs).
+    Limits stated as 95 % quantities (the derived hole centre and registration, U with k = 2) must hold in
+    COVERED_SHARE of the runs; the others in every run."""
     limits = REALISTIC_LIMITS[SCANNER[sensor]]
-    rows = []
-    centre = centre_limit_mm(SCANNER[sensor], load_instrument("realistic", SCANNER[sensor]).stitching_mm)
-    bounds = {"position": ("centre_error_mm_max", round(centre, 3)), "flatness": ("flatness_error_mm_max",
-              limits["flatness_mm"]), "size": ("size_error_mm_max", limits["size_mm"])}  # fmt: skip
+    out = []
+    instrument = load_instrument("realistic", SCANNER[sensor])
+    centre = round(centre_limit_mm(SCANNER[sensor], instrument), 3)
+    detection = hole_detection_limit_mm(SCANNER[sensor], instrument)
+    bounds = {"warp": ("flatness_error_mm_max", limits["flatness_mm"]),
+              "scale": ("size_error_mm_max", limits["size_mm"])}  # fmt: skip
     for e in summary:
         if e["sensor"] != sensor:
             continue
         c, m = e["case"], e["magnitude"]
-        rows.append((f"{c} {m}: no wrong definitive verdict", e["wrong_share"] == 0.0, f"{e['wrong_share']:.2f}"))
-        rows.append((f"{c} {m}: no cloud of the part refused", e["refused_share"] == 0.0, f"{e['refused_share']:.2f}"))
+        out.append((f"{c} {m}: no wrong definitive verdict", e["wrong_share"] == 0.0, f"{e['wrong_share']:.2f}"))
+        out.append((f"{c} {m}: no cloud of the part refused", e["refused_share"] == 0.0, f"{e['refused_share']:.2f}"))
         if c == "null":
-            rows.append((f"null: registration <= {limits['registration_mm']} mm / {limits['registration_deg']} deg",
-                         e["registration_mm_max"] <= limits["registration_mm"]
-                         and e["registration_deg_max"] <= limits["registration_deg"],
-                         f"{e['registration_mm_max']:.4f} mm / {e['registration_deg_max']:.4f} deg"))  # fmt: skip
+            for key, label in (("registration_mm", "translation"), ("registration_deg", "rotation")):
+                share, top = _share_within(rows, sensor, c, m, key, limits[key])
+                unit = key.rsplit("_", 1)[1]
+                out.append(
+                    (
+                        f"null: registration {label} <= {limits[key]} {unit} in >= {COVERED_SHARE:.0%} of runs",
+                        share >= COVERED_SHARE,
+                        f"{share:.2f} (max {top:.4f})",
+                    )
+                )
         elif c == "dent" and m >= limits["detection_limit_mm"]:
-            rows.append((f"dent {m} (at or above the stated detection limit {limits['detection_limit_mm']} mm): "
-                         "flagged >= 95 %", e["flag_share"] >= 0.95, f"{e['flag_share']:.2f}"))  # fmt: skip
+            out.append((f"dent {m} (at or above the stated detection limit {limits['detection_limit_mm']} mm): "
+                        "flagged >= 95 %", e["flag_share"] >= 0.95, f"{e['flag_share']:.2f}"))  # fmt: skip
             if "depth_error_mm_max" in e:
                 bound = limits["depth_mm"] + 0.1 * m
-                rows.append((f"dent {m}: depth error <= {bound:.3f} mm (max)", e["depth_error_mm_max"] <= bound,
-                             f"{e['depth_error_mm_max']:.4f}"))  # fmt: skip
+                out.append((f"dent {m}: depth error <= {bound:.3f} mm (max)", e["depth_error_mm_max"] <= bound,
+                            f"{e['depth_error_mm_max']:.4f}"))  # fmt: skip
         elif c == "dent" and m < 0.1:
-            rows.append((f"dent {m}: flagged <= 5 %", e["flag_share"] <= 0.05, f"{e['flag_share']:.2f}"))
+            out.append((f"dent {m}: flagged <= 5 %", e["flag_share"] <= 0.05, f"{e['flag_share']:.2f}"))
         if "within_U_share" in e:
-            rows.append(
+            out.append(
                 (
-                    f"{c} {m}: position error within its U in every run",
-                    e["within_U_share"] == 1.0,
+                    f"{c} {m}: position error within its U in >= {COVERED_SHARE:.0%} of runs",
+                    e["within_U_share"] >= COVERED_SHARE,
                     f"{e['within_U_share']:.2f} (U {e['position_U_mm_min']:.3f}-{e['position_U_mm_max']:.3f})",
                 )
             )
-        kind = {"hole": "position", "warp": "flatness", "scale": "size"}.get(c)
-        if kind and bounds[kind][0] in e:
-            key, bound = bounds[kind]
-            label = "centre" if kind == "position" else kind
-            rows.append((f"{c} {m}: {label} error <= {bound} mm (max)", e[key] <= bound, f"{e[key]:.4f}"))
-    return rows
+        if c == "hole" and m >= detection:
+            detected = float(np.mean([r.get("verdict") == NOT_CONFORM for r in rows
+                                      if (r["sensor"], r["case"], r["magnitude"]) == (sensor, c, m)]))  # fmt: skip
+            out.append(
+                (
+                    f"hole {m} (at or above the stated detection limit {detection} mm): not conform >= 95 %",
+                    detected >= 0.95,
+                    f"{detected:.2f}",
+                )
+            )
+        if c == "hole" and "centre_error_mm_max" in e:
+            share, top = _share_within(rows, sensor, c, m, "centre_error_mm", centre)
+            out.append(
+                (
+                    f"hole {m}: centre error <= {centre} mm in >= {COVERED_SHARE:.0%} of runs",
+                    share >= COVERED_SHARE,
+                    f"{share:.2f} (max {top:.4f})",
+                )
+            )
+        if c in bounds and bounds[c][0] in e:
+            key, bound = bounds[c]
+            out.append((f"{c} {m}: {'flatness' if c == 'warp' else 'size'} error <= {bound} mm (max)", e[key] <= bound,
+                        f"{e[key]:.4f}"))  # fmt: skip
+    return out
 
 
 def speed(seed: int = 0) -> dict:
@@ -307,19 +374,21 @@ def main(argv=None) -> int:
     parser.add_argument("--sensors", default="phoxi", help="comma list of phoxi, phoxi_low, laser")
     parser.add_argument("--cases", default=",".join(MAGNITUDES), help="comma list of " + ", ".join(MAGNITUDES))
     parser.add_argument("--error-model", default="ideal", help="sensor error model: ideal (noise only) or realistic")
-    parser.add_argument("--magnitudes", default=None, help="comma list: only these magnitudes of the cases")
+    parser.add_argument(
+        "--magnitudes",
+        default=None,
+        help="comma list: these magnitudes of the cases instead of their defaults (e.g. a stated detection limit)",
+    )
     parser.add_argument("--speed", action="store_true", help="also time a 1 M-point inspection (100 k faces)")
     parser.add_argument("--json", default=None, help="write rows, summary and targets here")
     args = parser.parse_args(argv)
     _check_arguments(parser, args)
     rows = []
-    only = None if args.magnitudes is None else {float(m) for m in args.magnitudes.split(",")}
+    only = None if args.magnitudes is None else [float(m) for m in args.magnitudes.split(",")]
     for sensor in args.sensors.split(","):
         instrument = load_instrument(args.error_model, SCANNER[sensor])
         for case in args.cases.split(","):
-            for magnitude in MAGNITUDES[case]:
-                if only is not None and magnitude not in only:
-                    continue
+            for magnitude in MAGNITUDES[case] if only is None else only:
                 for seed in range(args.first_seed, args.first_seed + args.seeds):
                     built = cases.build_case(case, magnitude, seed, sensor, args.error_model)
                     row = evaluate(built, instrument)
@@ -341,8 +410,9 @@ def main(argv=None) -> int:
     targets = []
     for sensor in args.sensors.split(","):
         print(f"targets ({sensor}, {args.error_model}):")
-        check = _realistic_targets if args.error_model == "realistic" else _targets
-        for name, met, value in check(summary, sensor):
+        checked = _realistic_targets(summary, sensor, rows) if args.error_model == "realistic" else \
+            _targets(summary, sensor)  # fmt: skip
+        for name, met, value in checked:
             targets.append({"sensor": sensor, "target": name, "met": met, "measured": value})
             print(f"  {'met   ' if met else 'MISSED'} {name}: {value}")
     result = {"rows": rows, "summary": summary, "targets": targets}

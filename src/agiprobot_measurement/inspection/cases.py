@@ -18,6 +18,7 @@ from agiprobot_measurement._paths import CONFIG_DIR
 from agiprobot_measurement.inspection import actual, simulate
 from agiprobot_measurement.inspection.errors import InspectionInputError
 from agiprobot_measurement.inspection.spec import InspectionSpec, load_spec
+from agiprobot_measurement.sensors.error_models import ErrorModel
 
 __all__ = ["CASES", "SENSORS", "Case", "build_case", "device_serial", "spec_path"]
 
@@ -100,12 +101,15 @@ DENT_MARGIN_MM = 2.0
 DENT_COVER_RADIUS_MM = 1.0
 
 
-def _scan(mesh_world, origin, case: str, sensor: str, seed: int, error_model, prescan=False) -> simulate.ScannedCloud:
-    """The case's scan; ``prescan``: noise-free and coarse (PhoXi low resolution, laser at PRESCAN_STEP_MM)."""
+def _scan(mesh_world, origin, case: str, sensor: str, seed: int, error_model, prescan=False,
+          noise=True) -> simulate.ScannedCloud:  # fmt: skip
+    """The case's scan; ``prescan``: noise-free and coarse (PhoXi low resolution, laser at PRESCAN_STEP_MM);
+    ``noise`` False: without the random noise (the error model's systematic errors stay)."""
     views = _VIEWS[case]
+    noise = noise and not prescan
     if sensor in ("phoxi", "phoxi_low"):
         return simulate.scan_phoxi(mesh_world, views, origin, "S", sensor == "phoxi" and not prescan, seed,
-                                   not prescan, error_model, device_serial(seed))  # fmt: skip
+                                   noise, error_model, device_serial(seed))  # fmt: skip
     if sensor != "laser":
         raise InspectionInputError(f"unknown sensor {sensor!r} (known: {list(SENSORS)})")
     clouds = []
@@ -116,9 +120,9 @@ def _scan(mesh_world, origin, case: str, sensor: str, seed: int, error_model, pr
         # the visible half of the part (depth 0 .. nearest point along the view) centred in the standoff range
         depth = (np.asarray(mesh_world.vertices) - origin) @ unit
         offset = 0.5 * depth.max() * unit
-        step, noise = (PRESCAN_STEP_MM, 0.0) if prescan else (LASER_STEP_MM, 1.0)
-        clouds.append(simulate.scan_laser(mesh_world, v, sweep, length, origin, step, seed + 1000 * k, noise, offset,
-                                          error_model, device_serial(seed)))  # fmt: skip
+        step = PRESCAN_STEP_MM if prescan else LASER_STEP_MM
+        clouds.append(simulate.scan_laser(mesh_world, v, sweep, length, origin, step, seed + 1000 * k, float(noise),
+                                          offset, error_model, device_serial(seed)))  # fmt: skip
     return simulate.ScannedCloud(np.vstack([c.points_mm for c in clouds]), np.concatenate([c.sigma_mm for c in clouds]),
                                  "laser_line")  # fmt: skip
 
@@ -156,10 +160,11 @@ def _measured_dent_centre(planned, error, sensor: str, seed: int, rng: np.random
 
 
 def build_case(case: str, magnitude: float = 0.0, seed: int = 0, sensor: str = "phoxi",
-               error_model: str | None = "ideal") -> Case:  # fmt: skip
+               error_model: str | ErrorModel | None = "ideal", noise: bool = True) -> Case:  # fmt: skip
     """The case's actual part placed with the placement error, scanned with the named error model (``ideal``:
-    noise only; ``realistic``: docs/sensor-errors.md); the inspection sees nominal + cloud. The dent is drawn
-    where the case's scan measures the whole dent (:func:`_measured_dent_centre`): a miss is a detection miss."""
+    noise only; ``realistic``: docs/sensor-errors.md; or an :class:`ErrorModel`); the inspection sees nominal +
+    cloud. The dent is drawn where the case's scan measures the whole dent (:func:`_measured_dent_centre`): a miss
+    is a detection miss. ``noise`` False scans without the random noise (the per-device systematic errors only)."""
     rng = np.random.default_rng(seed)
     planned = np.eye(4)
     planned[:3, 3] = PART_ORIGIN_MM
@@ -170,6 +175,7 @@ def build_case(case: str, magnitude: float = 0.0, seed: int = 0, sensor: str = "
         part, spec_name = _part(case, magnitude, rng)
         error = actual.placement_error(rng, *PLACEMENT_ERROR)
     part = part.with_placement(planned, error)
-    cloud = _scan(part.placed_actual(), PART_ORIGIN_MM, case, sensor, seed, error_model)
-    return Case(case, float(magnitude), int(seed), sensor, error_model, part, cloud.points_mm, cloud.sigma_mm,
+    cloud = _scan(part.placed_actual(), PART_ORIGIN_MM, case, sensor, seed, error_model, noise=noise)
+    name = error_model.name if isinstance(error_model, ErrorModel) else error_model
+    return Case(case, float(magnitude), int(seed), sensor, name, part, cloud.points_mm, cloud.sigma_mm,
                 load_spec(spec_path(spec_name)))  # fmt: skip

@@ -260,9 +260,10 @@ def _hole(feature: Feature, ctx: FeatureContext) -> FeatureResult:
     u_reg = float(ctx.registration_sigma(centre[None], d3[None])[0])
     position = 2.0 * offset
     u_scale = ctx.instrument.length_rel * float(np.linalg.norm(centre - ctx.registration_centre_mm))
-    # the hole's view against the datums' (or the rest of the cloud's) views: their relative pose error
+    # the hole's view against the datums' (or the rest of the cloud's) views: their relative pose error; the
+    # device's calibration error at the hole against that at the datum faces
     u_stitch = ctx.instrument.stitching_mm
-    u_position = 2.0 * expanded(u_fit, u_reg, u_scale, u_stitch)
+    u_position = 2.0 * expanded(u_fit, u_reg, u_scale, u_stitch, ctx.instrument.centre_mm)
     decisions = [decide("position", position, p["position_tolerance_mm"], u_position)]
     diameter = 2.0 * fit.radius
     if "diameter_tolerance_mm" in p:

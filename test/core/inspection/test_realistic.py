@@ -133,14 +133,58 @@ def test_the_benchmark_refuses_an_unknown_error_model_naming_the_known_ones(caps
         assert argv[1].split(",")[-1] in err and named in err and "Traceback" not in err
 
 
-def test_the_lasers_centre_bound_is_the_95_percent_radius_of_its_pose_chain_stitching():
+def test_the_centre_bound_is_the_95_percent_radius_of_the_instruments_centre_and_stitching_terms():
     from benchmarks.inspection.run import IDEAL_CENTRE_MM, centre_limit_mm
 
-    stitching = load_instrument("realistic", "laser_line").stitching_mm
-    bound = centre_limit_mm("laser_line", stitching)
-    assert centre_limit_mm("laser_line", 0.0) == IDEAL_CENTRE_MM["laser_line"]
-    assert centre_limit_mm("laser_line", 2 * stitching) > 1.9 * bound  # it scales with the pose chain
+    laser = load_instrument("realistic", "laser_line")
+    bound = centre_limit_mm("laser_line", laser)
+    assert centre_limit_mm("laser_line", InstrumentUncertainty()) == IDEAL_CENTRE_MM["laser_line"]
+    doubled = InstrumentUncertainty(stitching_mm=2 * laser.stitching_mm)
+    assert centre_limit_mm("laser_line", doubled) > 1.9 * bound  # it scales with the pose chain
     # 95 % of centres shifted by a 2-D Gaussian of per-axis sigma = the stitching term lie within the bound
-    shifts = np.random.default_rng(3).normal(0.0, stitching, (100_000, 2))
+    shifts = np.random.default_rng(3).normal(0.0, laser.stitching_mm, (100_000, 2))
     assert np.mean(np.linalg.norm(shifts, axis=1) <= bound) == pytest.approx(0.955, abs=0.01)
-    assert centre_limit_mm("phoxi_S", stitching) == 0.06  # a stated number where no pose chain stitches views
+    # the PhoXi's centre term (its calibration error at the hole against the datums) enters the same way
+    phoxi = load_instrument("realistic", "phoxi_S")
+    assert phoxi.centre_mm > 0 and phoxi.stitching_mm == 0.0
+    as_stitching = InstrumentUncertainty(stitching_mm=phoxi.centre_mm)
+    assert centre_limit_mm("phoxi_S", phoxi) == pytest.approx(centre_limit_mm("phoxi_S", as_stitching))
+    assert centre_limit_mm("phoxi_S", phoxi) > IDEAL_CENTRE_MM["phoxi_S"]
+
+
+def test_the_centre_term_widens_a_holes_position_uncertainty_by_its_share():
+    c = cases.build_case("hole", 0.2, 1, "phoxi_low", "ideal")
+    points, sigma = c.points_mm[::2], c.sigma_mm[::2]
+    plain = inspect_cloud(points, c.nominal, c.spec, c.part.nominal_placement, sigma)
+    wide = inspect_cloud(points, c.nominal, c.spec, c.part.nominal_placement, sigma,
+                         instrument=InstrumentUncertainty(centre_mm=0.03))  # fmt: skip
+    u0, u1 = (next(f for f in r.features if f.type == "hole").decisions[0].uncertainty_mm for r in (plain, wide))
+    # the position is twice the centre's offset: U grows by 2 x k x the per-axis term, in quadrature
+    assert np.isclose(u1**2 - u0**2, (2 * COVERAGE_FACTOR * 0.03) ** 2, rtol=1e-6)
+
+
+def test_the_derivation_stays_off_the_evaluation_seeds_and_summarises_per_axis():
+    from benchmarks.inspection.derive import main, summarise
+
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--first-seed", "90", "--devices", "20"])
+    assert exit_info.value.code == 2
+    runs = [{"centre_error_mm": [0.03, 0.0], "registration_mm": 0.01, "registration_deg": 0.002},
+            {"centre_error_mm": [0.0, -0.03], "registration_mm": 0.03, "registration_deg": 0.004}]  # fmt: skip
+    s = summarise(runs)
+    assert s["centre_mm"] == pytest.approx(0.03 / np.sqrt(2))  # RMS per axis over both axes
+    assert s["centre_radius_max_mm"] == pytest.approx(0.03)
+    assert s["registration_deg_max"] == pytest.approx(0.004)
+
+
+def test_a_case_scanned_without_noise_keeps_only_the_devices_systematic_errors():
+    from benchmarks.inspection.derive import calibration_only
+
+    def off_surface(c):
+        return np.abs(deviation.closest_points(c.part.placed_actual(), c.points_mm[::50]).signed_mm)
+
+    assert np.percentile(off_surface(cases.build_case("null", 0.0, 2, "phoxi_low", "ideal", noise=False)), 99) < 1e-3
+    assert np.percentile(off_surface(cases.build_case("null", 0.0, 2, "phoxi_low", "ideal")), 99) > 1e-2
+    # the calibration's field alone: smooth, of the order of the stated accuracy (0.05 mm), not noise-like
+    calibrated = off_surface(cases.build_case("null", 0.0, 2, "phoxi_low", calibration_only(), noise=False))
+    assert 5e-3 < np.sqrt(np.mean(calibrated**2)) < 0.2
