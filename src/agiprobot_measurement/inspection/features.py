@@ -223,7 +223,7 @@ def _size(feature: Feature, ctx: FeatureContext) -> FeatureResult:
     n /= np.linalg.norm(n)
     value = float((pa.centroid - pb.centroid) @ n)
     nominal, tol = feature.params["nominal_mm"], feature.params["tolerance_mm"]
-    u = expanded(pa.offset_sigma_mm, pb.offset_sigma_mm, ctx.instrument.length_rel * nominal)
+    u = expanded(pa.offset_sigma_mm, pb.offset_sigma_mm, ctx.instrument.length_rel * nominal, ctx.instrument.size_mm)
     d = decide("size", value, nominal + tol, u, lower=nominal - tol)
     parallel = float(np.degrees(np.arccos(np.clip(-pa.normal @ pb.normal, -1, 1))))
     return FeatureResult(feature.name, "size", {"size_mm": value, "nominal_mm": nominal, "deviation_mm": value - nominal,

@@ -4,13 +4,16 @@ A scanner's random noise averages out in a patch or a fit; its per-device system
 fixed pattern, speckle, hand-eye: docs/sensor-errors.md) do not. What is left of them after the best fit enters
 every decision's uncertainty as a fully correlated term: ``surface_mm`` (1 sigma) on a patch's mean deviation,
 ``form_mm`` on a flatness value, ``length_rel`` (relative, 1 sigma) on a size and, times the distance from the
-registration's centre, on a hole's position; ``centre_mm`` (1 sigma per in-plane axis) on a fitted hole's centre
+registration's centre, on a hole's position; ``size_mm`` (1 sigma) on a size between two opposite faces, which a
+scanner that sees them in opposite head orientations and at one standoff moves apart or together by its
+linearity and hand-eye errors whatever the size; ``centre_mm`` (1 sigma per in-plane axis) on a fitted hole's centre
 against its datums: what the device's calibration error moves the hole's points by against the datum faces'
 points (they lie elsewhere in the field of view, and the hole is seen by other views than some datums). The values
-per error model and scanner are an uncertainty evaluation with calibrated parts (ISO 15530-3 style): the null parts of the development seeds scanned with that
-error model (see the file's comments); ``centre_mm`` of the PhoXi is propagated from the error model by Monte Carlo
-(``python -m benchmarks.inspection.derive``: devices of the model's calibration draws, noise-free scans, the
-inspection's own datum alignment and circle fit). An unknown scanner or error model is an error; ``None`` is no term.
+per error model and scanner are an uncertainty evaluation with calibrated parts (ISO 15530-3 style): the null parts of
+the development seeds scanned with that error model (see the file's comments); ``centre_mm`` of the PhoXi and the
+laser's ``surface_mm`` and ``size_mm`` are propagated from the error model by Monte Carlo
+(``python -m benchmarks.inspection.derive``: devices of the model's draws, noise-free scans, the inspection's own
+fits). An unknown scanner or error model is an error; ``None`` is no term.
 
 ``stitching_mm`` (1 sigma, per axis) is the relative shift of two views taken in different head orientations,
 which a feature seen in one view suffers against datums (or the rest of the cloud) seen in others: it enters a
@@ -40,7 +43,7 @@ __all__ = [
 ]
 
 INSTRUMENTS_FILE = CONFIG_DIR / "inspection" / "instruments.yaml"
-_KEYS = ("surface_mm", "form_mm", "length_rel", "centre_mm", "stitching_mm")
+_KEYS = ("surface_mm", "form_mm", "length_rel", "centre_mm", "size_mm", "stitching_mm")
 #: ``stitching_mm`` value that derives the term from the error model's laser pose chain
 FROM_POSE_CHAIN = "pose_chain"
 
@@ -53,6 +56,7 @@ class InstrumentUncertainty:
     form_mm: float = 0.0
     length_rel: float = 0.0
     centre_mm: float = 0.0
+    size_mm: float = 0.0
     stitching_mm: float = 0.0
 
 

@@ -74,6 +74,7 @@ class InspectionResult:
     smoothed_mm: np.ndarray  # per point: the mean deviation of its patch (NaN where masked)
     timings_s: dict = field(default_factory=dict)
     instrument: InstrumentUncertainty = field(default_factory=InstrumentUncertainty)
+    region_of_point: np.ndarray | None = None  # per point: its index in ``regions`` (-1: in none, i.e. conform)
 
     @property
     def flags(self) -> int:
@@ -192,7 +193,7 @@ def inspect_cloud(points_world_mm, nominal: trimesh.Trimesh, spec: InspectionSpe
     timings["deviations"] = time.perf_counter() - t
     report("regions", 0.0)
     t = time.perf_counter()
-    regions, u_surface, smoothed = _regions(nominal, cp, sigma, use, reg, s, instrument.surface_mm)
+    regions, u_surface, smoothed, region_of_point = _regions(nominal, cp, sigma, use, reg, s, instrument.surface_mm)
     face_of_point, face_stats, face_points, edge_points = _faces(nominal, spec, cp, use, ~outlier & edge,
                                                                  s.tolerance_mm)  # fmt: skip
     coverage = _coverage(nominal, spec, cp.closest_mm[use], s.no_data_radius_mm)
@@ -206,14 +207,19 @@ def inspect_cloud(points_world_mm, nominal: trimesh.Trimesh, spec: InspectionSpe
     timings["total"] = time.perf_counter() - t0
     report("done", 1.0)
     return InspectionResult(spec, cad, cp.signed_mm, sigma, face_of_point, edge, outlier, reg, transform, regions,
-                            face_stats, results, coverage, u_surface, smoothed, timings, instrument)  # fmt: skip
+                            face_stats, results, coverage, u_surface, smoothed, timings, instrument,
+                            region_of_point)  # fmt: skip
 
 
-def _regions(mesh, cp, sigma, use, reg, s, systematic_mm=0.0) -> tuple[list[SurfaceRegion], float, np.ndarray]:
+def _regions(mesh, cp, sigma, use, reg, s, systematic_mm=0.0) -> tuple[list[SurfaceRegion], float, np.ndarray,
+                                                                       np.ndarray]:  # fmt: skip
+    """The regions outside the tolerance or indeterminate (worst first), the median U, each point's patch mean and
+    each point's region (index, -1: none)."""
     pat = patches(cp.closest_mm, cp.signed_mm, sigma, use, s.voxel_mm, s.patch_radius_mm)
     smoothed = np.full(len(cp.signed_mm), np.nan)
+    region_of_point = np.full(len(cp.signed_mm), -1, dtype=np.int32)
     if not len(pat.mean_mm):
-        return [], float("nan"), smoothed
+        return [], float("nan"), smoothed, region_of_point
     smoothed[use] = pat.mean_mm[pat.voxel_of_point[use]]
     normals = mesh.face_normals[cp.face[use]]
     voxel = pat.voxel_of_point[use]
@@ -224,15 +230,20 @@ def _regions(mesh, cp, sigma, use, reg, s, systematic_mm=0.0) -> tuple[list[Surf
     magnitude = np.abs(pat.mean_mm)
     t = s.tolerance_mm
     flagged = magnitude >= t - uncertainty
-    regions = []
+    found = []
     for members in pat.regions(flagged):
         worst = members[np.argmax(magnitude[members])]
         extreme, location = _peak(cp, use, pat, members, worst, s)
         not_conform = np.any(magnitude[members] >= t + uncertainty[members])
-        regions.append(SurfaceRegion(NOT_CONFORM if not_conform else INDETERMINATE, extreme, location.tolist(),
-                                     float(len(members) * s.voxel_mm**2), float(uncertainty[worst]), len(members)))  # fmt: skip
-    regions.sort(key=lambda r: -abs(r.extreme_mm))
-    return regions, float(np.median(uncertainty)), smoothed
+        found.append((SurfaceRegion(NOT_CONFORM if not_conform else INDETERMINATE, extreme, location.tolist(),
+                                    float(len(members) * s.voxel_mm**2), float(uncertainty[worst]), len(members)),
+                      members))  # fmt: skip
+    found.sort(key=lambda item: -abs(item[0].extreme_mm))
+    region_of_patch = np.full(len(pat.mean_mm), -1, dtype=np.int32)
+    for index, (_, members) in enumerate(found):
+        region_of_patch[members] = index
+    region_of_point[use] = region_of_patch[pat.voxel_of_point[use]]
+    return [region for region, _ in found], float(np.median(uncertainty)), smoothed, region_of_point
 
 
 def _peak(cp, use, pat, members, worst, s) -> tuple[float, np.ndarray]:

@@ -188,3 +188,53 @@ def test_a_case_scanned_without_noise_keeps_only_the_devices_systematic_errors()
     # the calibration's field alone: smooth, of the order of the stated accuracy (0.05 mm), not noise-like
     calibrated = off_surface(cases.build_case("null", 0.0, 2, "phoxi_low", calibration_only(), noise=False))
     assert 5e-3 < np.sqrt(np.mean(calibrated**2)) < 0.2
+
+
+def test_the_size_term_widens_a_sizes_uncertainty_by_its_share(realistic_null):
+    c = realistic_null
+    points, sigma = c.points_mm[::3], c.sigma_mm[::3]
+    plain = inspect_cloud(points, c.nominal, c.spec, c.part.nominal_placement, sigma)
+    wide = inspect_cloud(points, c.nominal, c.spec, c.part.nominal_placement, sigma,
+                         instrument=InstrumentUncertainty(size_mm=0.05))  # fmt: skip
+    for before, after in zip(plain.features, wide.features, strict=True):
+        u0, u1 = before.decisions[0].uncertainty_mm, after.decisions[0].uncertainty_mm
+        if before.type == "size":
+            assert np.isclose(u1**2 - u0**2, (COVERAGE_FACTOR * 0.05) ** 2, rtol=1e-6)
+        else:  # a flatness does not suffer a size term
+            assert u1 == pytest.approx(u0)
+
+
+def test_derived_dent_and_size_limits_follow_the_instrument_terms():
+    from benchmarks.inspection.run import (
+        SURFACE_TOLERANCE_MM,
+        dent_detection_limit_mm,
+        depth_limit_mm,
+        size_limit_mm,
+    )
+
+    laser = load_instrument("realistic", "laser_line")
+    limit = dent_detection_limit_mm("laser_line", laser)
+    # T + (2 + k) surface_mm, rounded up to 0.05 mm
+    exact = SURFACE_TOLERANCE_MM + (2 + COVERAGE_FACTOR) * laser.surface_mm
+    assert exact <= limit < exact + 0.05 and np.isclose(limit * 20, round(limit * 20))
+    doubled = InstrumentUncertainty(surface_mm=2 * laser.surface_mm)
+    assert dent_detection_limit_mm("laser_line", doubled) > limit
+    assert depth_limit_mm("laser_line", laser, 1.0) == pytest.approx(2 * laser.surface_mm + 0.1)
+    assert size_limit_mm("laser_line", InstrumentUncertainty(size_mm=0.1)) == pytest.approx(0.2)
+    # the PhoXi's limits stay the stated numbers whatever its terms
+    assert dent_detection_limit_mm("phoxi_S", doubled) == 0.3
+    assert size_limit_mm("phoxi_S", InstrumentUncertainty(size_mm=1.0)) == 0.12
+
+
+def test_the_laser_derivation_summarises_the_worst_patch_and_the_size_errors():
+    from benchmarks.inspection.derive import main, summarise_laser
+
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--sensor", "laser", "--first-seed", "95", "--devices", "10"])
+    assert exit_info.value.code == 2
+    runs = [{"patch_max_mm": 0.1 * (i + 1), "patch_rms_mm": 0.05, "size_errors_mm": [0.1, -0.1],
+             "registration_mm": 0.01 * i, "registration_deg": 0.001} for i in range(20)]  # fmt: skip
+    s = summarise_laser(runs)
+    assert s["surface_mm"] == pytest.approx(np.percentile(0.1 * np.arange(1, 21), 95) / 2)
+    assert s["size_mm"] == pytest.approx(0.1) and s["size_mean_mm"] == pytest.approx(0.0)
+    assert s["patch_max_max_mm"] == pytest.approx(2.0) and s["registration_mm_max"] == pytest.approx(0.19)
