@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from scipy import sparse
 
@@ -59,13 +60,44 @@ class ColumnSets:
         pos = np.repeat(self.indptr[which] - indptr[:-1], sizes) + np.arange(indptr[-1])
         return ColumnSets(indptr, self.indices[pos], self.n_rows)
 
+    def reduced_costs(self, costs: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """``c_j - a_j . y`` for every column (empty columns: their cost), summed in one compiled pass over the
+        entries: no matrix of ones (8 bytes per entry, a gigabyte at tilt full) is built for it."""
+        return costs - _column_sums(self.indptr, self.indices, np.ascontiguousarray(y, dtype=np.float64))
+
     def transpose(self) -> ColumnSets:
-        csc = sparse.csc_array(
-            (np.ones(self.indices.size, dtype=bool), self.indices, self.indptr), shape=(self.n_rows, self.n_cols)
-        )
-        csr = csc.tocsr()
-        csr.sort_indices()
-        return ColumnSets(csr.indptr, csr.indices, self.n_cols)
+        """The rows as columns (each row's columns sorted), by a compiled counting sort: one output array, no
+        sparse matrix of values and no sort (a scipy conversion took 5 s and 1 GB on 88 M entries, tilt full)."""
+        index_type = np.int32 if max(self.indices.size, self.n_cols) < 2**31 else np.int64
+        counts = np.bincount(self.indices, minlength=self.n_rows)
+        indptr = np.zeros(self.n_rows + 1, dtype=index_type)
+        np.cumsum(counts, out=indptr[1:])
+        indices = _transpose_entries(self.indptr, self.indices, indptr, np.empty(self.indices.size, dtype=index_type))
+        return ColumnSets(indptr, indices, self.n_cols)
+
+
+@numba.njit(cache=True)
+def _column_sums(indptr, indices, y):
+    """Per column, the sum of ``y`` over its rows (in entry order, as a sparse product of ones adds them)."""
+    out = np.zeros(indptr.size - 1)
+    for j in range(indptr.size - 1):
+        total = 0.0
+        for k in range(indptr[j], indptr[j + 1]):
+            total += y[indices[k]]
+        out[j] = total
+    return out
+
+
+@numba.njit(cache=True)
+def _transpose_entries(indptr, indices, row_start, out):
+    """Each entry's column into its row's slice of ``out`` (rows start at ``row_start``), columns in order."""
+    fill = row_start[:-1].copy()
+    for j in range(indptr.size - 1):
+        for k in range(indptr[j], indptr[j + 1]):
+            i = indices[k]
+            out[fill[i]] = j
+            fill[i] += 1
+    return out
 
 
 def measurable_columns(matrix) -> tuple[ColumnSets, np.ndarray | None]:

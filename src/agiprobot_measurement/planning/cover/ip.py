@@ -11,7 +11,6 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import sparse
 
 from agiprobot_measurement.planning.cover.columns import ColumnSets
 from agiprobot_measurement.planning.cover.greedy import greedy_weighted_cover, make_irredundant
@@ -103,8 +102,6 @@ def lp_relaxation(sub: ColumnSets, costs: np.ndarray, time_limit_s: float, start
     h = highs_model(
         sub.take(active) if active.size < n else sub, costs[active], integer=False, time_limit_s=time_limit_s
     )
-    # A^T y by one sparse product per pricing round
-    transposed = sparse.csr_array((np.ones(sub.indices.size), sub.indices, sub.indptr), shape=(n, sub.n_rows))
     batch = max(PRICING_BATCH_COLS, n // PRICING_BATCH_SHARE)
     inactive = np.ones(n, dtype=bool)
     inactive[active] = False
@@ -116,7 +113,7 @@ def lp_relaxation(sub: ColumnSets, costs: np.ndarray, time_limit_s: float, start
             return _informative(result)  # the last pricing round's: its bound holds whatever the columns added since
         sol = h.getSolution()
         y = np.maximum(np.asarray(sol.row_dual, dtype=np.float64), 0.0)
-        rc = costs - transposed @ y
+        rc = sub.reduced_costs(costs, y)
         x = np.zeros(n)
         x[active] = np.clip(np.asarray(sol.col_value, dtype=np.float64), 0.0, 1.0)
         result = x, float(y.sum() + np.minimum(rc, 0.0).sum()), rc, y

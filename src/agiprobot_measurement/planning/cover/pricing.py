@@ -15,7 +15,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import sparse
 
 from agiprobot_measurement.planning.cover.columns import ColumnSets, measurable_columns
 from agiprobot_measurement.planning.cover.greedy import greedy_weighted_cover
@@ -95,8 +94,5 @@ def full_bound(pricing: PoolPricing, pool_bound: float | None, integral: bool) -
 
 
 def _reduced_costs(cols: ColumnSets, costs: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """``c_j - a_j . y`` for every column (empty columns: their cost), by one sparse product."""
-    transposed = sparse.csr_array(
-        (np.ones(cols.indices.size), cols.indices, cols.indptr), shape=(cols.n_cols, cols.n_rows)
-    )
-    return costs - transposed @ y
+    """``c_j - a_j . y`` for every column (empty columns: their cost)."""
+    return cols.reduced_costs(costs, y)

@@ -154,3 +154,29 @@ def test_column_generation_cut_short_gives_no_bound_rather_than_a_negative_one(m
     x, bound, rc, _ = result
     assert bound > 0.0 or bound == -math.inf
     assert x.shape == rc.shape == (cols.n_cols,)
+
+
+def test_reduced_costs_equal_the_sparse_product_of_ones_bit_for_bit():
+    rng = np.random.default_rng(11)
+    mask = _random_mask(rng, 300, 500, 0.05)
+    mask[:, 7] = False  # an empty column keeps its cost
+    cols, _ = cover_columns.measurable_columns(sparse.csc_array(mask))
+    costs, y = rng.random(cols.n_cols) + 0.5, rng.random(cols.n_rows)
+    ones = sparse.csr_array((np.ones(cols.indices.size), cols.indices, cols.indptr), shape=(cols.n_cols, cols.n_rows))
+    expected = costs - ones @ y
+    got = cols.reduced_costs(costs, y)
+    assert np.array_equal(got, expected)
+    assert got[7] == costs[7]
+
+
+def test_the_compiled_transpose_equals_scipys():
+    rng = np.random.default_rng(12)
+    mask = _random_mask(rng, 200, 700, 0.04)
+    mask[:, 3] = False  # an empty column
+    cols, _ = cover_columns.measurable_columns(sparse.csc_array(mask))
+    rows = cols.transpose()
+    csr = sparse.csr_array(mask)
+    csr.sort_indices()
+    assert rows.n_rows == cols.n_cols and rows.n_cols == cols.n_rows
+    assert np.array_equal(rows.indptr, csr.indptr) and np.array_equal(rows.indices, csr.indices)
+    assert np.array_equal(rows.transpose().indices, cols.indices)  # twice: the columns again
