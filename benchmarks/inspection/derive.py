@@ -92,6 +92,16 @@ def laser_device_run(seed: int, model) -> dict:
             "registration_mm": reg_mm, "registration_deg": reg_deg}  # fmt: skip
 
 
+def _registration_summary(runs: list[dict]) -> dict:
+    """RMS, 95th percentile and maximum of the runs' registration errors (mm, deg)."""
+    out = {}
+    for key in ("registration_mm", "registration_deg"):
+        v = np.array([r[key] for r in runs])
+        out.update({f"{key}_rms": float(np.sqrt(np.mean(v * v))), f"{key}_p95": float(np.percentile(v, 95)),
+                    f"{key}_max": float(v.max())})  # fmt: skip
+    return out
+
+
 def summarise_laser(runs: list[dict]) -> dict:
     """The laser's derived terms (see the module docstring)."""
     worst = np.array([r["patch_max_mm"] for r in runs])
@@ -101,11 +111,7 @@ def summarise_laser(runs: list[dict]) -> dict:
            "patch_rms_mm": float(np.sqrt(np.mean([r["patch_rms_mm"] ** 2 for r in runs]))),
            "size_mm": float(np.sqrt(np.mean(sizes * sizes))), "size_mean_mm": float(sizes.mean()),
            "size_abs_max_mm": float(np.abs(sizes).max())}  # fmt: skip
-    for key in ("registration_mm", "registration_deg"):
-        v = np.array([r[key] for r in runs])
-        out.update({f"{key}_rms": float(np.sqrt(np.mean(v * v))), f"{key}_p95": float(np.percentile(v, 95)),
-                    f"{key}_max": float(v.max())})  # fmt: skip
-    return out
+    return {**out, **_registration_summary(runs)}
 
 
 def summarise(runs: list[dict]) -> dict:
@@ -117,11 +123,7 @@ def summarise(runs: list[dict]) -> dict:
            "centre_radius95_gauss_mm": RADIUS_95_SIGMAS * per_axis,
            "centre_radius_p95_mm": float(np.percentile(radial, 95)),
            "centre_radius_max_mm": float(radial.max())}  # fmt: skip
-    for key in ("registration_mm", "registration_deg"):
-        v = np.array([r[key] for r in runs])
-        out.update({f"{key}_rms": float(np.sqrt(np.mean(v * v))), f"{key}_p95": float(np.percentile(v, 95)),
-                    f"{key}_max": float(v.max())})  # fmt: skip
-    return out
+    return {**out, **_registration_summary(runs)}
 
 
 def main(argv=None) -> int:
