@@ -73,6 +73,10 @@ VERIFY_CHUNK = 256
 #: what loading the compiled path kernels may cost in a process (s): a verification batch that would load them is
 #: not started with less time left
 KERNEL_LOAD_S = 3.0
+#: near the deadline, each open point gets this many of its unverified views verified per pass (then twice as many)
+CLOSE_OUT_VIEWS_PER_POINT = 4
+#: ... and the passes are estimated to take this many times the first one (each pass settles most open points)
+CLOSE_OUT_PASSES_ESTIMATE = 2.0
 #: the IP time limit (s) of the fallback solve over verified views when the deadline has passed
 LATE_IP_TIME_S = 0.3
 #: before the deadline, a batch holds only the lines the time left allows at the measured time per line (at least
@@ -95,7 +99,8 @@ class _Round:
     limit: float
     chosen: list
     pending: list
-    solved: bool = True  # False when the round took a settled cover of an earlier round (its bound is that pool's)
+    solved: bool = True
+    started_s: float = 0.0  # when the round began (perf_counter s)  # False when the round took a settled cover of an earlier round (its bound is that pool's)
 
 
 @dataclass
@@ -117,6 +122,9 @@ class CoverLoop:
     verified_count: int = 0
     line_s: float | None = None  # measured verification time per scan line (s), None before the first batch
     only_verified: bool = False
+    # the points no verified view measures had their views verified before the deadline (:meth:`close_out`): the
+    # next round is the fallback over verified views
+    closed_out: bool = False
     result: SetCoverResult | None = None
     chosen: list = field(default_factory=list)
     rounds_used: int = 0
@@ -179,12 +187,14 @@ class CoverLoop:
         """This round's cover: over all views, the pool, or (the fallback, after the last round or at the
         deadline) the verified views only."""
         views, run = self.views, self.run
-        now = time.perf_counter()
+        now = started = time.perf_counter()
         # the first round always solves and verifies its picks: a plan comes out however short the time
-        if round_index == self.max_rounds or (now >= self.deadline and round_index > 0):
+        if round_index == self.max_rounds or (now >= self.deadline and round_index > 0) or self.closed_out:
             self.only_verified = True  # the fallback: no more verification, a cover of verified views
-            run.time_limit_hit = now >= self.deadline
+            run.time_limit_hit = now >= self.deadline or self.closed_out
             cause = "the time limit came" if run.time_limit_hit else f"{self.max_rounds} rounds"
+            if self.closed_out and now < self.deadline:
+                cause = "the time limit drew near (the open points' views verified first)"
             run.warn(
                 f"set cover: {cause} after {self.verified_count} scan lines verified; solving over verified views only",
                 LOG,
@@ -230,7 +240,7 @@ class CoverLoop:
         self.result = result
         self.chosen = [views[j] for j in result.selected.tolist()]
         pending = [v for v in self.chosen if v.mechanics_verified is False]
-        return _Round(columns, matrix, worst, durations, sub, limit, self.chosen, pending, solved)
+        return _Round(columns, matrix, worst, durations, sub, limit, self.chosen, pending, solved, started)
 
     def settle(self, step: _Round, round_index: int) -> str | None:
         """What the round's cover settles: ``'done'`` (the cover is final), ``'again'`` (solve again without a
@@ -372,8 +382,16 @@ class CoverLoop:
             index_of = {id(v): j for j, v in enumerate(views)}
             picked_columns = np.array([index_of[id(v)] for v in pending], dtype=np.int64)
         batch += [views[j] for j in substitute_views(step.matrix, views, picked_columns, SUBSTITUTES_PER_VIEW)]
-        if columns.size < len(views) and self.n_candidates >= LARGE_PROBLEM_VIEWS:
-            batch += [views[j] for j in columns.tolist() if views[j].mechanics_verified is False][:POOL_VERIFY_MAX]
+        if columns.size < len(views):
+            unverified = [views[j] for j in columns.tolist() if views[j].mechanics_verified is False]
+            round_s = time.perf_counter() - step.started_s
+            if self.n_candidates >= LARGE_PROBLEM_VIEWS:
+                batch += unverified[:POOL_VERIFY_MAX]
+            elif self.line_s is not None and len(unverified) * self.line_s <= round_s:
+                # the whole pool verified costs no more than this round did: the next solves choose among
+                # verified views, where each round of picking one unverified view at a time costs a round
+                # (a rent-or-buy rule: at worst twice the rounds' time)
+                batch += unverified
         return list(dict.fromkeys(batch)), size, likely
 
     def verify_round(self, step: _Round, round_index: int) -> None:
@@ -409,6 +427,36 @@ class CoverLoop:
             # every column, and a pool of all columns makes every round a full solve
             extra_columns.append(likely[: max(POOL_LIKELY_COLUMNS, 4 * size)])
         self.pool = np.unique(np.concatenate([np.asarray(c, dtype=np.int64) for c in extra_columns]))
+
+    def _close_out_due(self, step: _Round) -> bool:
+        """Whether another round would leave too little time to verify the views of the points no verified view
+        measures (:meth:`close_out`, estimated from its first pass at the measured time per line)."""
+        if not math.isfinite(self.deadline) or self.line_s is None:
+            return False
+        now = time.perf_counter()
+        # the round's matrix (views revived since come after its columns): an estimate need not see them
+        open_columns = open_point_views(step.matrix, self.views[: step.matrix.shape[1]], CLOSE_OUT_VIEWS_PER_POINT)
+        if open_columns.size == 0:
+            return False
+        close_out_s = CLOSE_OUT_PASSES_ESTIMATE * open_columns.size * self.line_s
+        return now + (now - step.started_s) + close_out_s + LATE_IP_TIME_S >= self.deadline
+
+    def close_out(self) -> None:
+        """Verify the unverified views of the points no verified view measures, a few per point (most shared
+        first), again for the points still open, until none is open or the deadline comes: every measurable
+        point then has a view known to be executable or none left unverified. The rounds end with the fallback
+        over verified views."""
+        views, per_point = self.views, CLOSE_OUT_VIEWS_PER_POINT
+        while time.perf_counter() < self.deadline:
+            matrix, _, _ = coverage_problem(self.run, views, self.n_points)
+            open_columns = open_point_views(matrix, views, per_point)
+            if open_columns.size == 0:
+                break
+            todo = [views[j] for j in open_columns.tolist()]
+            self.verified_count += screen_scan_lines(self.run, self.tools, todo)
+            self._verify(todo)
+            per_point *= 2  # points whose first views failed: more of theirs at once
+        self.closed_out = True
 
     def polish(self) -> None:
         """The rounds' short solves may leave a gap: spend what is left on the programme over the verified views
@@ -458,6 +506,8 @@ class CoverLoop:
             if verdict == "again":
                 continue
             self.verify_round(step, round_index)
+            if self._close_out_due(step):
+                self.close_out()
 
 
 def solve_scp(

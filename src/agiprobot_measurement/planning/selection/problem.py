@@ -7,6 +7,7 @@ entries at tilt full); views that are not store columns (revived or foreign ones
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 import scipy.sparse
 
@@ -28,16 +29,6 @@ def measurable_structure(matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     indptr = np.zeros(csc.shape[1] + 1, dtype=np.int64)
     np.cumsum(sizes, out=indptr[1:])
     return indptr, csc.indices[alive], sizes
-
-
-def _segment_counts(mask: np.ndarray, indptr: np.ndarray) -> np.ndarray:
-    """Per segment (column) of a CSC ``indptr``: how many entries of ``mask`` hold."""
-    counts = np.zeros(indptr.size - 1, dtype=np.int64)
-    nonempty = np.flatnonzero(np.diff(indptr) > 0)
-    if nonempty.size:
-        # reduceat runs from one start to the next; empty segments in between hold no entries
-        counts[nonempty] = np.add.reduceat(mask, indptr[nonempty], dtype=np.int64)
-    return counts
 
 
 def _segment_max(values: np.ndarray, indptr: np.ndarray) -> np.ndarray:
@@ -119,23 +110,52 @@ def coverage_problem(run: PlanningRun, views: list[ViewPoint], n_points: int, on
     return matrix, worst, durations
 
 
+@numba.njit(cache=True)
+def _compact_store(indptr, point_indices, uncertainties, alive, keep_view):
+    """The live entries of the store's columns in one pass: (indptr, point rows, per-column largest finite
+    uncertainty, 0 for an empty column) of the entries ``alive`` holds in the columns ``keep_view`` holds."""
+    n_views = indptr.size - 1
+    out_ptr = np.zeros(n_views + 1, dtype=np.int64)
+    worst = np.zeros(n_views)
+    for j in range(n_views):
+        count = 0
+        if keep_view[j]:
+            for e in range(indptr[j], indptr[j + 1]):
+                if alive[e]:
+                    count += 1
+                    u = float(uncertainties[e])
+                    if np.isfinite(u) and u > worst[j]:
+                        worst[j] = u
+        out_ptr[j + 1] = out_ptr[j] + count
+    rows = np.empty(out_ptr[n_views], dtype=point_indices.dtype)
+    for j in range(n_views):
+        if keep_view[j] and out_ptr[j + 1] > out_ptr[j]:
+            k = out_ptr[j]
+            for e in range(indptr[j], indptr[j + 1]):
+                if alive[e]:
+                    rows[k] = point_indices[e]
+                    k += 1
+    return out_ptr, rows, worst
+
+
 def _store_problem(run: PlanningRun, views: list[ViewPoint], only_verified: bool):
     """:func:`coverage_problem` of views that are all columns of the store."""
     store = run.measurability
     columns = np.asarray([v.coverage_column for v in views], dtype=np.int64)
-    alive = run.entry_alive
+    keep_view = np.ones(store.n_views, dtype=bool)
     if only_verified:
-        verified_store = np.zeros(store.n_views, dtype=bool)
-        verified_store[columns[[v.mechanics_verified is not False for v in views]]] = True
-        alive = alive & np.repeat(verified_store, np.diff(store.indptr))
-    counts = _segment_counts(alive, store.indptr)
-    indptr = np.zeros(store.n_views + 1, dtype=np.int64)
-    np.cumsum(counts, out=indptr[1:])
-    matrix = scipy.sparse.csc_matrix(
-        (np.ones(int(indptr[-1]), dtype=bool), store.point_indices[alive], indptr),
-        shape=(store.n_points, store.n_views),
+        keep_view[:] = False
+        keep_view[columns[[v.mechanics_verified is not False for v in views]]] = True
+    indptr, rows, worst = _compact_store(
+        np.asarray(store.indptr, dtype=np.int64),
+        np.asarray(store.point_indices),
+        np.asarray(store.uncertainties),
+        run.entry_alive,
+        keep_view,
     )
-    worst = _segment_max(store.uncertainties[alive], indptr)
+    matrix = scipy.sparse.csc_matrix(
+        (np.ones(rows.size, dtype=bool), rows, indptr), shape=(store.n_points, store.n_views)
+    )
     if len(columns) != store.n_views or np.any(columns != np.arange(store.n_views)):
         matrix, worst = matrix[:, columns], worst[columns]
     durations = np.where(run.duration_verified, run.durations, run.durations * run.duration_bias)[columns]
