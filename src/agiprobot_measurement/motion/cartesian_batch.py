@@ -34,6 +34,8 @@ STOP_NAMES = (STOP_COMPLETE, STOP_UNREACHABLE, STOP_JOINT_JUMP, STOP_JOINT_LIMIT
 _INVALID = 4
 #: a path is tracked by continuation only where every other IK branch lies this much beyond the jump threshold (rad)
 TRACK_MARGIN_RAD = 0.3
+#: the collision check of a batch of paths looks at every this-many-th state first (see compute_cartesian_paths)
+COARSE_STRIDE = 8
 
 
 @dataclass(frozen=True)
@@ -110,7 +112,9 @@ def compute_cartesian_paths(
     """Straight tip lines from the poses at ``start_q`` (P, dof) rad to ``targets`` (P, 4, 4) metres.
 
     Path i is the one ``compute_cartesian_path(ik, start_q[i], targets[i], ...)`` gives (same parameters); ``ik``
-    must offer ``solve_all`` (the closed-form solver). ``validity_checker`` is called once with all paths' states.
+    must offer ``solve_all`` (the closed-form solver). ``validity_checker`` is called with the paths' states in two
+    batches: every :data:`COARSE_STRIDE`-th state of each path (and its last), then the states before each path's
+    first invalid one of those (the result is that of one call with every state).
     """
     model = ik.model
     start_q = np.asarray(start_q, dtype=float).reshape(-1, model.dof)
@@ -133,12 +137,20 @@ def compute_cartesian_paths(
     lengths = counts + 1
     base = pose_offsets[:-1] + np.arange(n_paths)
     if validity_checker is not None:
-        rows = np.repeat(base, lengths) + _ranks(lengths)
-        ok = np.asarray(validity_checker(states[rows]), dtype=bool)
-        if ok.shape != (len(rows),):
-            raise MotionInputError(f"validity_checker must return one bool per state, shape ({len(rows)},)")
-        bad_rank = np.where(ok, np.iinfo(np.int64).max, _ranks(lengths))
-        first_bad = np.minimum.reduceat(bad_rank, np.concatenate([[0], np.cumsum(lengths)[:-1]]))
+        ranks = _ranks(lengths)
+        rows = np.repeat(base, lengths) + ranks
+        heads = np.concatenate([[0], np.cumsum(lengths)[:-1]])
+        # every COARSE_STRIDE-th state and each path's last first: a path cut there needs no check of the states
+        # after its first invalid coarse one (the cut is at or before it); the others are checked next, so the
+        # first invalid state found is the one a check of every state finds
+        coarse = (ranks % COARSE_STRIDE == COARSE_STRIDE - 1) | (ranks == np.repeat(lengths, lengths) - 1)
+        ok = np.ones(len(rows), dtype=bool)
+        ok[coarse] = _checked(validity_checker, states[rows[coarse]])
+        coarse_bad = np.minimum.reduceat(np.where(ok, np.iinfo(np.int64).max, ranks), heads)
+        fine = ~coarse & (ranks < np.repeat(coarse_bad, lengths))
+        ok[fine] = _checked(validity_checker, states[rows[fine]])
+        bad_rank = np.where(ok, np.iinfo(np.int64).max, ranks)
+        first_bad = np.minimum.reduceat(bad_rank, heads)
         cut = first_bad < lengths
         lengths = np.where(cut, first_bad, lengths)
         counts = np.where(cut, first_bad - 1, counts)
@@ -199,6 +211,16 @@ def _walk(ik, poses, pose_offsets, start_q, jump):
     states[target] = sub_states[source]
     counts[exact], codes[exact] = sub_counts, sub_codes
     return states, counts, codes
+
+
+def _checked(validity_checker, states: np.ndarray) -> np.ndarray:
+    """The checker's verdicts (bool, one per state) on ``states`` (none asked for an empty batch)."""
+    if len(states) == 0:
+        return np.zeros(0, dtype=bool)
+    ok = np.asarray(validity_checker(states), dtype=bool)
+    if ok.shape != (len(states),):
+        raise MotionInputError(f"validity_checker must return one bool per state, shape ({len(states)},)")
+    return ok
 
 
 def _ranks(lengths: np.ndarray) -> np.ndarray:

@@ -73,10 +73,8 @@ VERIFY_CHUNK = 256
 #: what loading the compiled path kernels may cost in a process (s): a verification batch that would load them is
 #: not started with less time left
 KERNEL_LOAD_S = 3.0
-#: near the deadline, each open point gets this many of its unverified views verified per pass (then twice as many)
+#: near the deadline, each open point gets this many of its unverified views verified per pass (then 4x as many)
 CLOSE_OUT_VIEWS_PER_POINT = 4
-#: ... and the passes are estimated to take this many times the first one (each pass settles most open points)
-CLOSE_OUT_PASSES_ESTIMATE = 2.0
 #: the IP time limit (s) of the fallback solve over verified views when the deadline has passed
 LATE_IP_TIME_S = 0.3
 #: before the deadline, a batch holds only the lines the time left allows at the measured time per line (at least
@@ -429,23 +427,24 @@ class CoverLoop:
         self.pool = np.unique(np.concatenate([np.asarray(c, dtype=np.int64) for c in extra_columns]))
 
     def _close_out_due(self, step: _Round) -> bool:
-        """Whether another round would leave too little time to verify the views of the points no verified view
-        measures (:meth:`close_out`, estimated from its first pass at the measured time per line)."""
+        """Whether another round like this one would leave too little time to verify every unverified view of the
+        points no verified view measures (:meth:`close_out`'s most, when all their views fail), at the measured
+        time per line."""
         if not math.isfinite(self.deadline) or self.line_s is None:
             return False
         now = time.perf_counter()
-        # the round's matrix (views revived since come after its columns): an estimate need not see them
-        open_columns = open_point_views(step.matrix, self.views[: step.matrix.shape[1]], CLOSE_OUT_VIEWS_PER_POINT)
-        if open_columns.size == 0:
-            return False
-        close_out_s = CLOSE_OUT_PASSES_ESTIMATE * open_columns.size * self.line_s
-        return now + (now - step.started_s) + close_out_s + LATE_IP_TIME_S >= self.deadline
+        # the problem as the round's verification left it: the views it revived are often the open points' only ones
+        matrix, _, _ = coverage_problem(self.run, self.views, self.n_points)
+        open_columns = open_point_views(matrix, self.views, len(self.views))
+        close_out_s = open_columns.size * self.line_s
+        return open_columns.size > 0 and now + (now - step.started_s) + close_out_s + LATE_IP_TIME_S >= self.deadline
 
-    def close_out(self) -> None:
+    def close_out(self, round_s: float = math.inf) -> None:
         """Verify the unverified views of the points no verified view measures, a few per point (most shared
-        first), again for the points still open, until none is open or the deadline comes: every measurable
-        point then has a view known to be executable or none left unverified. The rounds end with the fallback
-        over verified views."""
+        first), again (with the views revived for the failed ones) for the points still open, until none is open
+        or the deadline comes: every measurable point then has a view known to be executable or none left
+        unverified. When the time left would not hold another round of ``round_s`` seconds, the rounds end with
+        the fallback over verified views."""
         views, per_point = self.views, CLOSE_OUT_VIEWS_PER_POINT
         while time.perf_counter() < self.deadline:
             matrix, _, _ = coverage_problem(self.run, views, self.n_points)
@@ -453,10 +452,15 @@ class CoverLoop:
             if open_columns.size == 0:
                 break
             todo = [views[j] for j in open_columns.tolist()]
+            LOG.debug(
+                "set cover close-out: %d views of the open points, %d per point, %.1f s left",
+                len(todo), per_point, self.deadline - time.perf_counter(),
+            )  # fmt: skip
             self.verified_count += screen_scan_lines(self.run, self.tools, todo)
             self._verify(todo)
-            per_point *= 2  # points whose first views failed: more of theirs at once
-        self.closed_out = True
+            revive_in(self.run, self.tools, views, self.provided)
+            per_point *= 4  # points whose first views failed: more of theirs at once
+        self.closed_out = time.perf_counter() + round_s + LATE_IP_TIME_S >= self.deadline
 
     def polish(self) -> None:
         """The rounds' short solves may leave a gap: spend what is left on the programme over the verified views
@@ -507,7 +511,7 @@ class CoverLoop:
                 continue
             self.verify_round(step, round_index)
             if self._close_out_due(step):
-                self.close_out()
+                self.close_out(round_s=time.perf_counter() - step.started_s)
 
 
 def solve_scp(

@@ -100,3 +100,39 @@ def test_a_line_whose_first_branch_fails_is_run_on_another_branch_or_direction(c
     # the first round's short lines, and lines completed in a later round (another branch or the other direction)
     assert len(rounds) >= 2 and (rounds[0] < 1.0).sum() >= 3
     assert any((later >= 1.0).any() for later in rounds[1:])
+
+
+@pytest.mark.parametrize("stride", [1, 3, 8, 1000])
+def test_coarse_first_collision_check_cuts_paths_where_checking_every_state_does(cube_views, monkeypatch, stride):
+    """The batch checks every stride-th state first and then only the states before each path's first invalid one:
+    the cuts equal those of one check of every state, for a checker that rejects states at random."""
+    manager, _ = cube_views
+    monkeypatch.setattr(cartesian_batch, "COARSE_STRIDE", stride)
+    rng = np.random.default_rng(14)
+    picked = range(60)
+    starts_q = np.array([manager.preferred_state] * len(picked))
+    targets = manager.ik.model.fk(starts_q)
+    targets[:, :3, 3] += rng.normal(0.0, 0.1, size=(len(picked), 3))
+
+    def checker(q):  # a state is invalid when a hash of it falls below 5 %: invalid states spread along the paths
+        return np.abs(np.sin(q @ np.arange(1.0, q.shape[1] + 1.0) * 1e3)) > 0.05
+
+    calls = []
+
+    def counting(q):
+        calls.append(len(q))
+        return checker(q)
+
+    free = cartesian_batch.compute_cartesian_paths(manager.ik, starts_q, targets, step_mm=2.0)
+    checked = cartesian_batch.compute_cartesian_paths(manager.ik, starts_q, targets, step_mm=2.0,
+                                                      validity_checker=counting)  # fmt: skip
+    cut = 0
+    for k in range(len(picked)):
+        path = free.joint_path(k)
+        ok = checker(path)
+        first_bad = int(np.argmin(ok)) if not ok.all() else len(path)
+        np.testing.assert_array_equal(checked.joint_path(k), path[:first_bad])
+        cut += first_bad < len(path)
+    assert cut >= 10  # not vacuous: many paths are cut
+    if 1 < stride < 100:
+        assert sum(calls) < len(free.states)  # the states after a coarse cut were never checked

@@ -76,3 +76,11 @@ def test_close_out_after_the_deadline_verifies_nothing():
     _, loop = _loop(time.perf_counter() - 1.0)
     loop.close_out()
     assert loop.closed_out and loop.verified_count == 0
+
+
+def test_rounds_go_on_after_a_close_out_that_left_time_for_another_round():
+    _, loop = _loop(time.perf_counter() + 300.0)
+    loop.close_out(round_s=1.0)
+    assert not loop.closed_out
+    loop.solve_round(1)
+    assert not loop.only_verified
