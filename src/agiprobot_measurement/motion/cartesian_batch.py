@@ -32,7 +32,8 @@ __all__ = ["CartesianPaths", "compute_cartesian_paths", "line_poses"]
 #: the kernel's stop codes, in the order of :data:`STOP_NAMES`
 STOP_NAMES = (STOP_COMPLETE, STOP_UNREACHABLE, STOP_JOINT_JUMP, STOP_JOINT_LIMITS, STOP_INVALID_STATE)
 _INVALID = 4
-#: a path is tracked by continuation only where every other IK branch lies this much beyond the jump threshold (rad)
+#: a path is tracked by continuation only where every other IK branch lies this much (rad) beyond twice the largest
+#: tracked move (see cartesian_kernels.track_paths)
 TRACK_MARGIN_RAD = 0.3
 #: the collision check of a batch of paths looks at every this-many-th state first (see compute_cartesian_paths)
 COARSE_STRIDE = 8

@@ -181,8 +181,9 @@ def _track_paths(
     This is the walk of :func:`_follow_paths` over the closed-form solutions whenever the continued state is the
     closed-form solution nearest the previous one and every other one lies beyond the jump threshold: the path is
     given the code :data:`TRACK_EXACT` (to be checked with every branch) unless, at each of its waypoints, Newton
-    converges, no joint moves more than TRACK_MAX_MOVE_RAD, |sin(q5)| >= TRACK_MIN_WRIST_SINE, and the other
-    branches are at least ``jump_threshold + margin`` away: the wrist flip (pi on joint 6), the elbow's mirror
+    converges, no joint moves more than TRACK_MAX_MOVE_RAD (or the jump threshold, if smaller), |sin(q5)| >=
+    TRACK_MIN_WRIST_SINE, and the other branches are at least ``2 sqrt(dof) max_move + margin`` away (then farther
+    from the previous state than the tracked one, which the walk therefore keeps): the wrist flip (pi on joint 6), the elbow's mirror
     (2 |q3| on joint 3, unless -q3 lies outside the elbow's limits) and the other shoulder (``shoulder_gap`` (M,) on joint 1, rad, from the caller's closed
     form). UR joint order (shoulder pan, lift, elbow, wrist 1, 2, 3) assumed. Chain as :func:`chain_frames`.
     """
@@ -192,7 +193,12 @@ def _track_paths(
     counts = np.zeros(n_paths, dtype=np.int64)
     codes = np.zeros(n_paths, dtype=np.int64)
     two_pi = 2.0 * np.pi
-    need = jump_threshold + margin
+    # the walk takes the closed-form solution nearest the previous state (L2 over wrapped differences): the tracked
+    # one moves at most sqrt(dof) * max_move, so another branch at least twice that (plus the margin) from the
+    # tracked state is farther from the previous state than the tracked one (triangle inequality), and the walk
+    # keeps the tracked branch
+    max_move = min(TRACK_MAX_MOVE_RAD, jump_threshold)
+    need = 2.0 * np.sqrt(dof) * max_move + margin
     q = np.zeros(dof)
     jac = np.zeros((6, dof))
     err = np.zeros(6)

@@ -136,3 +136,35 @@ def test_coarse_first_collision_check_cuts_paths_where_checking_every_state_does
     assert cut >= 10  # not vacuous: many paths are cut
     if 1 < stride < 100:
         assert sum(calls) < len(free.states)  # the states after a coarse cut were never checked
+
+
+def test_tracked_paths_with_a_nearly_straight_elbow_equal_the_exact_walk(cube_views, monkeypatch):
+    """Paths whose elbow's mirror branch lies within the jump threshold (|q3| 0.4-0.9 rad) but far beyond the
+    tracked moves are tracked by continuation; they end where the walk over every closed-form branch ends them."""
+    manager, _ = cube_views
+    ik = manager.ik
+    rng = np.random.default_rng(15)
+    n = 80
+    starts_q = np.tile(manager.preferred_state, (n, 1)) + rng.normal(0.0, 0.3, size=(n, 6))
+    starts_q[:, 2] = rng.choice([-1.0, 1.0], size=n) * rng.uniform(0.4, 0.9, size=n)
+    starts_q = np.clip(starts_q, ik.model.lower, ik.model.upper)
+    targets = ik.model.fk(starts_q)
+    targets[:, :3, 3] += rng.normal(0.0, 0.08, size=(n, 3))
+    codes = []
+    track = cartesian_batch.track_paths
+
+    def recording(*args):
+        out = track(*args)
+        codes.append(out[2].copy())
+        return out
+
+    monkeypatch.setattr(cartesian_batch, "track_paths", recording)
+    tracked = cartesian_batch.compute_cartesian_paths(ik, starts_q, targets, step_mm=2.0, jump_threshold_rad=1.5)
+    monkeypatch.setattr(cartesian_batch, "TRACK_MARGIN_RAD", 10.0)  # every path through the closed-form branches
+    exact = cartesian_batch.compute_cartesian_paths(ik, starts_q, targets, step_mm=2.0, jump_threshold_rad=1.5)
+    np.testing.assert_array_equal(tracked.stop_codes, exact.stop_codes)
+    np.testing.assert_allclose(tracked.fractions, exact.fractions)
+    np.testing.assert_allclose(tracked.states, exact.states, atol=1e-6)
+    # not vacuous: many paths were settled by the continuation although their elbow's mirror lies within the jump
+    # threshold (a rule of "every other branch beyond the jump threshold" tracks none of them)
+    assert (codes[0] < cartesian_batch.TRACK_EXACT).mean() > 0.25
