@@ -111,6 +111,18 @@ def test_a_run_whose_rule_never_fired_loses_nothing_against_its_budget():
     assert row["ours_stopped_before_budget"] == 0.0
 
 
+def test_the_share_of_runs_stopping_within_one_point_of_their_budget_run():
+    stop = {"view": 4, "reason": "gain_below_threshold", "coverage": 0.85}
+    close = bench.self_terminated({**budget_summary(), "coverage": 0.855, "stop": stop})  # loses 0.005
+    far = bench.self_terminated(budget_summary(stop_view=3))  # stops at 0.8, the budget run reaches 0.9
+    never = {**budget_summary(), "stop": {}}  # the rule never fired: not stopped by itself
+    row = {"summary": {"c4": 0.8, "auc10": 0.7, "final_coverage": 0.9, "n95": None}, "runs": [close, far, never]}
+    assert bench.method_medians([row])["stopped_within_1pt"] == pytest.approx(1 / 3)
+    # a method that stopped for real (no budget run) has no loss to measure
+    real = {k: v for k, v in bench.self_terminated(budget_summary()).items() if k != "budget_final_coverage"}
+    assert bench.method_medians([{**row, "runs": [real]}])["stopped_within_1pt"] is None
+
+
 def test_a_budget_run_is_the_stopping_run_up_to_where_the_rule_fired():
     from agiprobot_measurement.nbv.simulation.station3d import SimulatedNBVStation
 

@@ -172,12 +172,14 @@ class Reconstructor:
         self._captures: list[CapturedView] = []
         self._tsdf = None
         self.stopping = StoppingRule(request.min_gain_area_mm2, request.min_relative_gain, planning.realised_streak,
-                                     planning.min_growth_share)  # fmt: skip
+                                     planning.budget_growth_share, planning.growth_window)  # fmt: skip
         fx = self.station.scanner_model.intrinsics(self.station.resolution).fx
         self.novelty = NoveltyTracker(self.roi_min_m, self.roi_max_m, self.map, fx)
         self._banned: list[np.ndarray] = []  # targets that turned out unmeasurable (the report's extra state)
         self.surprises = 0
         self._last_novel_m2 = math.inf
+        self._last_growth_m2 = math.inf  # surface the last frame added to the output map (newly full voxels, m^2)
+        self._full_before: np.ndarray | None = None
         self._joint_path = 0.0
         self._tcp_path = 0.0
         self._planning_s = 0.0
@@ -216,6 +218,11 @@ class Reconstructor:
         self.planning_map.integrate(origin, view.points_m, view.normals, view.sigma_mm, view_id=index)
         self._captures.append(view)
         self._last_novel_m2 = self.novelty.add(view)
+        full = self.map.full_mask()
+        before = self._full_before
+        added = int(full.sum()) if before is None else int(np.count_nonzero(full & ~before))
+        self._last_growth_m2 = added * self.map.resolution_m**2
+        self._full_before = full.copy()
         if view.depth_m is not None and view.intrinsics is not None:
             tsdf = self._tsdf_volume()
             if tsdf is not None:
@@ -395,7 +402,14 @@ class Reconstructor:
             area = choice.new_area_m2 if choice.remaining_area_m2 is None else choice.remaining_area_m2
             gain = choice.gain if choice.remaining_gain is None else choice.remaining_gain
             if self.policy.uses_stopping_rule:
-                fires = self.stopping.update(gain, area, self._last_novel_m2, self.map.observed_surface_area_m2())
+                fires = self.stopping.update(
+                    gain,
+                    area,
+                    self._last_novel_m2,
+                    self.map.observed_surface_area_m2(),
+                    self._last_growth_m2,
+                    self.request.max_views - len(self.views),
+                )
                 if self.stop_view is None and fires:
                     if self.on_stop is None:
                         return "gain_below_threshold"

@@ -235,8 +235,10 @@ class PlanningSettings:
     surprise_distance_m: float = 0.15
     surprise_angle_rad: float = math.radians(25.0)
     realised_streak: int = 3
-    #: stop also when the last ``realised_streak`` views together added less than this share of the observed surface
-    min_growth_share: float = 0.0
+    #: stop also when the rest of the view budget, at the mean growth of the map's surface over the last
+    #: ``growth_window`` views, would add less than this share of the observed surface (0: off)
+    budget_growth_share: float = 0.0
+    growth_window: int = 3
     #: ours: below this best predicted new surface (mm^2), and whenever the frontier predicts none, the view of the
     #: global sphere that sees the most never-observed space next to the seen surface is weighed too (0: only when
     #: the frontier predicts none)
@@ -260,7 +262,8 @@ class PlanningSettings:
             "surprise_distance_m": ("surprise_distance_m", number),
             "surprise_angle_deg": ("surprise_angle_rad", _degrees),
             "realised_streak": ("realised_streak", _whole()),
-            "min_growth_share": ("min_growth_share", lambda value, where: number(value, where, 0.0, 1.0)),
+            "budget_growth_share": ("budget_growth_share", lambda value, where: number(value, where, 0.0, 1.0)),
+            "growth_window": ("growth_window", _whole(1, 20)),
             "coverage_fallback_below_mm2": ("coverage_fallback_below_mm2", non_negative),
             "coverage_fallback_reach_vox": ("coverage_fallback_reach_vox", _whole(1, 20)),
             "tour": ("tour", lambda value, where: TourSettings.from_mapping(_mapping(value, where))),

@@ -146,6 +146,27 @@ def test_gain_threshold_and_cancel_and_budgets(station):
     assert set(TERMINATION_REASONS) >= {"gain_below_threshold", "cancelled", "max_path", "max_time", "max_views"}
 
 
+def test_the_stopping_rule_sees_the_maps_growth_and_the_views_left(station):
+    # budget_growth_share 0: the saturation rule stays off, the loop runs to its budget and hands it every iteration
+    recon, _ = make(station, max_views=4)
+    recon.stopping.budget_growth_share = 0.0
+    seen = []
+    update = recon.stopping.update
+
+    def spy(*args):
+        seen.append((args[4], args[5], len(recon.views), recon.map.observed_surface_area_m2()))
+        return update(*args)
+
+    recon.stopping.update = spy
+    result = recon.run()
+    assert result.termination_reason == "max_views" and len(seen) == 3
+    assert [left for _, left, _, _ in seen] == [4 - views for _, _, views, _ in seen] == [3, 2, 1]
+    growth = [g for g, _, _, _ in seen]
+    # after the opening view the map's growth is all it observed; later views add newly full voxels only
+    assert growth[0] == pytest.approx(result.views[0].observed_area_m2)
+    assert all(g >= 0 for g in growth) and sum(growth) >= seen[-1][3] - 1e-12
+
+
 def test_empty_roi_ends_with_nothing_found_after_the_search(station):
     center, _ = station.default_roi()
     beside = center + np.array([0.0, 0.3, 0.0])  # over the bare table next to the fixture
