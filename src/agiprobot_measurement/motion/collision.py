@@ -32,7 +32,12 @@ from agiprobot_measurement.motion.collision_config import (
     CollisionConfig,
     load_collision_config,
 )
-from agiprobot_measurement.motion.collision_kernels import second_stage, sphere_candidates, sphere_candidates_numpy
+from agiprobot_measurement.motion.collision_kernels import (
+    centres_inside_meshes,
+    second_stage,
+    sphere_candidates,
+    sphere_candidates_numpy,
+)
 from agiprobot_measurement.motion.collision_kernels import segment_distances as _segment_distances
 from agiprobot_measurement.motion.errors import MotionInputError, UnknownObjectError
 from agiprobot_measurement.motion.kinematics import KinematicModel
@@ -147,6 +152,11 @@ class _WorldObject:
     box_half: np.ndarray
     solid_box: bool  # the bounding box is the object itself
     mesh: object = None  # closed trimesh (object frame) for the inside test FCL's BVH cannot do
+
+
+def _centre_inside(shape_pose: np.ndarray, obj: _WorldObject) -> bool:
+    """Whether a shape's centre (its pose (4, 4), world) lies inside the object's closed mesh."""
+    return bool(centres_inside_meshes(shape_pose[None, :3, 3], np.zeros(1, dtype=np.int64), [obj])[0])
 
 
 class Clearance(NamedTuple):
@@ -603,6 +613,9 @@ class CollisionChecker:
         env_lo, env_hi = np.searchsorted(env[:, 0], states), np.searchsorted(env[:, 0], states, side="right")
         pair_lo, pair_hi = np.searchsorted(pairs[:, 0], states), np.searchsorted(pairs[:, 0], states, side="right")
         env_rows, pair_rows = env[:, 1:].tolist(), pairs[:, 1].tolist()
+        # a shape wholly inside a closed mesh (which FCL's surface BVH does not report) decides only where FCL found
+        # no contact: its centre is then in or out for the whole shape; all candidates' centres in one batch
+        inside = centres_inside_meshes(poses[env[:, 0], env[:, 1], :3, 3], env[:, 2], self._object_list).tolist()
         self_pairs = self._self_pairs.tolist()
         objects, shapes, request = self._object_list, self.shapes, self._request
         collide, result = fcl.collide, fcl.CollisionResult
@@ -610,15 +623,13 @@ class CollisionChecker:
             state_poses = poses[state]
             posed_world, posed_own = set(), set()
             hit = False
-            for s, o in env_rows[env_lo[k] : env_hi[k]]:
+            for row in range(env_lo[k], env_hi[k]):
+                s, o = env_rows[row]
                 if s not in posed_world:
                     self._pose_shapes(state_poses[s], shapes[s].world)
                     posed_world.add(s)
-                obj = objects[o]
                 mine = shapes[s].world.obj
-                if any(collide(mine, piece, request, result()) for piece in obj.pieces) or (
-                    obj.mesh is not None and self._inside_mesh(state_poses[s], obj)
-                ):
+                if any(collide(mine, piece, request, result()) for piece in objects[o].pieces) or inside[row]:
                     hit = True
                     break
             if not hit:
@@ -634,19 +645,6 @@ class CollisionChecker:
             if hit:
                 free[state] = False
         return free
-
-    def _inside_mesh(self, shape_pose: np.ndarray, obj: _WorldObject) -> bool:
-        """Whether a shape lies entirely inside a closed mesh, which FCL's surface BVH does not report.
-
-        Called only after FCL found no surface contact: then the shape is either wholly inside or wholly
-        outside, and its centre decides. The bounding-box test first, as it is rare that the mesh test is needed.
-        """
-        rotation, translation = obj.pose[:3, :3], obj.pose[:3, 3]
-        center_local = rotation.T @ (shape_pose[:3, 3] - translation)
-        box_center_local = rotation.T @ (obj.box_center - translation)
-        if np.any(np.abs(center_local - box_center_local) > obj.box_half):
-            return False
-        return bool(obj.mesh.contains(center_local[None])[0])
 
     def _all_pairs(self, include_allowed: bool):
         """(shape index, padded shape, the other's FCL objects, other, names) of every pair for the diagnostic
@@ -680,7 +678,7 @@ class CollisionChecker:
         for i, mine, others, owner, names in self._all_pairs(include_allowed):
             hit = any(fcl.collide(mine.obj, other, self._request, fcl.CollisionResult()) > 0 for other in others)
             if not hit and isinstance(owner, _WorldObject) and owner.mesh is not None:
-                hit = self._inside_mesh(poses[i], owner)
+                hit = _centre_inside(poses[i], owner)
             if hit and names not in found:
                 found.append(names)
         return found
@@ -702,7 +700,7 @@ class CollisionChecker:
                     gap, touching = 0.0 if gap == -1.0 else min(gap, 0.0), True
                 distance = min(distance, gap)
             inside = isinstance(owner, _WorldObject) and owner.mesh is not None
-            if not touching and inside and self._inside_mesh(poses[i], owner):
+            if not touching and inside and _centre_inside(poses[i], owner):
                 distance = -abs(distance)
             if distance < best.distance_m:
                 best = Clearance(float(distance), names)

@@ -12,10 +12,29 @@ import functools
 
 import numpy as np
 
-__all__ = ["second_stage", "segment_distances", "sphere_candidates", "sphere_candidates_numpy"]
+__all__ = ["centres_inside_meshes", "second_stage", "segment_distances", "sphere_candidates", "sphere_candidates_numpy"]
 
 #: segment lengths (squared, m^2) are floored at this, so degenerate segments work as points
 _EPS = 1e-12
+
+
+def centres_inside_meshes(centres: np.ndarray, obstacles: np.ndarray, objects) -> np.ndarray:
+    """(K,) bool: whether each point ``centres`` (K, 3) m (world) lies inside the closed mesh of the obstacle
+    ``objects[obstacles[k]]`` (False for an obstacle without a mesh): its oriented bounding box first, then the
+    mesh's own test (rays through Embree) for all points in the box of one obstacle at once."""
+    inside = np.zeros(len(centres), dtype=bool)
+    for o in np.unique(obstacles).tolist():
+        obj = objects[o]
+        if obj.mesh is None:
+            continue
+        rows = np.flatnonzero(obstacles == o)
+        rotation, translation = obj.pose[:3, :3], obj.pose[:3, 3]
+        local = (centres[rows] - translation) @ rotation  # R^T (c - t) per row
+        box_local = rotation.T @ (obj.box_center - translation)
+        in_box = np.all(np.abs(local - box_local) <= obj.box_half, axis=1)
+        if in_box.any():
+            inside[rows[in_box]] = np.asarray(obj.mesh.contains(local[in_box]), dtype=bool)
+    return inside
 
 
 def sphere_candidates(centers, box_axes, box_center, box_half, bound, env_checked, pair_i, pair_j, reach2):
