@@ -97,8 +97,8 @@ class _Round:
     limit: float
     chosen: list
     pending: list
-    solved: bool = True
-    started_s: float = 0.0  # when the round began (perf_counter s)  # False when the round took a settled cover of an earlier round (its bound is that pool's)
+    solved: bool = True  # False when the round took a settled cover of an earlier round (its bound is that pool's)
+    started_s: float = 0.0  # when the round began (perf_counter s)
 
 
 @dataclass
@@ -180,6 +180,11 @@ class CoverLoop:
             self.verified_count += len(part)
             done = min(1.0, self.verified_count / (self.verified_count + 10))
             self.tools.report("mechanics", done, f"verified {self.verified_count} scan lines")
+
+    def _screen_and_verify(self, views: list) -> None:
+        """Settle the views without a free start at either end at once, then verify the others (until the deadline)."""
+        self.verified_count += screen_scan_lines(self.run, self.tools, views)
+        self._verify(views)
 
     def solve_round(self, round_index: int) -> _Round:
         """This round's cover: over all views, the pool, or (the fallback, after the last round or at the
@@ -289,8 +294,7 @@ class CoverLoop:
         per_point = POINT_VIEWS_PER_ROUND * 2 ** min(round_index, 10)
         open_columns = open_point_views(step.matrix, views, per_point)[:MAX_POINT_VIEWS_PER_ROUND]
         if open_columns.size and time.perf_counter() < self.deadline and round_index + 1 < self.max_rounds:
-            self.verified_count += screen_scan_lines(self.run, self.tools, [views[j] for j in open_columns.tolist()])
-            self._verify([views[j] for j in open_columns.tolist()])
+            self._screen_and_verify([views[j] for j in open_columns.tolist()])
             # revived views join the problem, not the pool: they come into it verified, as the open
             # points' views (above) or through a solve over all views
             revive_in(self.run, self.tools, views, self.provided)
@@ -433,11 +437,14 @@ class CoverLoop:
         if not math.isfinite(self.deadline) or self.line_s is None:
             return False
         now = time.perf_counter()
+        spare_s = self.deadline - now - (now - step.started_s) - LATE_IP_TIME_S
+        if sum(v.mechanics_verified is False for v in self.views) * self.line_s < spare_s:
+            return False  # even every unverified view would fit: no need to find the open points' ones
         # the problem as the round's verification left it: the views it revived are often the open points' only ones
         matrix, _, _ = coverage_problem(self.run, self.views, self.n_points)
         open_columns = open_point_views(matrix, self.views, len(self.views))
         close_out_s = open_columns.size * self.line_s
-        return open_columns.size > 0 and now + (now - step.started_s) + close_out_s + LATE_IP_TIME_S >= self.deadline
+        return open_columns.size > 0 and close_out_s >= spare_s
 
     def close_out(self, round_s: float = math.inf) -> None:
         """Verify the unverified views of the points no verified view measures, a few per point (most shared
@@ -456,8 +463,7 @@ class CoverLoop:
                 "set cover close-out: %d views of the open points, %d per point, %.1f s left",
                 len(todo), per_point, self.deadline - time.perf_counter(),
             )  # fmt: skip
-            self.verified_count += screen_scan_lines(self.run, self.tools, todo)
-            self._verify(todo)
+            self._screen_and_verify(todo)
             revive_in(self.run, self.tools, views, self.provided)
             per_point *= 4  # points whose first views failed: more of theirs at once
         self.closed_out = time.perf_counter() + round_s + LATE_IP_TIME_S >= self.deadline
