@@ -32,8 +32,8 @@ __all__ = ["CartesianPaths", "compute_cartesian_paths", "line_poses"]
 #: the kernel's stop codes, in the order of :data:`STOP_NAMES`
 STOP_NAMES = (STOP_COMPLETE, STOP_UNREACHABLE, STOP_JOINT_JUMP, STOP_JOINT_LIMITS, STOP_INVALID_STATE)
 _INVALID = 4
-#: a path is tracked by continuation only where every other IK branch lies this much (rad) beyond twice the largest
-#: tracked move (see cartesian_kernels.track_paths)
+#: a path is tracked by continuation only where every other IK branch lies this much (rad) beyond twice the
+#: tracked move onto each waypoint (see cartesian_kernels.track_paths)
 TRACK_MARGIN_RAD = 0.3
 #: the collision check of a batch of paths looks at every this-many-th state first (see compute_cartesian_paths)
 COARSE_STRIDE = 8
@@ -164,11 +164,14 @@ def compute_cartesian_paths(
 
 def _walk(ik, poses, pose_offsets, start_q, jump):
     """(states, counts, codes) as :func:`~agiprobot_measurement.motion.cartesian_kernels.follow_paths` gives
-    them: the paths the continuation (:func:`~agiprobot_measurement.motion.cartesian_kernels.track_paths`) settles
-    from it (a UR arm's closed-form solver), the others from every closed-form branch of every waypoint."""
+    them: the continuation (:func:`~agiprobot_measurement.motion.cartesian_kernels.track_paths`, a UR arm's
+    closed-form solver) settles each path up to the first waypoint where it cannot show the walk's choice, and the
+    walk over every closed-form branch goes on from there: first over that one waypoint (most such paths stop
+    there: a joint limit, a jump, the workspace's edge), then over the rest of the paths that go on."""
     model = ik.model
     lower, upper = np.asarray(model.lower, dtype=np.float64), np.asarray(model.upper, dtype=np.float64)
     n_paths = len(start_q)
+    sizes = np.diff(pose_offsets)
     if hasattr(ik, "shoulder_gaps"):
         pre, axes, tip = model.fk_segments
         states, counts, codes = track_paths(
@@ -183,35 +186,53 @@ def _walk(ik, poses, pose_offsets, start_q, jump):
             upper,
             jump,
             TRACK_MARGIN_RAD,
+            *ik.closed_form_parameters(),
         )
         exact = np.flatnonzero(codes >= TRACK_EXACT)
+        resume = states[pose_offsets[exact] + exact + counts[exact]]
     else:
         states = np.zeros((len(poses) + n_paths, model.dof))
         counts, codes = np.zeros(n_paths, dtype=np.int64), np.zeros(n_paths, dtype=np.int64)
         exact = np.arange(n_paths)
-    if exact.size == 0:
-        return states, counts, codes
-    sizes = np.diff(pose_offsets)[exact]
-    rows = np.repeat(pose_offsets[exact], sizes) + _ranks(sizes)
+        resume = start_q
+    for window in (1, None):  # the first waypoint left, then the rest where the walk goes on
+        if exact.size == 0:
+            break
+        left = sizes[exact] - counts[exact]
+        take = left if window is None else np.minimum(left, window)
+        walked, sub_counts, sub_codes = _walk_every_branch(
+            ik, poses, pose_offsets[exact] + counts[exact], take, resume, start_q[exact], jump, lower, upper
+        )
+        lengths = sub_counts + 1  # the resumed state is written again (unchanged)
+        target = np.repeat(pose_offsets[exact] + exact + counts[exact], lengths) + _ranks(lengths)
+        source = np.repeat(np.concatenate([[0], np.cumsum(take)])[:-1] + np.arange(exact.size), lengths)
+        states[target] = walked[source + _ranks(lengths)]
+        counts[exact] += sub_counts
+        codes[exact] = sub_codes
+        going = (sub_codes == 0) & (sub_counts < left)
+        resume = walked[source[np.cumsum(lengths) - 1] + sub_counts][going] if going.any() else resume[:0]
+        exact = exact[going]
+    return states, counts, codes
+
+
+def _walk_every_branch(ik, poses, firsts, sizes, starts, seeds, jump, lower, upper):
+    """The walk over every closed-form branch (:func:`follow_paths`) of the waypoints ``poses[firsts[i]:firsts[i] +
+    sizes[i]]`` from the states ``starts[i]`` rad, the closed form seeded with ``seeds[i]`` (the path's start: it
+    picks a singular wrist's q6): (states (sum(sizes) + len(sizes), dof), counts, codes)."""
+    rows = np.repeat(firsts, sizes) + _ranks(sizes)
     sub_offsets = np.concatenate([[0], np.cumsum(sizes)])
     sub_poses = poses[rows]
-    solutions, valid = ik.solve_all(sub_poses, np.repeat(start_q[exact], sizes, axis=0))
+    solutions, valid = ik.solve_all(sub_poses, np.repeat(seeds, sizes, axis=0))
     solutions = np.where(valid[..., None], solutions, 0.0)
-    sub_states, sub_counts, sub_codes = follow_paths(
+    return follow_paths(
         np.ascontiguousarray(solutions),
         np.ascontiguousarray(valid),
         sub_offsets.astype(np.int64),
-        np.ascontiguousarray(start_q[exact]),
+        np.ascontiguousarray(starts, dtype=np.float64),
         jump,
         lower,
         upper,
     )
-    lengths = sub_counts + 1
-    target = np.repeat(pose_offsets[exact] + exact, lengths) + _ranks(lengths)
-    source = np.repeat(sub_offsets[:-1] + np.arange(exact.size), lengths) + _ranks(lengths)
-    states[target] = sub_states[source]
-    counts[exact], codes[exact] = sub_counts, sub_codes
-    return states, counts, codes
 
 
 def _checked(validity_checker, states: np.ndarray) -> np.ndarray:

@@ -14,7 +14,8 @@ from agiprobot_measurement.motion.kinematics_kernels import joint_frame, registe
 
 __all__ = ["TRACK_EXACT", "follow_branches", "follow_paths", "kernels_loaded", "track_paths"]
 
-#: the stop code of :func:`track_paths` for a path it cannot settle: the caller checks it with every IK branch
+#: the least stop code of :func:`track_paths` for a path it cannot settle beyond its count of waypoints: the caller
+#: walks on from there with every IK branch
 TRACK_EXACT = 5
 
 
@@ -30,9 +31,26 @@ def follow_paths(solutions, valid, offsets, starts, jump_threshold, lower, upper
     return _compiled_paths()(solutions, valid, offsets, starts, jump_threshold, lower, upper)
 
 
-def track_paths(poses, offsets, starts, shoulder_gap, pre, axes, tip, lower, upper, jump_threshold, margin):
+def track_paths(
+    poses, offsets, starts, shoulder_gap, pre, axes, tip, lower, upper, jump_threshold, margin, dh, base_inv, tip_inv
+):
     """Many paths followed by Newton steps from state to state; see :func:`_track_paths`."""
-    return _compiled_track()(poses, offsets, starts, shoulder_gap, pre, axes, tip, lower, upper, jump_threshold, margin)
+    return _compiled_track()(
+        poses,
+        offsets,
+        starts,
+        shoulder_gap,
+        pre,
+        axes,
+        tip,
+        lower,
+        upper,
+        jump_threshold,
+        margin,
+        dh,
+        base_inv,
+        tip_inv,
+    )
 
 
 def kernels_loaded() -> bool:
@@ -44,8 +62,11 @@ def kernels_loaded() -> bool:
 @functools.cache
 def _compiled_track():
     import numba  # lazily, see the module docstring
+    from numba.extending import register_jitable
 
     register_helpers()
+    for helper in (_newton, _track_work, _wrapped_distance, _limit_class, _product, _reachable):
+        register_jitable(helper)
     return numba.njit(cache=True)(_track_paths)
 
 
@@ -165,27 +186,227 @@ TRACK_GOAL = 1e-9
 TRACK_ITERATIONS = 12
 #: a tracked move larger than this on any joint (rad) leaves the path to the exact check (next to a singularity)
 TRACK_MAX_MOVE_RAD = 0.1
-#: the elbow's mirror solution counts as within the elbow's limits up to this far beyond them (rad): the closed
-#: form's limit slack (0.02) and a calibrated arm's deviation from the nominal DH (0.05)
-MIRROR_LIMIT_SLACK_RAD = 0.07
 #: ... and so does a state whose |sin(wrist_2)| falls below this (the wrist singularity)
 TRACK_MIN_WRIST_SINE = 0.02
 
 
+def _newton(q, target, pre, axes, tip, work):  # pragma: no cover - compiled
+    """Damped-free Newton steps moving ``q`` (dof,) rad in place until the chain's tip reaches ``target`` (4, 4)
+    within TRACK_GOAL (m and rad of the pose error vector); at most TRACK_ITERATIONS steps. ``work`` is the
+    scratch of :func:`_track_work`. Returns whether it converged (a near-singular Jacobian stops it: False)."""
+    jac, err, cur, nxt, rot, origins, zaxes, gram, rhs = work
+    dof = q.shape[0]
+    for _ in range(TRACK_ITERATIONS):
+        # forward kinematics with every joint's origin and axis
+        for r in range(4):
+            for c in range(4):
+                cur[r, c] = 1.0 if r == c else 0.0
+        for j in range(dof):
+            joint_frame(cur, nxt, rot, pre[j], axes[j], q[j])
+            x, y, z = axes[j, 0], axes[j, 1], axes[j, 2]
+            for r in range(3):
+                origins[j, r] = cur[r, 3]
+                zaxes[j, r] = cur[r, 0] * x + cur[r, 1] * y + cur[r, 2] * z
+        tip_frame(cur, tip, nxt)
+        # pose error: target - reached, the rotation R = Rt Rr^T as sin(angle) axis from its skew parts
+        for r in range(3):
+            err[r] = target[r, 3] - nxt[r, 3]
+        r21 = 0.0
+        r12 = 0.0
+        r02 = 0.0
+        r20 = 0.0
+        r10 = 0.0
+        r01 = 0.0
+        for mm in range(3):
+            r21 += target[2, mm] * nxt[1, mm]
+            r12 += target[1, mm] * nxt[2, mm]
+            r02 += target[0, mm] * nxt[2, mm]
+            r20 += target[2, mm] * nxt[0, mm]
+            r10 += target[1, mm] * nxt[0, mm]
+            r01 += target[0, mm] * nxt[1, mm]
+        err[3] = 0.5 * (r21 - r12)
+        err[4] = 0.5 * (r02 - r20)
+        err[5] = 0.5 * (r10 - r01)
+        worst = 0.0
+        for r in range(6):
+            worst = max(worst, abs(err[r]))
+        if worst <= TRACK_GOAL:
+            return True
+        for j in range(dof):
+            lx = nxt[0, 3] - origins[j, 0]
+            ly = nxt[1, 3] - origins[j, 1]
+            lz = nxt[2, 3] - origins[j, 2]
+            ax, ay, az = zaxes[j, 0], zaxes[j, 1], zaxes[j, 2]
+            jac[0, j] = ay * lz - az * ly
+            jac[1, j] = az * lx - ax * lz
+            jac[2, j] = ax * ly - ay * lx
+            jac[3, j], jac[4, j], jac[5, j] = ax, ay, az
+        # J dq = err by Gaussian elimination with partial pivoting (J is 6x6 for the UR arm; a near-singular J gives
+        # a large move, which leaves the path to the exact check)
+        for r in range(6):
+            for c in range(dof):
+                gram[r, c] = jac[r, c]
+            rhs[r] = err[r]
+        for c in range(6):
+            pivot = c
+            for r in range(c + 1, 6):
+                if abs(gram[r, c]) > abs(gram[pivot, c]):
+                    pivot = r
+            if abs(gram[pivot, c]) < 1e-12:
+                return False
+            if pivot != c:
+                for cc in range(6):
+                    gram[c, cc], gram[pivot, cc] = gram[pivot, cc], gram[c, cc]
+                rhs[c], rhs[pivot] = rhs[pivot], rhs[c]
+            for r in range(c + 1, 6):
+                f = gram[r, c] / gram[c, c]
+                for cc in range(c, 6):
+                    gram[r, cc] -= f * gram[c, cc]
+                rhs[r] -= f * rhs[c]
+        for r in range(5, -1, -1):
+            acc = rhs[r]
+            for cc in range(r + 1, 6):
+                acc -= gram[r, cc] * rhs[cc]
+            rhs[r] = acc / gram[r, r]
+        for j in range(dof):
+            q[j] += rhs[j]
+    return False
+
+
+def _track_work(dof):  # pragma: no cover - compiled
+    """Scratch arrays of :func:`_newton`."""
+    return (
+        np.zeros((6, dof)),
+        np.zeros(6),
+        np.zeros((4, 4)),
+        np.zeros((4, 4)),
+        np.zeros((3, 3)),
+        np.zeros((dof, 3)),
+        np.zeros((dof, 3)),
+        np.zeros((6, 6)),
+        np.zeros(6),
+    )
+
+
+def _wrapped_distance(a, b):  # pragma: no cover - compiled
+    """L2 norm of the joint differences ``a - b`` wrapped to [-pi, pi) (rad), as the branch walk measures it."""
+    two_pi = 2.0 * np.pi
+    total = 0.0
+    for d in range(a.shape[0]):
+        x = a[d] - b[d] + np.pi
+        x = x - two_pi * np.floor(x / two_pi) - np.pi
+        total += x * x
+    return np.sqrt(total)
+
+
+#: :func:`_limit_class`' answers: every joint has a value within its limits; some joint only within the closed
+#: form's clipping slack beyond a limit; some joint none even there
+LIMITS_INSIDE, LIMITS_NEAR, LIMITS_OUTSIDE = 0, 1, 2
+#: the closed form clips a solution this far (rad) beyond a limit into it (the IK's clip slack)
+CLIP_SLACK_RAD = 1e-4
+
+
+def _limit_class(q, lower, upper):  # pragma: no cover - compiled
+    """Whether the IK's closed form keeps the solution ``q`` (dof,) rad, some turn of each joint within [lower,
+    upper] (1e-9 rad slack): LIMITS_INSIDE, LIMITS_NEAR (some joint only within CLIP_SLACK_RAD beyond a limit,
+    where the closed form clips and refines again) or LIMITS_OUTSIDE."""
+    two_pi = 2.0 * np.pi
+    worst = LIMITS_INSIDE
+    for d in range(q.shape[0]):
+        if np.ceil((lower[d] - 1e-9 - q[d]) / two_pi) <= np.floor((upper[d] + 1e-9 - q[d]) / two_pi):
+            continue
+        if np.ceil((lower[d] - CLIP_SLACK_RAD - q[d]) / two_pi) <= np.floor(
+            (upper[d] + CLIP_SLACK_RAD - q[d]) / two_pi
+        ):
+            worst = max(worst, LIMITS_NEAR)
+        else:
+            worst = LIMITS_OUTSIDE
+    return worst
+
+
+def _product(a, b):  # pragma: no cover - compiled
+    """The 4 x 4 matrix product ``a @ b``."""
+    out = np.zeros((4, 4))
+    for r in range(4):
+        for c in range(4):
+            acc = 0.0
+            for m in range(4):
+                acc += a[r, m] * b[m, c]
+            out[r, c] = acc
+    return out
+
+
+def _reachable(pose, dh, base_inv, tip_inv):  # pragma: no cover - compiled
+    """Whether some branch of the UR closed form (``URAnalyticIK._solve_raw``, the same formulas) passes its
+    domain tests for ``pose`` (4, 4): the wrist centre at least d4 from the joint-1 axis and, for a shoulder and
+    wrist branch, the planar arm's cos(q3) within [-1, 1] (both with the domain slack ``dh[6]``). True also where
+    |sin q5| < ``dh[7]`` (a singular wrist: q6 would come from a seed): only a False is a verdict."""
+    d1, a2, a3, d4, d5, d6, slack, singular = dh[0], dh[1], dh[2], dh[3], dh[4], dh[5], dh[6], dh[7]
+    target = _product(_product(base_inv, pose), tip_inv)  # the pose of DH frame 6 in the DH base
+    wx = target[0, 3] - d6 * target[0, 2]
+    wy = target[1, 3] - d6 * target[1, 2]
+    ratio = d4 / max(np.hypot(wx, wy), 1e-300)
+    if ratio > 1.0 + slack:
+        return False
+    psi = np.arctan2(wy, wx)
+    phi = np.arcsin(min(max(ratio, -1.0), 1.0))
+    for q1 in (psi + phi, psi + np.pi - phi):
+        s1, c1 = np.sin(q1), np.cos(q1)
+        row_x = s1 * target[0, 0] - c1 * target[1, 0]
+        row_y = s1 * target[0, 1] - c1 * target[1, 1]
+        c5 = s1 * target[0, 2] - c1 * target[1, 2]
+        s5_abs = np.hypot(row_x, row_y)
+        if s5_abs < singular:
+            return True
+        for sign in (1.0, -1.0):
+            q5 = np.arctan2(s5_abs * sign, c5)
+            q6 = np.arctan2(-row_y * sign, row_x * sign)
+            # frame 4's origin in frame 1: T01^-1 T06 T46^-1 applied to the origin, T46 = DH(q5, d5, 0, -pi/2)
+            # DH(q6, d6, 0, 0) with the rotation R46 = Rz(q5) Rx(-pi/2) Rz(q6) and p46 = (-d6 s5, d6 c5, d5);
+            # T46^-1's origin is -R46^T p46 (in frame 6)
+            s5, cq5 = np.sin(q5), np.cos(q5)
+            s6, c6 = np.sin(q6), np.cos(q6)
+            # R46 = Rz(q5) Rx(-pi/2) Rz(q6); its columns
+            r00, r01, r02 = cq5 * c6, -cq5 * s6, -s5
+            r10, r11, r12 = s5 * c6, -s5 * s6, cq5
+            r20, r21, r22 = -s6, -c6, 0.0
+            p0, p1, p2 = -s5 * d6, cq5 * d6, d5
+            o0 = -(r00 * p0 + r10 * p1 + r20 * p2)
+            o1 = -(r01 * p0 + r11 * p1 + r21 * p2)
+            o2 = -(r02 * p0 + r12 * p1 + r22 * p2)
+            # that point in the base frame (target), then in frame 1 (T01 = DH(q1, d1, 0, pi/2))
+            bx = target[0, 0] * o0 + target[0, 1] * o1 + target[0, 2] * o2 + target[0, 3]
+            by = target[1, 0] * o0 + target[1, 1] * o1 + target[1, 2] * o2 + target[1, 3]
+            bz = target[2, 0] * o0 + target[2, 1] * o1 + target[2, 2] * o2 + target[2, 3]
+            px = c1 * bx + s1 * by
+            py = bz - d1
+            cos3 = (px * px + py * py - a2 * a2 - a3 * a3) / (2.0 * a2 * a3)
+            if abs(cos3) <= 1.0 + slack:
+                return True
+    return False
+
+
 def _track_paths(
-    poses, offsets, starts, shoulder_gap, pre, axes, tip, lower, upper, jump_threshold, margin
+    poses, offsets, starts, shoulder_gap, pre, axes, tip, lower, upper, jump_threshold, margin, dh, base_inv, tip_inv
 ):  # pragma: no cover - compiled
     """The joint states of P Cartesian paths by continuation: each waypoint's state is found by damped Newton
     steps on the model's kinematics from the previous one, and the path stops as :func:`_follow_paths` stops it.
 
-    This is the walk of :func:`_follow_paths` over the closed-form solutions whenever the continued state is the
-    closed-form solution nearest the previous one and every other one lies beyond the jump threshold: the path is
-    given the code :data:`TRACK_EXACT` (to be checked with every branch) unless, at each of its waypoints, Newton
-    converges, no joint moves more than TRACK_MAX_MOVE_RAD (or the jump threshold, if smaller), |sin(q5)| >=
-    TRACK_MIN_WRIST_SINE, and the other branches are at least ``2 sqrt(dof) max_move + margin`` away (then farther
-    from the previous state than the tracked one, which the walk therefore keeps): the wrist flip (pi on joint 6), the elbow's mirror
-    (2 |q3| on joint 3, unless -q3 lies outside the elbow's limits) and the other shoulder (``shoulder_gap`` (M,) on joint 1, rad, from the caller's closed
-    form). UR joint order (shoulder pan, lift, elbow, wrist 1, 2, 3) assumed. Chain as :func:`chain_frames`.
+    This is the walk of :func:`_follow_paths` over the closed-form solutions whenever the state kept is the
+    closed-form solution nearest the previous one: the path stops with a code of at least :data:`TRACK_EXACT` at
+    its first waypoint where that is not shown (its count the waypoints before it, which are; the caller walks on
+    from there over every branch) unless, at each of its waypoints, Newton converges, no joint moves more than
+    TRACK_MAX_MOVE_RAD (or the jump threshold, if smaller), |sin(q5)| >= TRACK_MIN_WRIST_SINE, the wrist flip (pi
+    on joint 6) and the other shoulder (``shoulder_gap`` (M,) on joint 1, rad, from the caller's closed form) lie
+    at least ``2 |move| + margin`` from the kept state, ``|move|`` the length (L2, rad) of the move onto that
+    waypoint (then they are farther from the previous state than the kept one, which the walk therefore keeps),
+    and the kept state has every joint within its limits (:func:`_limit_class`). The elbow's mirror either lies
+    that far too (2 |q3| on joint 3) or is solved for (the planar two-link arm of the DH lengths a2, a3 mirrored,
+    then Newton on the model): of the tracked state and the mirror the walk keeps the nearer one within the limits,
+    and so does this. Where Newton fails on a pose the closed form cannot reach with any branch (:func:`_reachable`
+    with ``dh``, ``base_inv``, ``tip_inv`` of ``URAnalyticIK.closed_form_parameters``), the path ends there as
+    unreachable, as the walk ends it. UR joint order (shoulder
+    pan, lift, elbow, wrist 1, 2, 3) assumed. Chain as :func:`chain_frames`.
     """
     m = poses.shape[0]
     n_paths, dof = starts.shape
@@ -193,22 +414,16 @@ def _track_paths(
     counts = np.zeros(n_paths, dtype=np.int64)
     codes = np.zeros(n_paths, dtype=np.int64)
     two_pi = 2.0 * np.pi
-    # the walk takes the closed-form solution nearest the previous state (L2 over wrapped differences): the tracked
-    # one moves at most sqrt(dof) * max_move, so another branch at least twice that (plus the margin) from the
-    # tracked state is farther from the previous state than the tracked one (triangle inequality), and the walk
-    # keeps the tracked branch
+    # the walk takes the closed-form solution nearest the previous state (L2 over wrapped differences): another
+    # branch at least twice the kept move (plus the margin) from the kept state is farther from the previous
+    # state than the kept one (triangle inequality), and the walk keeps that one
     max_move = min(TRACK_MAX_MOVE_RAD, jump_threshold)
-    need = 2.0 * np.sqrt(dof) * max_move + margin
+    # the wrist flip (pi on joint 6) may lie within reach of the largest move: every path goes to the exact walk
+    all_exact = 2.0 * np.sqrt(dof) * max_move + margin >= np.pi
+    work = _track_work(dof)
+    a2, a3 = dh[1], dh[2]
     q = np.zeros(dof)
-    jac = np.zeros((6, dof))
-    err = np.zeros(6)
-    cur = np.zeros((4, 4))
-    nxt = np.zeros((4, 4))
-    rot = np.zeros((3, 3))
-    origins = np.zeros((dof, 3))
-    zaxes = np.zeros((dof, 3))
-    gram = np.zeros((6, 6))
-    rhs = np.zeros(6)
+    twin = np.zeros(dof)
     velocity = np.zeros(dof)
     for i in range(n_paths):
         first, last = offsets[i], offsets[i + 1]
@@ -218,134 +433,77 @@ def _track_paths(
             states[row, d] = q[d]
         count = last - first
         code = 0
-        if need >= np.pi:
+        if all_exact:
             count, code = 0, 5
         for k in range(first, last):
             if code >= 5:
                 break
-            converged = False
             start_q = q.copy()
             if k > first:
                 for d in range(dof):
                     q[d] += velocity[d]  # the last move as the predictor: one Newton step is then enough
-            for _ in range(TRACK_ITERATIONS):
-                # forward kinematics with every joint's origin and axis
-                for r in range(4):
-                    for c in range(4):
-                        cur[r, c] = 1.0 if r == c else 0.0
-                for j in range(dof):
-                    joint_frame(cur, nxt, rot, pre[j], axes[j], q[j])
-                    x, y, z = axes[j, 0], axes[j, 1], axes[j, 2]
-                    for r in range(3):
-                        origins[j, r] = cur[r, 3]
-                        zaxes[j, r] = cur[r, 0] * x + cur[r, 1] * y + cur[r, 2] * z
-                tip_frame(cur, tip, nxt)
-                # pose error: target - reached, rotation target R^T as sin(angle) axis
-                for r in range(3):
-                    err[r] = poses[k, r, 3] - nxt[r, 3]
-                # R = Rt Rr^T; skew parts
-                r21 = 0.0
-                r12 = 0.0
-                r02 = 0.0
-                r20 = 0.0
-                r10 = 0.0
-                r01 = 0.0
-                for mm in range(3):
-                    r21 += poses[k, 2, mm] * nxt[1, mm]
-                    r12 += poses[k, 1, mm] * nxt[2, mm]
-                    r02 += poses[k, 0, mm] * nxt[2, mm]
-                    r20 += poses[k, 2, mm] * nxt[0, mm]
-                    r10 += poses[k, 1, mm] * nxt[0, mm]
-                    r01 += poses[k, 0, mm] * nxt[1, mm]
-                err[3] = 0.5 * (r21 - r12)
-                err[4] = 0.5 * (r02 - r20)
-                err[5] = 0.5 * (r10 - r01)
-                worst = 0.0
-                for r in range(6):
-                    worst = max(worst, abs(err[r]))
-                if worst <= TRACK_GOAL:
-                    converged = True
+            if not _newton(q, poses[k], pre, axes, tip, work):
+                if _reachable(poses[k], dh, base_inv, tip_inv):
+                    count, code = k - first, 6
+                else:  # no branch of the closed form reaches the pose: the walk stops before it
+                    count, code = k - first, 1
+                break
+            moved = _wrapped_distance(q, start_q)
+            kept = _limit_class(q, lower, upper)
+            x = 2.0 * abs(q[2] + np.pi - two_pi * np.floor((q[2] + np.pi) / two_pi) - np.pi)
+            if min(x, two_pi - x) < 2.0 * moved + margin:
+                # the elbow's mirror may be nearer the previous state (or the only valid one of the two): solve for
+                # it (the mirrored planar arm: q3' = -q3, q2' = q2 + beta(q3) - beta(-q3), q4' keeps q2 + q3 + q4;
+                # Newton on the model then) and keep the one the walk keeps
+                shift = np.arctan2(a3 * np.sin(q[2]), a2 + a3 * np.cos(q[2])) - np.arctan2(
+                    -a3 * np.sin(q[2]), a2 + a3 * np.cos(q[2])
+                )
+                for d in range(dof):
+                    twin[d] = q[d]
+                twin[1] = q[1] + shift
+                twin[2] = -q[2]
+                twin[3] = q[3] - shift + 2.0 * q[2]
+                if not _newton(twin, poses[k], pre, axes, tip, work):
+                    count, code = k - first, 9
                     break
-                for j in range(dof):
-                    lx = nxt[0, 3] - origins[j, 0]
-                    ly = nxt[1, 3] - origins[j, 1]
-                    lz = nxt[2, 3] - origins[j, 2]
-                    ax, ay, az = zaxes[j, 0], zaxes[j, 1], zaxes[j, 2]
-                    jac[0, j] = ay * lz - az * ly
-                    jac[1, j] = az * lx - ax * lz
-                    jac[2, j] = ax * ly - ay * lx
-                    jac[3, j], jac[4, j], jac[5, j] = ax, ay, az
-                # J dq = err by Gaussian elimination with partial pivoting (J is 6x6 for the UR arm; a near-singular
-                # J gives a large move, which leaves the path to the exact check)
-                for r in range(6):
-                    for c in range(dof):
-                        gram[r, c] = jac[r, c]
-                    rhs[r] = err[r]
-                singular = False
-                for c in range(6):
-                    pivot = c
-                    for r in range(c + 1, 6):
-                        if abs(gram[r, c]) > abs(gram[pivot, c]):
-                            pivot = r
-                    if abs(gram[pivot, c]) < 1e-12:
-                        singular = True
-                        break
-                    if pivot != c:
-                        for cc in range(6):
-                            gram[c, cc], gram[pivot, cc] = gram[pivot, cc], gram[c, cc]
-                        rhs[c], rhs[pivot] = rhs[pivot], rhs[c]
-                    for r in range(c + 1, 6):
-                        f = gram[r, c] / gram[c, c]
-                        for cc in range(c, 6):
-                            gram[r, cc] -= f * gram[c, cc]
-                        rhs[r] -= f * rhs[c]
-                if singular:
+                mirrored = _limit_class(twin, lower, upper)
+                if mirrored == LIMITS_NEAR:
+                    count, code = k - first, 5
                     break
-                for r in range(5, -1, -1):
-                    acc = rhs[r]
-                    for cc in range(r + 1, 6):
-                        acc -= gram[r, cc] * rhs[cc]
-                    rhs[r] = acc / gram[r, r]
-                for j in range(dof):
-                    q[j] += rhs[j]
-            if not converged:
-                count, code = 0, 6
+                twin_moved = _wrapped_distance(twin, start_q)
+                # the nearer valid one (the walk's order of the branches puts the elbow's q3 >= 0 first: the tie)
+                nearer = twin_moved < moved or (twin_moved == moved and twin[2] > q[2])
+                if mirrored == LIMITS_INSIDE and (kept == LIMITS_OUTSIDE or nearer):
+                    for d in range(dof):
+                        x = twin[d] - start_q[d] + np.pi
+                        q[d] = start_q[d] + x - two_pi * np.floor(x / two_pi) - np.pi
+                    moved, kept = twin_moved, mirrored
+            if kept != LIMITS_INSIDE:
+                # a joint of a narrow range beyond its limit: the walk has no such solution and may take one of the
+                # far branches; next to a limit the closed form clips: the exact walk decides either way
+                count, code = k - first, 5
                 break
             large = False
             for d in range(dof):
                 velocity[d] = q[d] - start_q[d]
-                if abs(velocity[d]) > min(TRACK_MAX_MOVE_RAD, jump_threshold):
+                if abs(velocity[d]) > max_move:
                     large = True
-            x = 2.0 * abs(q[2] + np.pi - two_pi * np.floor((q[2] + np.pi) / two_pi) - np.pi)
-            elbow_gap = min(x, two_pi - x)
-            # the elbow's mirror (-q3) outside the elbow's limits (any turn, with the closed form's slack and a
-            # calibrated arm's deviation) is no solution at all
-            mirror = -q[2]
-            lo, hi = lower[2] - MIRROR_LIMIT_SLACK_RAD, upper[2] + MIRROR_LIMIT_SLACK_RAD
-            if np.ceil((lo - mirror) / two_pi) > np.floor((hi - mirror) / two_pi):
-                elbow_gap = np.inf
+            # the other branches must lie farther than twice this move (plus the margin) from the kept state
+            need = 2.0 * moved + margin
             if large:
-                count, code = 0, 7
+                count, code = k - first, 7
                 break
             if abs(np.sin(q[4])) < TRACK_MIN_WRIST_SINE:
-                count, code = 0, 8
-                break
-            if elbow_gap < need:
-                count, code = 0, 9
+                count, code = k - first, 8
                 break
             if shoulder_gap[k] < need:
-                count, code = 0, 10
+                count, code = k - first, 10
                 break
             outside = False
             for d in range(dof):
                 if q[d] < lower[d] - 1e-9 or q[d] > upper[d] + 1e-9:
                     outside = True
-                    if q[d] > lower[d] - 1e-4 and q[d] < upper[d] + 1e-4:
-                        code = 5  # the closed form clips within 1e-4 rad of a limit: the exact walk decides
                 states[row + k - first + 1, d] = min(max(q[d], lower[d]), upper[d])
-            if code == 5:
-                count = 0
-                break
             if outside:
                 count, code = k - first, 3
                 break
