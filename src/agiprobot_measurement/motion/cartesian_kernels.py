@@ -424,6 +424,7 @@ def _track_paths(
     a2, a3 = dh[1], dh[2]
     q = np.zeros(dof)
     twin = np.zeros(dof)
+    start_q = np.zeros(dof)
     velocity = np.zeros(dof)
     for i in range(n_paths):
         first, last = offsets[i], offsets[i + 1]
@@ -438,7 +439,7 @@ def _track_paths(
         for k in range(first, last):
             if code >= 5:
                 break
-            start_q = q.copy()
+            start_q[:] = q
             if k > first:
                 for d in range(dof):
                     q[d] += velocity[d]  # the last move as the predictor: one Newton step is then enough
