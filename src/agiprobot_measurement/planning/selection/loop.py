@@ -77,6 +77,10 @@ KERNEL_LOAD_S = 3.0
 CLOSE_OUT_VIEWS_PER_POINT = 4
 #: the IP time limit (s) of the fallback solve over verified views when the deadline has passed
 LATE_IP_TIME_S = 0.3
+#: ... but the fallback's cover is the plan's: its solve gets at least this long (s), past the deadline if need be
+#: (the connection's reserve follows it), so that its LP gives the lower bound the report states beside the view
+#: count (a 0.3 s solve of a 6,000-point cover on a loaded machine may end before its LP)
+FALLBACK_MIN_IP_TIME_S = 2.0
 #: before the deadline, a batch holds only the lines the time left allows at the measured time per line (at least
 #: this many; the first batch this many, to measure it): a batch that starts just before the deadline ends soon after
 MIN_VERIFY_CHUNK = 16
@@ -219,6 +223,8 @@ class CoverLoop:
         if math.isfinite(remaining):
             # past the deadline the fallback's cover of verified views (a small programme) gets a short solve
             limit = max(min(1.0, max(remaining, LATE_IP_TIME_S)), min(limit, 0.5 * remaining))
+            if self.only_verified:
+                limit = max(limit, min(self.time_limit_s, FALLBACK_MIN_IP_TIME_S))
         sub = matrix if columns.size == len(views) else matrix[:, columns]
         solved = self.settled is None or self.only_verified
         if not solved:

@@ -7,6 +7,7 @@ import time
 import numpy as np
 
 from agiprobot_measurement.planning.report.report import coverable_mask
+from agiprobot_measurement.planning.selection import loop as loop_module
 from agiprobot_measurement.planning.selection.loop import CoverLoop, _Round
 from agiprobot_measurement.planning.selection.problem import coverage_problem
 from agiprobot_measurement.planning.trajectory_manager import TrajectoryManager
@@ -84,3 +85,23 @@ def test_rounds_go_on_after_a_close_out_that_left_time_for_another_round():
     assert not loop.closed_out
     loop.solve_round(1)
     assert not loop.only_verified
+
+
+def test_the_fallback_past_the_deadline_solves_long_enough_for_the_covers_lower_bound(monkeypatch):
+    """The fallback's cover is the plan's: past the deadline its solve still gets FALLBACK_MIN_IP_TIME_S (not the
+    0.3 s of LATE_IP_TIME_S), so its LP gives the bound the report puts beside the view count."""
+    _, loop = _loop(time.perf_counter() + 120.0)
+    loop.close_out()
+    loop.deadline = time.perf_counter() - 5.0  # the deadline long past
+    limits = []
+    solve = loop_module.solve_set_cover
+
+    def recording(*args, **kwargs):
+        limits.append(kwargs["time_limit_s"])
+        return solve(*args, **kwargs)
+
+    monkeypatch.setattr(loop_module, "solve_set_cover", recording)
+    loop.solve_round(1)
+    assert loop.only_verified
+    assert limits == [min(loop.time_limit_s, loop_module.FALLBACK_MIN_IP_TIME_S)]
+    assert loop.result.lower_bound is not None and loop.result.lower_bound <= loop.result.objective
