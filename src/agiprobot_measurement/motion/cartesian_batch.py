@@ -24,7 +24,7 @@ from agiprobot_measurement.motion.cartesian import (
     STOP_JOINT_LIMITS,
     STOP_UNREACHABLE,
 )
-from agiprobot_measurement.motion.cartesian_kernels import TRACK_EXACT, follow_paths, track_paths
+from agiprobot_measurement.motion.cartesian_kernels import TRACK_EXACT, fill_line_poses, follow_paths, track_paths
 from agiprobot_measurement.motion.errors import MotionInputError
 
 __all__ = ["CartesianPaths", "compute_cartesian_paths", "line_poses"]
@@ -84,20 +84,21 @@ def line_poses(
         ]
     )
     offsets = np.concatenate([[0], np.cumsum(steps)])
-    line = np.repeat(np.arange(len(starts)), steps)
-    s = (np.arange(offsets[-1]) - offsets[line] + 1) / steps[line]
-    # Rodrigues' formula of each line's rotation vector scaled by s (the slerp of interpolate_poses)
+    # Rodrigues' formula of each line's rotation vector scaled by s (the slerp of interpolate_poses): the start's
+    # rotation S times I + sin(t) K + (1 - cos(t)) K^2 is S + sin(t) (S K) + (1 - cos(t)) (S K^2)
     axis = np.where(angle[:, None] > 1e-15, rotvec / np.maximum(angle, 1e-300)[:, None], 0.0)
-    x, y, z = axis[line].T
-    k = np.zeros((len(line), 3, 3))
+    x, y, z = axis.T
+    k = np.zeros((len(starts), 3, 3))
     k[:, 0, 1], k[:, 0, 2], k[:, 1, 0], k[:, 1, 2], k[:, 2, 0], k[:, 2, 1] = -z, y, z, -x, -y, x
-    theta = angle[line] * s
-    rotation = np.eye(3) + np.sin(theta)[:, None, None] * k + (1.0 - np.cos(theta))[:, None, None] * (k @ k)
-    poses = np.zeros((len(line), 4, 4))
-    poses[:, :3, :3] = starts[line, :3, :3] @ rotation
-    poses[:, :3, 3] = starts[line, :3, 3] + s[:, None] * (targets[line, :3, 3] - starts[line, :3, 3])
-    poses[:, 3, 3] = 1.0
-    poses[offsets[1:] - 1] = targets  # end exactly on the target
+    start_k = starts[:, :3, :3] @ k
+    poses = fill_line_poses(
+        np.ascontiguousarray(starts, dtype=np.float64),
+        np.ascontiguousarray(targets, dtype=np.float64),
+        np.ascontiguousarray(start_k),
+        np.ascontiguousarray(start_k @ k),
+        np.ascontiguousarray(angle, dtype=np.float64),
+        offsets.astype(np.int64),
+    )
     return poses, offsets
 
 

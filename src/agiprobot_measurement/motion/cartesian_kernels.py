@@ -12,7 +12,7 @@ import numpy as np
 
 from agiprobot_measurement.motion.kinematics_kernels import joint_frame, register_helpers, tip_frame
 
-__all__ = ["TRACK_EXACT", "follow_branches", "follow_paths", "kernels_loaded", "track_paths"]
+__all__ = ["TRACK_EXACT", "fill_line_poses", "follow_branches", "follow_paths", "kernels_loaded", "track_paths"]
 
 #: the least stop code of :func:`track_paths` for a path it cannot settle beyond its count of waypoints: the caller
 #: walks on from there with every IK branch
@@ -29,6 +29,11 @@ def follow_paths(solutions, valid, offsets, starts, jump_threshold, lower, upper
     """Many paths' branch walks with their joint-jump and joint-limit checks, compiled at the first call; see
     :func:`_follow_paths`."""
     return _compiled_paths()(solutions, valid, offsets, starts, jump_threshold, lower, upper)
+
+
+def fill_line_poses(starts, targets, start_k, start_k2, angle, offsets):
+    """The interpolated poses (M, 4, 4) of P lines, compiled at the first call; see :func:`_fill_line_poses`."""
+    return _compiled_line_poses()(starts, targets, start_k, start_k2, angle, offsets)
 
 
 def track_paths(
@@ -56,7 +61,8 @@ def track_paths(
 def kernels_loaded() -> bool:
     """Whether the batched path kernels (:func:`track_paths`, :func:`follow_paths`) are compiled or loaded from
     numba's cache in this process: their first call costs seconds, which a caller near a deadline may not have."""
-    return all(factory.cache_info().currsize and factory().signatures for factory in (_compiled_track, _compiled_paths))
+    factories = (_compiled_track, _compiled_paths, _compiled_line_poses)
+    return all(factory.cache_info().currsize and factory().signatures for factory in factories)
 
 
 @functools.cache
@@ -75,6 +81,36 @@ def _compiled():
     import numba  # lazily, see the module docstring
 
     return numba.njit(cache=True)(_follow_branches)
+
+
+@functools.cache
+def _compiled_line_poses():
+    import numba  # lazily, see the module docstring
+
+    return numba.njit(cache=True)(_fill_line_poses)
+
+
+def _fill_line_poses(starts, targets, start_k, start_k2, angle, offsets):  # pragma: no cover - compiled
+    """Line i's poses in rows ``offsets[i]:offsets[i + 1]`` (n steps, start excluded, the last exactly
+    ``targets[i]``): at s = j / n the position ``(1 - s) p0 + s p1`` (metres) and the rotation ``S + sin(s a) SK +
+    (1 - cos(s a)) SK2`` (Rodrigues' formula of the line's rotation vector scaled by s, times the start's rotation
+    S; ``start_k`` = S K, ``start_k2`` = S K^2 (P, 3, 3) with K the unit axis' skew matrix, ``angle`` (P,) rad)."""
+    n_lines = starts.shape[0]
+    poses = np.zeros((offsets[n_lines], 4, 4))
+    for i in range(n_lines):
+        first, last = offsets[i], offsets[i + 1]
+        n = last - first
+        for j in range(n - 1):
+            s = (j + 1) / n
+            sin_t, one_cos = np.sin(angle[i] * s), 1.0 - np.cos(angle[i] * s)
+            row = first + j
+            for r in range(3):
+                for c in range(3):
+                    poses[row, r, c] = starts[i, r, c] + sin_t * start_k[i, r, c] + one_cos * start_k2[i, r, c]
+                poses[row, r, 3] = starts[i, r, 3] + s * (targets[i, r, 3] - starts[i, r, 3])
+            poses[row, 3, 3] = 1.0
+        poses[last - 1] = targets[i]  # end exactly on the target
+    return poses
 
 
 @functools.cache
