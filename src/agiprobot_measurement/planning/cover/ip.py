@@ -251,6 +251,10 @@ def solve_reduced_ip(sub, costs, tie, integral, solve, deadline, mip_gap, warm_s
         # local columns by how likely a cover is to use them (LP value, then reduced cost): the planner verifies
         # scan lines in this order
         stats["likely_local_columns"] = np.lexsort((rc, -x_lp))
+    else:
+        # no LP in time (or none asked): the dual ascent's weaker bound, so the cover still comes with one
+        lp_bound = sub.dual_ascent_bound(costs)
+        stats["dual_ascent_bound"] = lp_bound
     incumbent = min(candidates, key=lambda c: float(costs[c].sum()))
     if lp is not None and sub.n_cols > SUPPORT_MIP_COLS:
         # A small programme over the columns the LP likes best (least reduced cost) plus the incumbent
@@ -299,5 +303,6 @@ def solve_reduced_ip(sub, costs, tie, integral, solve, deadline, mip_gap, warm_s
     else:
         chosen = np.asarray(incumbent, dtype=np.int64)
         detail = f"{outcome.detail}; kept the heuristic cover"
-    bound = max(lp_bound, min(outcome.bound, ub)) if lp is not None else outcome.bound
+    # the programme holds every cover cheaper than the incumbent (all columns, or those the LP's reduced costs keep)
+    bound = max(lp_bound, min(outcome.bound, ub))
     return chosen, bound, detail

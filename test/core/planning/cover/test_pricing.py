@@ -180,3 +180,28 @@ def test_the_compiled_transpose_equals_scipys():
     assert rows.n_rows == cols.n_cols and rows.n_cols == cols.n_rows
     assert np.array_equal(rows.indptr, csr.indptr) and np.array_equal(rows.indices, csr.indices)
     assert np.array_equal(rows.transpose().indices, cols.indices)  # twice: the columns again
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_dual_ascent_bounds_every_cover_and_stays_below_the_lp(seed):
+    rng = np.random.default_rng(seed)
+    mask = _random_mask(rng, 14, 9, 0.3)
+    costs = rng.uniform(0.5, 2.0, 9)
+    cols, _ = cover_columns.measurable_columns(sparse.csc_array(mask))
+    dual = cols.dual_ascent_bound(costs)  # the uncoverable row is skipped
+    assert 0.0 < dual <= _cheapest_cover(mask, costs) + 1e-9
+    coverable, _ = cover_columns.measurable_columns(sparse.csc_array(mask[mask.any(axis=1)]))
+    _, lp_bound, _, _ = cover_ip.lp_relaxation(coverable, costs, 10.0)
+    assert dual <= lp_bound + 1e-9
+
+
+def test_a_cover_whose_lp_did_not_solve_still_has_a_lower_bound(monkeypatch):
+    """No LP within the time (a large cover on a loaded machine): the dual ascent gives the bound the report puts
+    beside the view count, never above the cover's cost."""
+    rng = np.random.default_rng(7)
+    mask = _random_mask(rng, 60, 40, 0.12)
+    monkeypatch.setattr(cover_ip, "lp_relaxation", lambda *args, **kwargs: None)
+    monkeypatch.setattr(cover_ip, "MIN_MIP_TIME_S", 1e9)  # ... and no time for the integer programme either
+    result = solve_set_cover(sparse.csc_array(mask), "IP_basic", time_limit_s=5.0)
+    assert result.lower_bound is not None and 0 < result.lower_bound <= result.objective
+    assert "dual_ascent_bound" in result.stats
