@@ -123,6 +123,7 @@ class CoverLoop:
     set_cover_time: float = 0.0
     verified_count: int = 0
     line_s: float | None = None  # measured verification time per scan line (s), None before the first batch
+    longest_round_s: float = 0.0  # the longest round so far (s): what the close-out's test expects the next to take
     only_verified: bool = False
     # the points no verified view measures had their views verified before the deadline (:meth:`close_out`): the
     # next round is the fallback over verified views
@@ -437,13 +438,15 @@ class CoverLoop:
         self.pool = np.unique(np.concatenate([np.asarray(c, dtype=np.int64) for c in extra_columns]))
 
     def _close_out_due(self, step: _Round) -> bool:
-        """Whether another round like this one would leave too little time to verify every unverified view of the
-        points no verified view measures (:meth:`close_out`'s most, when all their views fail), at the measured
-        time per line."""
+        """Whether another round as long as the longest so far (this one included) would leave too little time to
+        verify every unverified view of the points no verified view measures (:meth:`close_out`'s most, when all
+        their views fail), at the measured time per line."""
         if not math.isfinite(self.deadline) or self.line_s is None:
             return False
         now = time.perf_counter()
-        spare_s = self.deadline - now - (now - step.started_s) - LATE_IP_TIME_S
+        # the next round may take as long as the longest so far (a solve over all views; a loaded machine)
+        self.longest_round_s = max(self.longest_round_s, now - step.started_s)
+        spare_s = self.deadline - now - self.longest_round_s - LATE_IP_TIME_S
         if sum(v.mechanics_verified is False for v in self.views) * self.line_s < spare_s:
             return False  # even every unverified view would fit: no need to find the open points' ones
         # the problem as the round's verification left it: the views it revived are often the open points' only ones
@@ -523,7 +526,7 @@ class CoverLoop:
                 continue
             self.verify_round(step, round_index)
             if self._close_out_due(step):
-                self.close_out(round_s=time.perf_counter() - step.started_s)
+                self.close_out(round_s=self.longest_round_s)
 
 
 def solve_scp(

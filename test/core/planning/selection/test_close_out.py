@@ -9,6 +9,7 @@ import numpy as np
 from agiprobot_measurement.planning.report.report import coverable_mask
 from agiprobot_measurement.planning.selection import loop as loop_module
 from agiprobot_measurement.planning.selection.loop import CoverLoop, _Round
+from agiprobot_measurement.planning.selection.open_points import open_point_views
 from agiprobot_measurement.planning.selection.problem import coverage_problem
 from agiprobot_measurement.planning.trajectory_manager import TrajectoryManager
 from agiprobot_measurement.station import PACKAGE_ROOT
@@ -62,6 +63,21 @@ def test_close_out_is_due_only_when_another_round_would_leave_too_little_time():
     assert loop._close_out_due(step)
     loop.line_s = None  # nothing verified yet: no estimate
     assert not loop._close_out_due(step)
+
+
+def test_close_out_is_due_when_the_longest_round_so_far_would_leave_too_little_time():
+    """A short round after a long one (a solve over all views, a loaded machine): the next may be as long as the
+    longest, so the close-out starts while its views still fit."""
+    manager, loop = _loop(math.inf)
+    matrix, worst, durations = coverage_problem(manager.run, loop.views, loop.n_points)
+    columns = np.arange(len(loop.views))
+    loop.line_s = 0.01
+    open_s = open_point_views(matrix, loop.views, len(loop.views)).size * loop.line_s
+    short = _Round(columns, matrix, worst, durations, matrix, 1.0, [], [], True, time.perf_counter())
+    loop.deadline = time.perf_counter() + open_s + 5.0  # the open points' views and a short round fit
+    assert not loop._close_out_due(short)
+    loop.longest_round_s = 10.0  # an earlier round took 10 s: another like it would leave too little time
+    assert loop._close_out_due(short)
 
 
 def test_after_a_close_out_the_next_round_is_the_fallback_over_verified_views():
