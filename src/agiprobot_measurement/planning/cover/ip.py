@@ -251,10 +251,12 @@ def solve_reduced_ip(sub, costs, tie, integral, solve, deadline, mip_gap, warm_s
         # local columns by how likely a cover is to use them (LP value, then reduced cost): the planner verifies
         # scan lines in this order
         stats["likely_local_columns"] = np.lexsort((rc, -x_lp))
-    else:
-        # no LP in time (or none asked): the dual ascent's weaker bound, so the cover still comes with one
-        lp_bound = sub.dual_ascent_bound(costs)
-        stats["dual_ascent_bound"] = lp_bound
+    # the bound the cover comes with: the LP's, or where the LP gave none in time (or none was asked) the dual
+    # ascent's, weaker (the reduced-cost test below takes the LP's own bound only: it pairs with the LP's duals)
+    floor = lp_bound
+    if not math.isfinite(floor):
+        floor = sub.dual_ascent_bound(costs)
+        stats["dual_ascent_bound"] = floor
     incumbent = min(candidates, key=lambda c: float(costs[c].sum()))
     if lp is not None and sub.n_cols > SUPPORT_MIP_COLS:
         # A small programme over the columns the LP likes best (least reduced cost) plus the incumbent
@@ -269,19 +271,17 @@ def solve_reduced_ip(sub, costs, tie, integral, solve, deadline, mip_gap, warm_s
     ub = float(costs[incumbent].sum())
     stats["incumbent_objective_normalised"] = ub
     stats["lp_time_s"] = time.perf_counter() - t0
-    if not math.isfinite(lp_bound):
-        settled = False
-    elif integral:
-        settled = math.ceil(lp_bound - 1e-6) >= ub - mip_gap * (ub + offset) - 1e-9
+    if integral:
+        settled = math.ceil(floor - 1e-6) >= ub - mip_gap * (ub + offset) - 1e-9
     else:
-        settled = lp_bound >= ub - max(mip_gap, 1e-9) * (ub + offset) - 1e-12
+        settled = floor >= ub - max(mip_gap, 1e-9) * (ub + offset) - 1e-12
     if settled:
         stats["mip_shape"] = (0, 0)
-        return np.asarray(incumbent, dtype=np.int64), lp_bound, "the LP bound meets the heuristic cover"
+        return np.asarray(incumbent, dtype=np.int64), floor, "the lower bound meets the heuristic cover"
     if deadline - time.perf_counter() < MIN_MIP_TIME_S:
         # no time left: loading a programme of 100k columns into HiGHS alone takes seconds (tilt full)
         stats["mip_shape"] = (0, 0)
-        return np.asarray(incumbent, dtype=np.int64), lp_bound, "no time left for the programme; heuristic cover"
+        return np.asarray(incumbent, dtype=np.int64), floor, "no time left for the programme; heuristic cover"
     keep = np.ones(sub.n_cols, dtype=bool)
     if lp is not None:
         threshold = ub - 1.0 + 1e-6 if integral else ub + 1e-9 * max(ub, 1.0)
@@ -304,5 +304,5 @@ def solve_reduced_ip(sub, costs, tie, integral, solve, deadline, mip_gap, warm_s
         chosen = np.asarray(incumbent, dtype=np.int64)
         detail = f"{outcome.detail}; kept the heuristic cover"
     # the programme holds every cover cheaper than the incumbent (all columns, or those the LP's reduced costs keep)
-    bound = max(lp_bound, min(outcome.bound, ub))
+    bound = max(floor, min(outcome.bound, ub))
     return chosen, bound, detail

@@ -195,12 +195,18 @@ def test_the_dual_ascent_bounds_every_cover_and_stays_below_the_lp(seed):
     assert dual <= lp_bound + 1e-9
 
 
-def test_a_cover_whose_lp_did_not_solve_still_has_a_lower_bound(monkeypatch):
-    """No LP within the time (a large cover on a loaded machine): the dual ascent gives the bound the report puts
-    beside the view count, never above the cover's cost."""
+def _lp_without_bound(sub, costs, *args, **kwargs):
+    """An LP stopped by its time before any dual solution: a primal, no bound."""
+    return np.ones(sub.n_cols), -math.inf, np.asarray(costs, dtype=float), np.zeros(sub.n_rows)
+
+
+@pytest.mark.parametrize("lp", [lambda *args, **kwargs: None, _lp_without_bound], ids=["no_lp", "lp_without_bound"])
+def test_a_cover_whose_lp_did_not_solve_still_has_a_lower_bound(monkeypatch, lp):
+    """No LP bound within the time (a large cover on a loaded machine): the dual ascent gives the bound the report
+    puts beside the view count, never above the cover's cost."""
     rng = np.random.default_rng(7)
     mask = _random_mask(rng, 60, 40, 0.12)
-    monkeypatch.setattr(cover_ip, "lp_relaxation", lambda *args, **kwargs: None)
+    monkeypatch.setattr(cover_ip, "lp_relaxation", lp)
     monkeypatch.setattr(cover_ip, "MIN_MIP_TIME_S", 1e9)  # ... and no time for the integer programme either
     result = solve_set_cover(sparse.csc_array(mask), "IP_basic", time_limit_s=5.0)
     assert result.lower_bound is not None and 0 < result.lower_bound <= result.objective
