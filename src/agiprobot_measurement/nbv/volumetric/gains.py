@@ -60,7 +60,6 @@ __all__ = [
     "ViewModel",
     "camera_ray_directions",
     "evaluate_views",
-    "enclosed_unknown",
     "expected_surface",
     "expected_surface_fields",
     "open_faces",
@@ -217,30 +216,8 @@ class ViewGains:
     seconds: float = 0.0
 
 
-def enclosed_unknown(grid: VoxelMap, closing_vox: int) -> np.ndarray:
-    """The part's inside as far as the map shows it: unknown voxels that the full voxels (the static scene
-    included), with gaps of up to ``closing_vox`` voxels closed, enclose -- with the solid below the grid (the
-    fixture and the table the ROI stands on) counted as closed. A surface still open to the air encloses nothing.
-    The inside of a solid is opaque and never measured: a view whose rays pass a gap of the seen surface into it
-    sees nothing there."""
-    labels = grid.labels()
-    full = labels == FULL
-    if closing_vox <= 0 or not full.any():
-        return np.zeros(grid.shape, dtype=bool)
-    pad = closing_vox + 1
-    # the solid below the grid closes it from beneath; the other sides are open air
-    padded = np.pad(full, pad, mode="constant")
-    padded[:, :, :pad] = True
-    closed = ndimage.binary_closing(padded, structure=np.ones((3, 3, 3), bool), iterations=int(closing_vox))
-    inside = ndimage.binary_fill_holes(closed) & ~closed
-    inside = inside[pad:-pad, pad:-pad, pad:-pad]
-    return inside & (labels == UNKNOWN)
-
-
-def _gain_fields(grid: VoxelMap, max_dist_m: float, interior_closing_vox: int = 0):
-    """Flat per-voxel inputs of the bundle kernel (cached on the map until it changes). With
-    ``interior_closing_vox`` the part's inside (:func:`enclosed_unknown`) is opaque and worth nothing: full to the
-    rays, no entropy, no flags."""
+def _gain_fields(grid: VoxelMap, max_dist_m: float):
+    """Flat per-voxel inputs of the bundle kernel (cached on the map until it changes)."""
 
     def compute():
         labels = grid.labels()
@@ -248,8 +225,6 @@ def _gain_fields(grid: VoxelMap, max_dist_m: float, interior_closing_vox: int = 
         state[labels == EMPTY] = rc.S_EMPTY
         state[(labels == UNKNOWN) & ~grid.observed] = rc.S_UNOBSERVED
         state[labels == FULL] = rc.S_FULL
-        inside = enclosed_unknown(grid, interior_closing_vox)
-        state[inside] = rc.S_FULL
         blocked = (state == rc.S_FULL).astype(np.uint8)
         flags = np.zeros(grid.shape, dtype=np.uint8)
         flags[grid.occlusion_plane_mask()] |= rc.F_OCCPLANE
@@ -282,21 +257,18 @@ def _gain_fields(grid: VoxelMap, max_dist_m: float, interior_closing_vox: int = 
             dist = ndimage.distance_transform_edt(~full) * grid.resolution_m
             ok = (state == rc.S_UNOBSERVED) & (dist > 0) & (dist < max_dist_m)
             pc_value[ok] = max_dist_m - dist[ok]
-        flags[inside] = 0
         prob = grid.probability().astype(np.float64).reshape(-1)
-        entropy = rc.entropy(prob)
-        entropy[inside.reshape(-1)] = 0.0
         return (
             state.reshape(-1),
             blocked.reshape(-1),
             prob,
-            entropy,
+            rc.entropy(prob),
             flags.reshape(-1),
             np.ascontiguousarray(normals.reshape(-1, 3)),
             pc_value.reshape(-1),
         )
 
-    return grid._cached(("gain_fields", float(max_dist_m), int(interior_closing_vox)), compute)
+    return grid._cached(("gain_fields", float(max_dist_m)), compute)
 
 
 def predicted_normals(grid: VoxelMap) -> np.ndarray:
@@ -313,14 +285,11 @@ def evaluate_views(
     rpg_compat: bool = False,
     kolmost_weight: float = 0.5,
     proximity_max_dist_m: float | None = None,
-    interior_closing_vox: int = 0,
 ) -> ViewGains:
     """Gains of camera poses (V, 4, 4) world <- camera (z = optical axis, m) on ``grid`` (see the module docstring).
 
     ``gain`` is one of :data:`GAIN_NAMES`; all metrics come back in ``all_gains`` anyway (one traversal computes
-    them all). ``kolmost_weight`` is the report's ``w`` in ``w cos(a) + 1 - w``. ``interior_closing_vox`` > 0: the
-    part's inside (:func:`enclosed_unknown`) counts as opaque and worth nothing (ours; the published metrics as
-    they are with 0).
+    them all). ``kolmost_weight`` is the report's ``w`` in ``w cos(a) + 1 - w``.
     """
     start = time.perf_counter()
     if gain not in GAIN_NAMES:
@@ -348,7 +317,7 @@ def evaluate_views(
     if n_views == 0:
         empty = np.zeros(0)
         return ViewGains(empty, empty.copy(), np.zeros(0, dtype=np.int64), {name: empty.copy() for name in GAIN_NAMES})
-    state, blocked, prob, ent, flags, normals, pc_value = _gain_fields(grid, max_dist, int(interior_closing_vox))
+    state, blocked, prob, ent, flags, normals, pc_value = _gain_fields(grid, max_dist)
     nx, ny, nz = grid.shape
     parallel = rc.parallel_allowed()
     n_chunks = max(1, min(numba.get_num_threads(), n_views)) if parallel else 1

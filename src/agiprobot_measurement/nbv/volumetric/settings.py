@@ -244,10 +244,6 @@ class PlanningSettings:
     #: the frontier predicts none)
     coverage_fallback_below_mm2: float = 100.0
     coverage_fallback_reach_vox: int = 3  # "next to": within this many planning voxels of a full voxel
-    #: ours: unknown space enclosed by the seen surface (gaps up to this many planning voxels closed, the solid
-    #: below the ROI counted as closed) is the part's inside, opaque and never measurable: its gain terms leave it
-    #: out (0: off)
-    interior_closing_vox: int = 0
     tour: TourSettings = field(default_factory=TourSettings)
 
     @classmethod
@@ -270,7 +266,6 @@ class PlanningSettings:
             "growth_window": ("growth_window", _whole(1, 20)),
             "coverage_fallback_below_mm2": ("coverage_fallback_below_mm2", non_negative),
             "coverage_fallback_reach_vox": ("coverage_fallback_reach_vox", _whole(1, 20)),
-            "interior_closing_vox": ("interior_closing_vox", _whole(0, 5)),
             "tour": ("tour", lambda value, where: TourSettings.from_mapping(_mapping(value, where))),
         }
         return cls(**_parse(values, "planning", rules))

@@ -50,7 +50,6 @@ class OursPolicy(Policy):
         self.fallback_reach_vox = planning.coverage_fallback_reach_vox
         self.exact_evaluated = planning.exact_evaluated
         self.coarse_ray_divisor = planning.coarse_ray_divisor
-        self.interior_closing_vox = planning.interior_closing_vox
 
     def cost_factor(self, expected_area_m2: float) -> float:
         """The share of lambda applied now. ``constant``: 1. ``remaining_surface``: 1 - A / A1, with A the most
@@ -101,8 +100,7 @@ class OursPolicy(Policy):
         """Ours' weighted score (before the motion discount) of camera poses (n, 4, 4) with their expected gains."""
         terms = {"expected_surface": exp_gain}
         if set(self.weights) - {"expected_surface"}:
-            g = evaluate_views(self.context.planning_map, poses, view_model, gain="report",
-                               interior_closing_vox=self.interior_closing_vox)  # fmt: skip
+            g = evaluate_views(self.context.planning_map, poses, view_model, gain="report")
             terms.update(g.all_gains)
         return weighted_score(terms, self.weights, len(poses))
 
