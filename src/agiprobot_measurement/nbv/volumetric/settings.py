@@ -223,10 +223,6 @@ class PlanningSettings:
     ours_weights: dict | None = None  # None: ours' own default
     cost_schedule: str = "constant"
     cost_schedule_power: float = 1.0
-    #: ours: the average-entropy term's weight times (A / A1)^power, A the most new surface a candidate is expected
-    #: to see now and A1 that at the first planned view (0: off, the weight as configured): uncertain space is
-    #: worth looking through while much surface is unseen, and is mostly space no view measures once little is left
-    entropy_fade_power: float = 0.0
     cost_joint_path_s_per_rad: float = 0.0
     expected_surface: dict = field(default_factory=dict)
     gain_rays: tuple[int, int] = (32, 24)
@@ -256,7 +252,6 @@ class PlanningSettings:
             "ours_weights": ("ours_weights", _weights),
             "cost_schedule": ("cost_schedule", _one_of(*COST_SCHEDULES)),
             "cost_schedule_power": ("cost_schedule_power", positive),
-            "entropy_fade_power": ("entropy_fade_power", non_negative),
             "cost_joint_path_s_per_rad": ("cost_joint_path_s_per_rad", non_negative),
             "expected_surface": ("expected_surface", _mapping),
             "gain_rays": ("gain_rays", _ray_bundle),

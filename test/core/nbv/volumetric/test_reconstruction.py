@@ -257,20 +257,6 @@ def test_ours_counts_motion_fully_by_default_and_as_the_surface_runs_out_with_th
     assert ramp.cost_factor(0.0) == 1.0
 
 
-def test_the_entropy_term_fades_as_the_predicted_surface_runs_out_only_when_asked():
-    weights = {"proximity_count": 1.0, "average_entropy": 2.0, "rear_side_voxel": 0.5}
-    plain = ours_policy(ours_weights=weights)
-    assert [plain.term_weights(a) for a in (0.02, 0.005, 0.0)] == [weights] * 3
-    fading = ours_policy(ours_weights=weights, entropy_fade_power=1.0)
-    assert fading.term_weights(0.02) == weights  # the first planned view: as configured
-    assert fading.term_weights(0.005)["average_entropy"] == pytest.approx(0.5)  # a quarter of the surface left
-    assert fading.term_weights(0.0)["average_entropy"] == 0.0
-    assert fading.term_weights(0.0)["proximity_count"] == 1.0 and fading.weights == weights  # the others stay
-    squared = ours_policy(ours_weights=weights, entropy_fade_power=2.0)
-    squared.term_weights(0.02)
-    assert squared.term_weights(0.01)["average_entropy"] == pytest.approx(0.5)
-
-
 def test_a_higher_schedule_power_lets_motion_count_later():
     squared = ours_policy(cost_schedule="remaining_surface", cost_schedule_power=2.0)
     assert squared.cost_factor(0.02) == 0.0

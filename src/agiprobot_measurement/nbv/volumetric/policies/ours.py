@@ -44,30 +44,12 @@ class OursPolicy(Policy):
         self.model = ExpectedSurfaceModel.from_config(planning.expected_surface)
         self.cost_schedule = planning.cost_schedule
         self.cost_schedule_power = planning.cost_schedule_power
-        self.entropy_fade_power = planning.entropy_fade_power
         self.cost_s_per_rad = planning.cost_joint_path_s_per_rad
         self.first_expected_area_m2 = None
         self.fallback_below_mm2 = planning.coverage_fallback_below_mm2
         self.fallback_reach_vox = planning.coverage_fallback_reach_vox
         self.exact_evaluated = planning.exact_evaluated
         self.coarse_ray_divisor = planning.coarse_ray_divisor
-
-    def remaining_share(self, expected_area_m2: float) -> float:
-        """A / A1 (clipped to [0, 1]): the most new surface any candidate is expected to see now over that at the
-        first planned view (1 before the first, or when the first expected none)."""
-        if self.first_expected_area_m2 is None:
-            self.first_expected_area_m2 = expected_area_m2
-        if self.first_expected_area_m2 <= 0:
-            return 1.0
-        return float(np.clip(expected_area_m2 / self.first_expected_area_m2, 0.0, 1.0))
-
-    def term_weights(self, expected_area_m2: float) -> dict:
-        """Ours' score weights now: the configured ones, the average-entropy term's faded by ``(A / A1)^power``
-        (``planning.entropy_fade_power``; 0: as configured)."""
-        weights = dict(self.weights)
-        if self.entropy_fade_power > 0 and "average_entropy" in weights:
-            weights["average_entropy"] *= self.remaining_share(expected_area_m2) ** self.entropy_fade_power
-        return weights
 
     def cost_factor(self, expected_area_m2: float) -> float:
         """The share of lambda applied now. ``constant``: 1. ``remaining_surface``: 1 - A / A1, with A the most
@@ -80,7 +62,8 @@ class OursPolicy(Policy):
             self.first_expected_area_m2 = expected_area_m2
         if self.first_expected_area_m2 <= 0:
             return 1.0
-        return (1.0 - self.remaining_share(expected_area_m2)) ** self.cost_schedule_power
+        share_seen = float(np.clip(1.0 - expected_area_m2 / self.first_expected_area_m2, 0.0, 1.0))
+        return share_seen**self.cost_schedule_power
 
     def scored_pool(self, q):
         """(candidates, stats, feasible indices, expected gain, expected new area (m^2), utilities) of the pool at
@@ -97,14 +80,13 @@ class OursPolicy(Policy):
         discount = np.exp(-c.cost_weight * self.cost_factor(float(exp_area.max())) * cost)
         exact = len(idx) <= self.exact_evaluated or self.exact_evaluated <= 0
         view_model = c.view_model if exact else coarse_view(c.view_model, self.coarse_ray_divisor)
-        weights = self.term_weights(float(exp_area.max()))
-        utilities = self._score(cands.poses[idx], exp_gain, view_model, weights)
+        utilities = self._score(cands.poses[idx], exp_gain, view_model)
         utilities *= discount
         if not exact:
             # coarse to fine: the best by the coarse bundle are scored with the full one (each term normalised
             # within them) and the choice is among them; the others keep their coarse utility, ranked below
             top = np.argsort(-utilities, kind="stable")[: self.exact_evaluated]
-            fine = self._score(cands.poses[idx[top]], exp_gain[top], c.view_model, weights) * discount[top]
+            fine = self._score(cands.poses[idx[top]], exp_gain[top], c.view_model) * discount[top]
             rest = np.ones(len(idx), dtype=bool)
             rest[top] = False
             if rest.any():
@@ -114,13 +96,13 @@ class OursPolicy(Policy):
         self.remember(cands, utilities)
         return cands, stats, idx, exp_gain, exp_area, utilities
 
-    def _score(self, poses: np.ndarray, exp_gain: np.ndarray, view_model: ViewModel, weights: dict) -> np.ndarray:
+    def _score(self, poses: np.ndarray, exp_gain: np.ndarray, view_model: ViewModel) -> np.ndarray:
         """Ours' weighted score (before the motion discount) of camera poses (n, 4, 4) with their expected gains."""
         terms = {"expected_surface": exp_gain}
-        if set(weights) - {"expected_surface"}:
+        if set(self.weights) - {"expected_surface"}:
             g = evaluate_views(self.context.planning_map, poses, view_model, gain="report")
             terms.update(g.all_gains)
-        return weighted_score(terms, weights, len(poses))
+        return weighted_score(terms, self.weights, len(poses))
 
     def choose(self, q):
         return self.choose_from(q, *self.scored_pool(q))
