@@ -4,21 +4,33 @@
 :class:`~agiprobot_measurement.nbv.simulation.ground_truth.GroundTruth` over its feasible poses with the project's
 :func:`~agiprobot_measurement.planning.cover.solve.solve_set_cover` (the lower bound on views) and gives the greedy
 max-coverage order for the 90 / 95 % counts; :func:`oracle_path_curve` the coverage over the straight joint path of
-a greedy planner that knows the truth, :func:`oracle_tour_curve` that of a set cover visited in the shortest tour; :class:`GainQuality` scores each gain's choice against the truly best view.
+a greedy planner that knows the truth, :func:`oracle_tour_curve` that of a set cover visited in the shortest tour; :class:`GainQuality` scores each gain's choice against the truly best view. :class:`TruthLoopPolicy` is the truth-aware greedy *inside* the loop (ours' pool, noise, fusion and
+reachability; the choice by the true new observable points): the benchmark's ``oracle_loop`` methods.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.nbv.simulation.ground_truth import GroundTruth, views_to
+from agiprobot_measurement.nbv.volumetric.candidates import Candidates
 from agiprobot_measurement.nbv.volumetric.gains import ExpectedSurfaceModel, expected_surface
 from agiprobot_measurement.nbv.volumetric.policies.base import weighted_score
+from agiprobot_measurement.nbv.volumetric.policies.ours import OursPolicy
 from agiprobot_measurement.nbv.volumetric.tour import greedy_cover, order_tour
 from agiprobot_measurement.planning.cover.solve import solve_set_cover
 from agiprobot_measurement.sensors.phoxi.renderer import RayCaster, SceneGeometry
 
-__all__ = ["ORACLE_PATH_PLANNERS", "GainQuality", "oracle_path_curve", "oracle_tour_curve", "oracle_views"]
+__all__ = [
+    "ORACLE_LOOP_POOLS",
+    "ORACLE_PATH_PLANNERS",
+    "GainQuality",
+    "TruthLoopPolicy",
+    "oracle_path_curve",
+    "oracle_tour_curve",
+    "oracle_views",
+]
 
 
 def oracle_views(truth: GroundTruth, time_limit_s: float = 20.0) -> dict:
@@ -198,3 +210,66 @@ class GainQuality:
         if not self.decisions:
             return {}
         return {name: float(np.mean([d[name] for d in self.decisions])) for name in self.decisions[0]}
+
+
+#: the benchmark's in-loop oracles: method name -> the pool its truth-aware choice is made from
+ORACLE_LOOP_POOLS = {"oracle_loop": "ours", "oracle_loop_all": "all", "oracle_loop_gt": "gt"}
+
+
+class TruthLoopPolicy(OursPolicy):
+    """The truth-aware greedy inside ours' loop: the same opening view, sensor noise, fusion, filters
+    (reachability, collision with the scene and the not-yet-known-free region, tabu) and motion as ours, but each
+    view the feasible candidate that measures the most observable ground-truth points not yet covered (exact
+    visibility from its pose, :meth:`GroundTruth.visible_from`). It runs to the budget (no stopping rule).
+
+    ``pool``: ``ours`` -- ours' pool as ours scores it (frontier + sphere after the evaluation limit of
+    ``planning.max_evaluated``); ``all`` -- every feasible candidate of ours' generator (no limit); ``gt`` -- the
+    ground truth's dense pose set (the offline oracle's, three standoffs, aimed at the part's centre) through the
+    same filter chain. Splits the gap between the offline truth-aware greedy and ours into pool, noise / fusion /
+    reachability, and scoring."""
+
+    name = "oracle_loop"
+    uses_stopping_rule = False
+
+    def __init__(self, context, planning, truth: GroundTruth, pool: str = "ours"):
+        if pool not in ORACLE_LOOP_POOLS.values():
+            raise InputError(f"unknown oracle pool {pool!r}; one of {', '.join(ORACLE_LOOP_POOLS.values())}")
+        super().__init__(context, planning)
+        self.truth = truth
+        self.pool_kind = pool
+        st = truth.station
+        self._caster = RayCaster(SceneGeometry.concatenate([st.static_geometry, st.part_geometry]))
+
+    def true_gain(self, poses: np.ndarray) -> np.ndarray:
+        """Observable ground-truth points not yet covered that each pose (n, 4, 4) measures validly."""
+        todo = self.truth.observable & ~self.truth.covered
+        return np.array([np.count_nonzero(self.truth.visible_from(p, self._caster) & todo) for p in poses], float)
+
+    def _candidates(self, q):
+        c = self.context
+        if self.pool_kind == "ours":
+            cands, _ = self.pool(q)
+            return cands
+        if self.pool_kind == "all":
+            cands, _ = c.generator.generate(c.planning_map, c.roi_min_m, c.roi_max_m, q, c.sources, c.tabu)
+            return cands
+        poses = self.truth.visibility.poses
+        aim = np.broadcast_to(self.truth.station.part_mesh.bounding_box.centroid, (len(poses), 3)).copy()
+        cands = Candidates(poses.copy(), aim, np.full(len(poses), -1), np.full(len(poses), "sphere", dtype=object))
+        return c.generator.filter(cands, c.planning_map, c.roi_min_m, c.roi_max_m, q, c.tabu)
+
+    def choose(self, q):
+        cands = self._candidates(q)
+        stats = self.stats(cands)
+        idx = np.nonzero(cands.feasible)[0]
+        if not len(idx):
+            self.remember(cands, None)
+            return None, "frontier_exhausted", stats
+        gain = self.true_gain(cands.poses[idx])
+        self.remember(cands, gain)
+        if not np.any(gain > 0):
+            return None, "frontier_exhausted", stats
+        # no expected area: the oracle's views are never "surprises" (it knows what they see)
+        choice, fallbacks = self.ranked(cands, idx, gain, gain, np.zeros(len(idx)))
+        stats["fallbacks"] = fallbacks
+        return choice, "", stats

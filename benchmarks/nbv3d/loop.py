@@ -54,7 +54,7 @@ from agiprobot_measurement.nbv.volumetric.gain_names import GAIN_NAMES
 from agiprobot_measurement.nbv.volumetric.request import METHODS, ReconstructionRequest
 from agiprobot_measurement.nbv.volumetric.station3d import load_nbv_config
 from benchmarks.harness import ROOT, load_conditions, number_value, parse_key_values, write_json
-from benchmarks.nbv_oracles import GainQuality, oracle_views
+from benchmarks.nbv_oracles import ORACLE_LOOP_POOLS, GainQuality, TruthLoopPolicy, oracle_views
 
 CONDITIONS = load_conditions("nbv3d_loop")
 SHARED = (ROOT / CONDITIONS["parts_dir"]).resolve()
@@ -248,6 +248,13 @@ def main(argv=None) -> int:
         "each gain's best candidate gets (1 = it picks the truly best view)",
     )
     parser.add_argument(
+        "--decisions",
+        type=int,
+        default=8,
+        help="with --gain-quality: how many of ours' decisions are scored (default 8: the opening game; up to "
+        "--max-views for the tail too; the JSON keeps every decision's shares)",
+    )
+    parser.add_argument(
         "--compare-weights",
         action="append",
         default=[],
@@ -256,6 +263,9 @@ def main(argv=None) -> int:
         "(repeatable), e.g. proximity_count=1,report=0.3",
     )
     parser.add_argument("--pixel-step", type=int, default=DEFAULTS["pixel_step"])
+    parser.add_argument(
+        "--noise-free", action="store_true", help="the simulated PhoXi without noise (default: config/nbv.yaml's)"
+    )
     parser.add_argument(
         "--gt-spacing", type=float, default=DEFAULTS["gt_spacing_m"], help="ground-truth point spacing (m)"
     )
@@ -357,12 +367,13 @@ def gain_quality(args) -> int:
     for name, (part, units, extent) in zip(objects, specs, strict=True):
         station = SimulatedNBVStation(part, units, extent, seed=args.seed, pixel_step=args.pixel_step, config=config)
         truth = GroundTruth(station, spacing_m=args.gt_spacing, directions=args.gt_directions)
-        hook = GainQuality(truth, mixes=mixes)
+        hook = GainQuality(truth, max_decisions=args.decisions, mixes=mixes)
         request = ReconstructionRequest.with_config_defaults(
             gain="ours", max_views=args.max_views, seed=args.seed, **ours_options
         )
         simulate(station, request, truth, chamfer=False, on_scored=hook)
         results["gain_quality"][name] = {"decisions": len(hook.decisions), **hook.summary()}
+        results.setdefault("gain_quality_decisions", {})[name] = hook.decisions
         print(f"[{name}] {len(hook.decisions)} decisions scored", file=sys.stderr)
     rows = results["gain_quality"]
     names = sorted({k for r in rows.values() for k in r if k != "decisions"})
@@ -379,13 +390,15 @@ def gain_quality(args) -> int:
 
 def run(args) -> int:
     for m in args.methods:
-        if m != "oracle" and m not in METHODS:
-            raise InputError(f"unknown method {m!r}; known: {', '.join([*METHODS, 'oracle'])}")
+        if m != "oracle" and m not in METHODS and m not in ORACLE_LOOP_POOLS:
+            raise InputError(f"unknown method {m!r}; known: {', '.join([*METHODS, 'oracle', *ORACLE_LOOP_POOLS])}")
     objects, specs, config, ours_options, options = _setup(args)
-    results = {"max_views": args.max_views, "pixel_step": args.pixel_step, **options, "set": args.set, "objects": {}}
+    results = {"max_views": args.max_views, "pixel_step": args.pixel_step, **options, "set": args.set,
+               "noise_free": bool(args.noise_free), "objects": {}}  # fmt: skip
     for name, (part, units, extent) in zip(objects, specs, strict=True):
         t = time.perf_counter()
-        station = SimulatedNBVStation(part, units, extent, seed=args.seed, pixel_step=args.pixel_step, config=config)
+        station = SimulatedNBVStation(part, units, extent, seed=args.seed, pixel_step=args.pixel_step, config=config,
+                                      noise=False if args.noise_free else None)  # fmt: skip
         truth = GroundTruth(station, spacing_m=args.gt_spacing, directions=args.gt_directions)
         entry = {
             "extent_mm": float(station.part_mesh.extents.max() * 1000),
@@ -417,9 +430,20 @@ def run(args) -> int:
                     overrides["cost_weight"] = 0.0  # rpg's default
                 if method in ("ours", "ours_tour"):
                     overrides.update(ours_options)
+                factory = None
+                if method in ORACLE_LOOP_POOLS:
+                    # the truth-aware greedy inside ours' loop (ours' request, the choice by the true new points)
+                    overrides["gain"] = "ours"
+                    overrides.update(ours_options)
+
+                    def factory(context, planning, pool=ORACLE_LOOP_POOLS[method]):
+                        return TruthLoopPolicy(context, planning, truth, pool)
+
                 request = ReconstructionRequest.with_config_defaults(**overrides)
                 try:
-                    summary = simulate(station, request, truth, chamfer=not args.no_chamfer, budget_run=budget)
+                    summary = simulate(station, request, truth, chamfer=not args.no_chamfer, budget_run=budget,
+                                       policy_factory=factory)  # fmt: skip
+                    summary["method"] = method
                 except AgiprobotError as exc:  # e.g. a motion the time parameterisation refuses: noted, not fatal
                     entry.setdefault("failed_runs", []).append({"method": method, "seed": seed, "error": str(exc)})
                     print(f"[{name}] {method} seed {seed}: FAILED {exc}", file=sys.stderr)

@@ -236,15 +236,19 @@ def simulate(
     chamfer: bool = True,
     budget_run: bool = False,
     on_scored=None,
+    policy_factory=None,
 ) -> dict:
     """One reconstruction on the simulated station (a fresh robot at the home pose and camera; the ground truth's
     coverage is reset): the result plus the benchmark's metrics as a JSON-ready summary. ``on_scored``: the
-    reconstructor's hook called with every scored candidate pool (e.g. a :class:`GainQuality`)."""
+    reconstructor's hook called with every scored candidate pool (e.g. a :class:`GainQuality`); ``policy_factory``:
+    the reconstructor's (None: the request's method)."""
     robot = SimulatedRobot(station)
     camera = SimulatedPhoXiCamera(station, robot, first_frame_index=1000 * int(request.seed))
     if ground_truth is not None:
         ground_truth.reset()
-    recon = Reconstructor(robot, camera, request, station=station, ground_truth=ground_truth)
+    recon = Reconstructor(
+        robot, camera, request, station=station, ground_truth=ground_truth, policy_factory=policy_factory
+    )
     recon.on_scored = on_scored
     stop = {}
     if budget_run:
