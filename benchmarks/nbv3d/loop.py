@@ -436,7 +436,7 @@ def run(args) -> int:
                     overrides["gain"] = "ours"
                     overrides.update(ours_options)
 
-                    def factory(context, planning, pool=ORACLE_LOOP_POOLS[method]):
+                    def factory(context, planning, pool=ORACLE_LOOP_POOLS[method], truth=truth):
                         return TruthLoopPolicy(context, planning, truth, pool)
 
                 request = ReconstructionRequest.with_config_defaults(**overrides)
