@@ -187,7 +187,7 @@ def _walk(ik, poses, pose_offsets, start_q, jump):
             upper,
             jump,
             TRACK_MARGIN_RAD,
-            *ik.closed_form_parameters(),
+            ik.elbow_links(),
         )
         exact = np.flatnonzero(codes >= TRACK_EXACT)
         resume = states[pose_offsets[exact] + exact + counts[exact]]

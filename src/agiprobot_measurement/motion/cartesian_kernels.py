@@ -37,7 +37,7 @@ def fill_line_poses(starts, targets, start_k, start_k2, angle, offsets):
 
 
 def track_paths(
-    poses, offsets, starts, shoulder_gap, pre, axes, tip, lower, upper, jump_threshold, margin, dh, base_inv, tip_inv
+    poses, offsets, starts, shoulder_gap, pre, axes, tip, lower, upper, jump_threshold, margin, elbow_links
 ):
     """Many paths followed by Newton steps from state to state; see :func:`_track_paths`."""
     return _compiled_track()(
@@ -52,9 +52,7 @@ def track_paths(
         upper,
         jump_threshold,
         margin,
-        dh,
-        base_inv,
-        tip_inv,
+        elbow_links,
     )
 
 
@@ -71,7 +69,7 @@ def _compiled_track():
     from numba.extending import register_jitable
 
     register_helpers()
-    for helper in (_newton, _track_work, _wrapped_distance, _limit_class, _product, _reachable):
+    for helper in (_newton, _track_work, _wrapped_distance, _limit_class):
         register_jitable(helper)
     return numba.njit(cache=True)(_track_paths)
 
@@ -360,70 +358,8 @@ def _limit_class(q, lower, upper):  # pragma: no cover - compiled
     return worst
 
 
-def _product(a, b):  # pragma: no cover - compiled
-    """The 4 x 4 matrix product ``a @ b``."""
-    out = np.zeros((4, 4))
-    for r in range(4):
-        for c in range(4):
-            acc = 0.0
-            for m in range(4):
-                acc += a[r, m] * b[m, c]
-            out[r, c] = acc
-    return out
-
-
-def _reachable(pose, dh, base_inv, tip_inv):  # pragma: no cover - compiled
-    """Whether some branch of the UR closed form (``URAnalyticIK._solve_raw``, the same formulas) passes its
-    domain tests for ``pose`` (4, 4): the wrist centre at least d4 from the joint-1 axis and, for a shoulder and
-    wrist branch, the planar arm's cos(q3) within [-1, 1] (both with the domain slack ``dh[6]``). True also where
-    |sin q5| < ``dh[7]`` (a singular wrist: q6 would come from a seed): only a False is a verdict."""
-    d1, a2, a3, d4, d5, d6, slack, singular = dh[0], dh[1], dh[2], dh[3], dh[4], dh[5], dh[6], dh[7]
-    target = _product(_product(base_inv, pose), tip_inv)  # the pose of DH frame 6 in the DH base
-    wx = target[0, 3] - d6 * target[0, 2]
-    wy = target[1, 3] - d6 * target[1, 2]
-    ratio = d4 / max(np.hypot(wx, wy), 1e-300)
-    if ratio > 1.0 + slack:
-        return False
-    psi = np.arctan2(wy, wx)
-    phi = np.arcsin(min(max(ratio, -1.0), 1.0))
-    for q1 in (psi + phi, psi + np.pi - phi):
-        s1, c1 = np.sin(q1), np.cos(q1)
-        row_x = s1 * target[0, 0] - c1 * target[1, 0]
-        row_y = s1 * target[0, 1] - c1 * target[1, 1]
-        c5 = s1 * target[0, 2] - c1 * target[1, 2]
-        s5_abs = np.hypot(row_x, row_y)
-        if s5_abs < singular:
-            return True
-        for sign in (1.0, -1.0):
-            q5 = np.arctan2(s5_abs * sign, c5)
-            q6 = np.arctan2(-row_y * sign, row_x * sign)
-            # frame 4's origin in frame 1: T01^-1 T06 T46^-1 applied to the origin, T46 = DH(q5, d5, 0, -pi/2)
-            # DH(q6, d6, 0, 0) with the rotation R46 = Rz(q5) Rx(-pi/2) Rz(q6) and p46 = (-d6 s5, d6 c5, d5);
-            # T46^-1's origin is -R46^T p46 (in frame 6)
-            s5, cq5 = np.sin(q5), np.cos(q5)
-            s6, c6 = np.sin(q6), np.cos(q6)
-            # R46 = Rz(q5) Rx(-pi/2) Rz(q6); its columns
-            r00, r01, r02 = cq5 * c6, -cq5 * s6, -s5
-            r10, r11, r12 = s5 * c6, -s5 * s6, cq5
-            r20, r21, r22 = -s6, -c6, 0.0
-            p0, p1, p2 = -s5 * d6, cq5 * d6, d5
-            o0 = -(r00 * p0 + r10 * p1 + r20 * p2)
-            o1 = -(r01 * p0 + r11 * p1 + r21 * p2)
-            o2 = -(r02 * p0 + r12 * p1 + r22 * p2)
-            # that point in the base frame (target), then in frame 1 (T01 = DH(q1, d1, 0, pi/2))
-            bx = target[0, 0] * o0 + target[0, 1] * o1 + target[0, 2] * o2 + target[0, 3]
-            by = target[1, 0] * o0 + target[1, 1] * o1 + target[1, 2] * o2 + target[1, 3]
-            bz = target[2, 0] * o0 + target[2, 1] * o1 + target[2, 2] * o2 + target[2, 3]
-            px = c1 * bx + s1 * by
-            py = bz - d1
-            cos3 = (px * px + py * py - a2 * a2 - a3 * a3) / (2.0 * a2 * a3)
-            if abs(cos3) <= 1.0 + slack:
-                return True
-    return False
-
-
 def _track_paths(
-    poses, offsets, starts, shoulder_gap, pre, axes, tip, lower, upper, jump_threshold, margin, dh, base_inv, tip_inv
+    poses, offsets, starts, shoulder_gap, pre, axes, tip, lower, upper, jump_threshold, margin, elbow_links
 ):  # pragma: no cover - compiled
     """The joint states of P Cartesian paths by continuation: each waypoint's state is found by damped Newton
     steps on the model's kinematics from the previous one, and the path stops as :func:`_follow_paths` stops it.
@@ -439,9 +375,7 @@ def _track_paths(
     and the kept state has every joint within its limits (:func:`_limit_class`). The elbow's mirror either lies
     that far too (2 |q3| on joint 3) or is solved for (the planar two-link arm of the DH lengths a2, a3 mirrored,
     then Newton on the model): of the tracked state and the mirror the walk keeps the nearer one within the limits,
-    and so does this. Where Newton fails on a pose the closed form cannot reach with any branch (:func:`_reachable`
-    with ``dh``, ``base_inv``, ``tip_inv`` of ``URAnalyticIK.closed_form_parameters``), the path ends there as
-    unreachable, as the walk ends it. UR joint order (shoulder
+    and so does this (``elbow_links``: the DH lengths a2, a3 m of the closed form). UR joint order (shoulder
     pan, lift, elbow, wrist 1, 2, 3) assumed. Chain as :func:`chain_frames`.
     """
     m = poses.shape[0]
@@ -457,7 +391,7 @@ def _track_paths(
     # the wrist flip (pi on joint 6) may lie within reach of the largest move: every path goes to the exact walk
     all_exact = 2.0 * np.sqrt(dof) * max_move + margin >= np.pi
     work = _track_work(dof)
-    a2, a3 = dh[1], dh[2]
+    a2, a3 = elbow_links[0], elbow_links[1]
     q = np.zeros(dof)
     twin = np.zeros(dof)
     start_q = np.zeros(dof)
@@ -480,10 +414,7 @@ def _track_paths(
                 for d in range(dof):
                     q[d] += velocity[d]  # the last move as the predictor: one Newton step is then enough
             if not _newton(q, poses[k], pre, axes, tip, work):
-                if _reachable(poses[k], dh, base_inv, tip_inv):
-                    count, code = k - first, 6
-                else:  # no branch of the closed form reaches the pose: the walk stops before it
-                    count, code = k - first, 1
+                count, code = k - first, 6  # the walk over every branch decides (a pose out of reach: it ends)
                 break
             moved = _wrapped_distance(q, start_q)
             kept = _limit_class(q, lower, upper)

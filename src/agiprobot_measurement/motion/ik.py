@@ -347,14 +347,10 @@ class URAnalyticIK:
         ratio = self.d4 / np.maximum(radius, 1e-300)
         return np.where(ratio <= 1.0, np.pi - 2.0 * np.arcsin(np.minimum(ratio, 1.0)), 0.0)
 
-    def closed_form_parameters(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(dh (8,): d1, a2, a3, d4, d5, d6 m, the domain slack of the closed form's acos/asin arguments and the
-        |sin q5| below which the wrist counts as singular; the
-        inverse of the chain base -> DH base transform (4, 4); the inverse of the DH frame 6 -> tip transform
-        (4, 4)): what a compiled kernel needs to repeat the closed form's reachability test
+    def elbow_links(self) -> np.ndarray:
+        """(2,) m: the DH lengths a2, a3 of the planar arm, with which a compiled kernel mirrors the elbow
         (:func:`~agiprobot_measurement.motion.cartesian_kernels.track_paths`)."""
-        dh = [self.d1, self.a2, self.a3, self.d4, self.d5, self.d6, self._domain_slack, _WRIST_SINGULAR]
-        return np.array(dh, dtype=float), self._base_inv.copy(), self._tip_inv.copy()
+        return np.array([self.a2, self.a3], dtype=float)
 
     def refine(
         self,
