@@ -51,6 +51,7 @@ from agiprobot_measurement.nbv.simulation.families3d import FAMILY_SETS, family_
 from agiprobot_measurement.nbv.simulation.ground_truth import GroundTruth, auc, simulate, views_to
 from agiprobot_measurement.nbv.simulation.station3d import SimulatedNBVStation
 from agiprobot_measurement.nbv.volumetric.gain_names import GAIN_NAMES
+from agiprobot_measurement.nbv.volumetric.policies.ours import OursPolicy
 from agiprobot_measurement.nbv.volumetric.request import METHODS, ReconstructionRequest
 from agiprobot_measurement.nbv.volumetric.station3d import load_nbv_config
 from benchmarks.harness import ROOT, load_conditions, number_value, parse_key_values, write_json
@@ -300,7 +301,7 @@ def ours_weights(options: list[str], flag: str = "--ours-weight") -> dict | None
     unknown term or a weight that is not a finite number >= 0 is refused with its name."""
     if not options:
         return None
-    known = ("expected_surface", *GAIN_NAMES)
+    known = (*OursPolicy.own_terms, *GAIN_NAMES)
     out = parse_key_values(options, flag, "TERM=WEIGHT", known, lambda _, text: number_value(text, low=0.0))
     if not any(out.values()):
         raise InputError(f"{flag}: at least one weight must be positive")

@@ -273,6 +273,7 @@ def simulate(
     summary["render_s"] = [round(float(s), 4) for s in camera.render_s]
     if budget_run:
         summary["stop"] = stop  # empty: the rule never fired before the budget (or another reason ended the run)
+        summary["stop_history"] = list(recon.stopping.history)
     if ground_truth is not None:
         curve = [float(v.coverage) for v in result.views]
         summary["coverage_curve"] = curve

@@ -22,7 +22,8 @@ Modules (imported on demand; this file stays light):
   plane, predicted surface and exports, with :mod:`.map_parts` (raw points, static surface samples),
   :mod:`.pooling` (coarse copies) and :mod:`.raycast3d` (its numba kernels);
 - :mod:`.gains` the seven volumetric information gains and the report's, PhoXi-aware, and the utilities (their names
-  in :mod:`.gain_names`, light to import);
+  in :mod:`.gain_names`, light to import); :mod:`.sampling` the seen surface sampled too sparsely and the fused
+  points' open borders (ours' ``undersampled_surface`` term);
 - :mod:`.meshing` projective TSDF and marching cubes;
 - :mod:`.interfaces` the robot and camera the loop needs (implemented by the simulation and by
   ``agiprobot_measurement.ros.nbv_interfaces`` on the station);

@@ -64,6 +64,7 @@ __all__ = [
     "expected_surface_fields",
     "open_faces",
     "predicted_normals",
+    "undersampled_surface",
     "utility",
 ]
 
@@ -692,6 +693,41 @@ def expected_surface(
     if len(poses) == 0:
         return np.zeros(0), np.zeros(0)
     weight, normals = expected_surface_fields(grid, model)
+    return _surface_bundle(grid, poses, view, weight, normals, float(model.kolmost_weight), 0.0, 0.0)
+
+
+def undersampled_surface(
+    grid: VoxelMap,
+    camera_poses: np.ndarray,
+    view: ViewModel,
+    weight: np.ndarray,
+    pitch_rad: float,
+    radius_m: float,
+    normals: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Expected newly *densely* measured seen surface of camera poses (V, 4, 4): ``(gain (V,), area_m2 (V,))``,
+    both the sum over the full voxels a view measures (the ray's first full voxel, in range, lit, both incidences
+    within ``max_incidence_rad`` of the fused normal) of ``weight x min(1, pi radius_m^2 / s^2)``: ``weight`` (flat,
+    per planning voxel) the share of its surface no fused point lies within ``radius_m`` of (see
+    :mod:`.sampling`), ``s = pitch_rad x distance / cos(incidence)`` the view's sample spacing there (m).
+    ``normals`` (flat, 3): the directions the incidence is taken to (None: the fused normals)."""
+    poses = np.asarray(camera_poses, dtype=np.float64)
+    if poses.shape == (4, 4):
+        poses = poses[None]
+    if poses.ndim != 3 or poses.shape[1:] != (4, 4) or not np.all(np.isfinite(poses)):
+        raise InputError(f"camera_poses must be a finite (V, 4, 4) array, got shape {poses.shape}")
+    weight = np.ascontiguousarray(weight, dtype=np.float64).reshape(-1)
+    if weight.shape != (grid.n_voxels,):
+        raise InputError(f"weight must have one value per planning voxel ({grid.n_voxels}), got {weight.shape}")
+    if len(poses) == 0 or not pitch_rad > 0 or not np.any(weight > 0):
+        return np.zeros(len(poses)), np.zeros(len(poses))
+    normals = predicted_normals(grid) if normals is None else np.ascontiguousarray(normals, dtype=np.float64)
+    return _surface_bundle(grid, poses, view, weight, normals, 0.0, float(pitch_rad), float(radius_m))
+
+
+def _surface_bundle(grid, poses, view, weight, normals, kolmost_weight, pitch_rad, radius_m):
+    """The predicted-surface ray cast (:func:`.raycast3d.expected_surface_bundle`) of ``poses`` over per-voxel
+    ``weight`` and ``normals``: (gain (V,), area (V,) m^2)."""
     blocked = (grid.labels() == FULL).reshape(-1).astype(np.uint8)
     nx, ny, nz = grid.shape
     parallel = rc.parallel_allowed()
@@ -711,6 +747,8 @@ def expected_surface(
         float(view.range_min_m),
         float(view.range_max_m),
         math.cos(view.max_incidence_rad),
-        float(model.kolmost_weight),
+        float(kolmost_weight),
+        float(pitch_rad),
+        float(radius_m),
     )
     return gain, vox * grid.resolution_m**2

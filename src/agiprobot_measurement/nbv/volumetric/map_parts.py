@@ -13,11 +13,13 @@ __all__ = ["RawPoints", "surface_samples_in_box"]
 class RawPoints:
     """Every kept raw point of every fused frame: ``xyz_m`` (N, 3) float32 world, ``normal`` (N, 3) float32 unit
     (zero where the sensor gave none; oriented towards the sensor), ``view`` (N,) int32, ``sigma_mm`` (N,) float32
-    (NaN where unknown). Frames are stored as chunks and concatenated on first access."""
+    (NaN where unknown). Frames are stored as chunks and concatenated on first access. ``origins`` maps a view id
+    to its sensor origin (3,) world (m) where the fusion knew it (not kept by the map's files)."""
 
     def __init__(self):
         self._chunks: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
         self._cache = None
+        self.origins: dict[int, np.ndarray] = {}
 
     def append(self, xyz_m, normal, view_id, sigma_mm) -> None:
         """Add points: ``view_id`` one int for all or one per point."""

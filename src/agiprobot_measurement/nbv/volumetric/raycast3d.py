@@ -650,6 +650,8 @@ def _expected_chunk(
     range_max,
     cos_max_incidence,
     kolmost_weight,
+    pitch_rad,
+    radius_m,
 ):
     """Views ``c, c + n_chunks, ...`` of :func:`expected_surface_bundle`."""
     n_views = poses.shape[0]
@@ -729,8 +731,16 @@ def _expected_chunk(
                         break
                 if not _lit(cx, cy, cz, ow, rw, depth, proj_w, proj_h, proj_tan_h, proj_tan_v, res):
                     break
-                g += w * (kolmost_weight * cos_cam + 1.0 - kolmost_weight)
-                a += w
+                if pitch_rad > 0.0:
+                    # the share of the voxel's surface within radius_m of this view's samples, spaced
+                    # pitch x distance / cos(incidence) along the tilt
+                    spacing = pitch_rad * math.sqrt(ex * ex + ey * ey + ez * ez) / max(cos_cam, 0.05)
+                    share = min(1.0, math.pi * radius_m * radius_m / (spacing * spacing))
+                    g += w * share
+                    a += w * share
+                else:
+                    g += w * (kolmost_weight * cos_cam + 1.0 - kolmost_weight)
+                    a += w
                 break
         gain[v] = g
         area[v] = a
@@ -745,7 +755,9 @@ def _expected_surface_bundle(n_chunks, *scene):
     its open faces); that voxel counts
     once per view when its depth is in range, both incidence cosines (camera and projector, signed: the front side
     of the predicted surface) are at least ``cos_max_incidence`` and the projector lights it. Returns ``(gain (V,),
-    voxels (V,))``: the sum of ``weight x (w cos a + 1 - w)`` (Kolmost) and the sum of weights. ``scene``: the
+    voxels (V,))``: the sum of ``weight x (w cos a + 1 - w)`` (Kolmost) and the sum of weights; with ``pitch_rad``
+    > 0 both are the sum of ``weight x min(1, pi radius_m^2 / s^2)``, ``s = pitch_rad x distance / cos a`` the
+    view's sample spacing there (the share of the surface it measures densely enough). ``scene``: the
     arguments of :func:`_expected_chunk` after its outputs, ``poses`` first; ``n_chunks``: the threads' shares.
     """
     n_views = scene[0].shape[0]

@@ -34,7 +34,7 @@ __all__ = [
 ]
 
 #: how ours applies its motion weight lambda over a run (``planning.cost_schedule``)
-COST_SCHEDULES = ("constant", "remaining_surface")
+COST_SCHEDULES = ("constant", "remaining_surface", "map_growth")
 #: the sections of config/nbv.yaml
 SECTIONS = ("phoxi_tool", "roi", "request", "candidates", "planning", "motion", "simulation")
 
@@ -244,6 +244,14 @@ class PlanningSettings:
     #: the frontier predicts none)
     coverage_fallback_below_mm2: float = 100.0
     coverage_fallback_reach_vox: int = 3  # "next to": within this many planning voxels of a full voxel
+    #: ours' ``undersampled_surface`` term (:mod:`.sampling`): a surface point counts as measured within
+    #: ``coverage_radius_m`` of a sample; a point's sample spacing is its ``sample_neighbours``-th neighbour's
+    #: distance; the surface beyond the open borders of the fused points counts ``open_border_weight`` x (0: not)
+    coverage_radius_m: float = 0.002
+    sample_neighbours: int = 4
+    open_border_weight: float = 0.0
+    #: the term's weight x (its best area / (that + the most unseen surface expected)) ^ this power
+    undersampled_fade_power: float = 1.0
     tour: TourSettings = field(default_factory=TourSettings)
 
     @classmethod
@@ -266,6 +274,10 @@ class PlanningSettings:
             "growth_window": ("growth_window", _whole(1, 20)),
             "coverage_fallback_below_mm2": ("coverage_fallback_below_mm2", non_negative),
             "coverage_fallback_reach_vox": ("coverage_fallback_reach_vox", _whole(1, 20)),
+            "coverage_radius_m": ("coverage_radius_m", positive),
+            "sample_neighbours": ("sample_neighbours", _whole(1, 16)),
+            "open_border_weight": ("open_border_weight", non_negative),
+            "undersampled_fade_power": ("undersampled_fade_power", non_negative),
             "tour": ("tour", lambda value, where: TourSettings.from_mapping(_mapping(value, where))),
         }
         return cls(**_parse(values, "planning", rules))

@@ -28,6 +28,9 @@ class StoppingRule:
     low_gain_streak: int = 0
     low_real_streak: int = 0
     growth_m2: list = field(default_factory=list)
+    #: per iteration what the rule saw: views left, the map's growth and observed surface (m^2), and whether a rule
+    #: other than the saturation against the budget fired (a replay of other shares needs no re-run)
+    history: list = field(default_factory=list)
 
     def projected_growth_m2(self, views_left: int) -> float:
         """The surface (m^2) the rest of the budget (``views_left`` views) adds at the mean growth of the last
@@ -61,9 +64,13 @@ class StoppingRule:
             and views_left is not None
             and self.projected_growth_m2(views_left) < self.budget_growth_share * observed_area_m2
         )
-        return (
+        other = (
             self.low_gain_streak >= 2
             or self.low_real_streak >= self.realised_streak
-            or saturated
             or relative < self.min_relative_gain
         )
+        seen = {"views_left": views_left, "growth_m2": float(last_growth_m2), "observed_m2": float(observed_area_m2)}
+        streaks = {"low_gain_streak": self.low_gain_streak, "low_real_streak": self.low_real_streak}
+        fired = {"other_rule": bool(other), "saturated": bool(saturated), "relative_gain": float(relative)}
+        self.history.append({**seen, **streaks, **fired})
+        return other or saturated

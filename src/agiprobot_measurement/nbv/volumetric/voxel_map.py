@@ -442,6 +442,8 @@ class VoxelMap:
         else:
             n_free, n_hit = fuse_frame_serial(*args, 1)
         self.raw.append(points[kept], normals[kept], view_id, sigma[kept])
+        if np.ndim(view_id) == 0:
+            self.raw.origins[int(view_id)] = origin.copy()
         self.views_integrated += 1
         self._changed()
         return {

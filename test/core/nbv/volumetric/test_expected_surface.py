@@ -11,7 +11,6 @@ from agiprobot_measurement.common.geometry import look_at
 from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.nbv.volumetric.gains import (
     ExpectedSurfaceModel,
-    ViewModel,
     expected_surface,
     expected_surface_fields,
 )
@@ -21,20 +20,6 @@ RES = 0.005  # m: 20^3 voxels over a 0.1 m cube
 
 WALL_Y_INDEX = 10  # the seen wall's voxel layer (y 0.050-0.055 m)
 LAST_FULL_X_INDEX = 9  # the wall covers x < 0.05 m: its full voxel columns are 0..9
-
-
-def narrow_view():
-    """A camera of 4 deg x 4 deg, 8 x 8 rays, with the projector at its centre."""
-    return ViewModel(
-        fov_h_rad=np.radians(4.0),
-        fov_v_rad=np.radians(4.0),
-        range_min_m=0.05,
-        range_max_m=1.0,
-        projector_offset_m=np.zeros(3),
-        rays_h=8,
-        rays_v=8,
-        max_incidence_rad=np.radians(75.0),
-    )
 
 
 def pose_along_y(x_m, z_m):
@@ -78,7 +63,7 @@ def test_the_surface_is_expected_beyond_the_seen_edge_and_not_inside_the_part():
     assert np.all(weight[:, WALL_Y_INDEX + 1 :, :] == 0.0)
 
 
-def test_a_view_facing_the_continuation_gains_and_one_facing_the_seen_wall_does_not():
+def test_a_view_facing_the_continuation_gains_and_one_facing_the_seen_wall_does_not(narrow_view):
     grid = half_wall_map()
     view = narrow_view()
     poses = [pose_along_y(x, 0.05) for x in (0.025, 0.055, 0.075, 0.095)]
@@ -94,7 +79,7 @@ def test_a_view_facing_the_continuation_gains_and_one_facing_the_seen_wall_does_
         assert one_gain[0] == pytest.approx(gain[j]) and one_area[0] == pytest.approx(area_m2[j])
 
 
-def test_kolmost_weights_the_gain_and_the_area_is_the_weight_sum():
+def test_kolmost_weights_the_gain_and_the_area_is_the_weight_sum(narrow_view):
     grid = half_wall_map()
     view = narrow_view()
     pose = pose_along_y(0.055, 0.05)
@@ -110,7 +95,7 @@ def test_kolmost_weights_the_gain_and_the_area_is_the_weight_sum():
     assert expected_surface(grid, pose, view, bare)[0][0] == 0.0
 
 
-def test_bad_expected_surface_input_is_refused():
+def test_bad_expected_surface_input_is_refused(narrow_view):
     grid = half_wall_map()
     view = narrow_view()
     with pytest.raises(InputError, match="VoxelMap"):

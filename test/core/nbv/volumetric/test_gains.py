@@ -34,20 +34,6 @@ def set_voxels(grid, region, log_odds):
     grid.invalidate()
 
 
-def narrow_view(fov_deg=4.0, offset=(0.0, 0.0, 0.0), **extra):
-    return ViewModel(
-        fov_h_rad=math.radians(fov_deg),
-        fov_v_rad=math.radians(fov_deg),
-        range_min_m=0.05,
-        range_max_m=1.0,
-        projector_offset_m=np.array(offset),
-        rays_h=8,
-        rays_v=8,
-        max_incidence_rad=math.radians(75),
-        **extra,
-    )
-
-
 def pose_along_y(x, z, distance=0.3):
     """A camera at y = -distance looking +y through (x, ., z)."""
     return look_at([x, -distance, z], [x, 0.05, z])
@@ -57,7 +43,7 @@ def gains_of(grid, poses, view, **kwargs):
     return evaluate_views(grid, np.array(poses), view, **kwargs)
 
 
-def test_a_view_into_unknown_space_gains_more_than_one_into_known_free_space():
+def test_a_view_into_unknown_space_gains_more_than_one_into_known_free_space(narrow_view):
     grid = blank_map()
     set_voxels(grid, np.s_[:10, :, :], -2.0)  # x < 0.05 m known free; the rest never observed
     result = gains_of(grid, [pose_along_y(0.075, 0.05), pose_along_y(0.025, 0.05)], narrow_view())
@@ -68,7 +54,7 @@ def test_a_view_into_unknown_space_gains_more_than_one_into_known_free_space():
     assert result.visible_voxels[0] > 0 and result.visible_voxels[1] > 0
 
 
-def test_a_full_voxel_occludes_what_lies_behind_it():
+def test_a_full_voxel_occludes_what_lies_behind_it(narrow_view):
     grid = blank_map()
     view = narrow_view()
     pose = [pose_along_y(0.05, 0.05)]
@@ -80,7 +66,7 @@ def test_a_full_voxel_occludes_what_lies_behind_it():
     assert 0 < walled.visible_voxels[0] <= 8 * 8
 
 
-def test_a_voxel_the_projector_cannot_light_is_not_counted():
+def test_a_voxel_the_projector_cannot_light_is_not_counted(narrow_view):
     grid = blank_map()
     set_voxels(grid, np.s_[:, :, :], -2.0)
     grid.log_odds[9:11, 10:12, 9:11] = 0.0  # a 2x2x2 unknown target at (0.05, 0.055, 0.05)
@@ -103,7 +89,7 @@ def test_a_voxel_the_projector_cannot_light_is_not_counted():
     assert gains_of(grid, pose, coincident_view, gain="unobserved_voxel").gain[0] == pytest.approx(lit)
 
 
-def test_a_surface_seen_at_grazing_incidence_is_not_counted():
+def test_a_surface_seen_at_grazing_incidence_is_not_counted(narrow_view):
     grid = blank_map()
     set_voxels(grid, np.s_[:, 10, :], 2.0)
     pose = [pose_along_y(0.05, 0.05)]
@@ -120,7 +106,7 @@ def test_a_surface_seen_at_grazing_incidence_is_not_counted():
     assert gains_of(grid, pose, narrow_view()).visible_voxels[0] == facing
 
 
-def test_rpg_compat_visibility_lets_known_free_space_occlude_as_the_rpg_code_does():
+def test_rpg_compat_visibility_lets_known_free_space_occlude_as_the_rpg_code_does(narrow_view):
     grid = blank_map()
     set_voxels(grid, np.s_[:, :10, :], -2.0)  # the camera-side half is known free, the far half never observed
     pose = [pose_along_y(0.05, 0.05)]
@@ -136,7 +122,7 @@ def test_rpg_compat_visibility_lets_known_free_space_occlude_as_the_rpg_code_doe
         assert a[name][0] == pytest.approx(b[name][0]), name
 
 
-def test_rear_side_voxel_and_entropy_count_full_voxels_reached_through_unknown_space():
+def test_rear_side_voxel_and_entropy_count_full_voxels_reached_through_unknown_space(narrow_view):
     pose = [pose_along_y(0.05, 0.05)]
     behind_unknown = blank_map()
     set_voxels(behind_unknown, np.s_[:, 10, :], 2.0)
@@ -152,7 +138,7 @@ def test_rear_side_voxel_and_entropy_count_full_voxels_reached_through_unknown_s
     assert gains_of(blank_map(), pose, narrow_view()).all_gains["average_entropy"][0] == 0.0
 
 
-def test_proximity_count_rewards_unobserved_voxels_near_occupied_ones():
+def test_proximity_count_rewards_unobserved_voxels_near_occupied_ones(narrow_view):
     grid = blank_map()
     set_voxels(grid, np.s_[9:11, 9:11, 9:11], 2.0)
     near = pose_along_y(0.05, 0.05)
@@ -163,7 +149,7 @@ def test_proximity_count_rewards_unobserved_voxels_near_occupied_ones():
     assert wider[0] > 0
 
 
-def test_area_factor_is_vasquez_gomez_cubic():
+def test_area_factor_is_vasquez_gomez_cubic(narrow_view):
     for alpha in (0.2, 0.8):
         assert raycast3d._area_factor(0.0, alpha) == pytest.approx(0.0)
         assert raycast3d._area_factor(alpha, alpha) == pytest.approx(1.0)
@@ -191,7 +177,7 @@ def surface_with_open_border():
     return grid
 
 
-def test_report_gain_counts_growth_neighbours_seen_weighted_by_kolmost():
+def test_report_gain_counts_growth_neighbours_seen_weighted_by_kolmost(narrow_view):
     grid = surface_with_open_border()
     assert grid.growth_neighbour_mask()[10, 10:, :].any()
     target = np.array([0.05, 0.055, 0.05])
@@ -235,7 +221,7 @@ def test_view_model_from_the_phoxi_s():
     assert dirs.shape == (64 * 48, 3) and np.allclose(np.linalg.norm(dirs, axis=1), 1.0)
 
 
-def test_many_views_at_once_match_one_at_a_time():
+def test_many_views_at_once_match_one_at_a_time(narrow_view):
     grid = surface_with_open_border()
     rng = np.random.default_rng(0)
     poses = [
@@ -251,7 +237,7 @@ def test_many_views_at_once_match_one_at_a_time():
         assert alone.visible_voxels[0] == together.visible_voxels[i]
 
 
-def test_bad_gain_inputs_are_refused():
+def test_bad_gain_inputs_are_refused(narrow_view):
     grid = blank_map()
     view = narrow_view()
     with pytest.raises(InputError, match="unknown gain"):
@@ -266,7 +252,7 @@ def test_bad_gain_inputs_are_refused():
     assert empty.gain.shape == (0,) and set(empty.all_gains) == set(GAIN_NAMES)
 
 
-def test_the_serial_kernel_of_forked_children_gives_the_same_gains(monkeypatch):
+def test_the_serial_kernel_of_forked_children_gives_the_same_gains(monkeypatch, narrow_view):
     grid = surface_with_open_border()
     poses = [pose_along_y(0.05, 0.05), pose_along_y(0.03, 0.06), pose_along_y(0.07, 0.04)]
     threaded = gains_of(grid, poses, narrow_view(fov_deg=20.0))

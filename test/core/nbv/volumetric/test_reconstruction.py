@@ -264,6 +264,33 @@ def test_a_higher_schedule_power_lets_motion_count_later():
     assert squared.cost_factor(0.0) == 1.0
 
 
+def test_the_map_growth_schedule_lets_motion_count_as_the_maps_growth_falls_off():
+    from types import SimpleNamespace
+
+    from agiprobot_measurement.nbv.volumetric.policies.ours import GrowthTrack
+
+    class Grid:  # what the schedule reads of the planning map: its version and observed surface
+        def __init__(self):
+            self.version, self.area = 0, 0.0
+
+        def observed_surface_area_m2(self):
+            return self.area
+
+    grid = Grid()
+    policy = ours_policy(cost_schedule="map_growth")
+    policy.context = SimpleNamespace(planning_map=grid)
+    factors = []
+    for area in (0.01, 0.03, 0.06, 0.07, 0.075, 0.076):
+        grid.version += 1
+        grid.area = area
+        factors.append(policy.cost_factor(1.0))
+        assert policy.cost_factor(1.0) == factors[-1]  # the same map (version): the same factor
+    # two-view gains: 0.05, 0.04, 0.015, 0.006 against the best 0.05
+    assert factors[:3] == [0.0, 0.0, 0.0]
+    np.testing.assert_allclose(factors[3:], [1 - 0.04 / 0.05, 1 - 0.015 / 0.05, 1 - 0.006 / 0.05])
+    assert GrowthTrack().saturation(grid) == 0.0
+
+
 @pytest.mark.parametrize(
     ("key", "value"),
     [
@@ -463,3 +490,26 @@ def test_a_roi_out_of_reach_ends_with_nothing_found(station):
     result = recon.run()
     assert result.termination_reason == "nothing_found"
     assert result.observed_surface_area_m2 == 0.0
+
+
+def test_ours_undersampled_term_counts_by_its_share_of_the_surface_still_to_be_had(station):
+    from agiprobot_measurement.nbv.volumetric.gains import undersampled_surface
+
+    recon, _ = make(station, max_views=2)
+    recon.run()
+    policy, q = recon.policy, recon.current_joints()
+    cands, _, idx, exp_gain, _, _ = policy.scored_pool(q)
+    poses, view = cands.poses[idx], recon.context.view_model
+    grid = recon.context.planning_map
+    missed, normals, pitch = policy.sampling.fields(grid, 0.0)
+    us_gain, us_area = undersampled_surface(grid, poses, view, missed, pitch, 0.002, normals)
+    assert us_gain.max() > 0.0  # every 8th pixel of the opening views leaves sparse surface
+    policy.weights = {"proximity_count": 1.0, "undersampled_surface": 2.0}
+    policy.undersampled_fade_power = 1.0
+    alone = policy._score(poses, exp_gain, view, 1e9)  # the unseen surface dwarfs it: the term fades out
+    policy.weights = {"proximity_count": 1.0}
+    np.testing.assert_allclose(alone, policy._score(poses, exp_gain, view, 0.0), atol=1e-6)
+    policy.weights = {"proximity_count": 1.0, "undersampled_surface": 2.0}
+    share = us_area.max() / (us_area.max() + 0.01)
+    with_term = policy._score(poses, exp_gain, view, 0.01)
+    np.testing.assert_allclose(with_term - alone, 2.0 * share * us_gain / us_gain.max(), atol=1e-9)

@@ -4,13 +4,21 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.nbv.volumetric.gain_names import GAIN_NAMES
-from agiprobot_measurement.nbv.volumetric.gains import ExpectedSurfaceModel, ViewModel, evaluate_views, expected_surface
+from agiprobot_measurement.nbv.volumetric.gains import (
+    ExpectedSurfaceModel,
+    ViewModel,
+    evaluate_views,
+    expected_surface,
+    undersampled_surface,
+)
 from agiprobot_measurement.nbv.volumetric.policies.base import Policy, PolicyContext, weighted_score
+from agiprobot_measurement.nbv.volumetric.sampling import SamplingModel, SamplingState
 from agiprobot_measurement.nbv.volumetric.settings import PlanningSettings
 
 __all__ = ["OursPolicy"]
@@ -29,23 +37,29 @@ class OursPolicy(Policy):
 
     name = "ours"
     #: the score when the configuration names none: the name ``expected_surface`` is the predicted-surface gain,
-    #: the others are :data:`~agiprobot_measurement.nbv.volumetric.gain_names.GAIN_NAMES`
+    #: ``undersampled_surface`` the seen surface sampled too sparsely (:func:`.gains.undersampled_surface`), the
+    #: others are :data:`~agiprobot_measurement.nbv.volumetric.gain_names.GAIN_NAMES`
     default_weights = (("expected_surface", 1.0),)
+    own_terms = ("expected_surface", "undersampled_surface")
 
     def __init__(self, context: PolicyContext, planning: PlanningSettings):
         super().__init__(context)
         weights = planning.ours_weights
         self.weights = dict(weights if weights is not None else dict(self.default_weights))
-        unknown = sorted(set(self.weights) - {*GAIN_NAMES, "expected_surface"})
+        unknown = sorted(set(self.weights) - {*GAIN_NAMES, *self.own_terms})
         if unknown:
             raise InputError(
-                f"planning.ours_weights: unknown gain(s) {unknown}; known: expected_surface, {', '.join(GAIN_NAMES)}"
+                f"planning.ours_weights: unknown gain(s) {unknown}; known: {', '.join([*self.own_terms, *GAIN_NAMES])}"
             )
+        self.open_border_weight = planning.open_border_weight
+        self.undersampled_fade_power = planning.undersampled_fade_power
+        self.sampling = SamplingState(SamplingModel(planning.coverage_radius_m, planning.sample_neighbours))
         self.model = ExpectedSurfaceModel.from_config(planning.expected_surface)
         self.cost_schedule = planning.cost_schedule
         self.cost_schedule_power = planning.cost_schedule_power
         self.cost_s_per_rad = planning.cost_joint_path_s_per_rad
         self.first_expected_area_m2 = None
+        self.growth = GrowthTrack()
         self.fallback_below_mm2 = planning.coverage_fallback_below_mm2
         self.fallback_reach_vox = planning.coverage_fallback_reach_vox
         self.exact_evaluated = planning.exact_evaluated
@@ -55,9 +69,14 @@ class OursPolicy(Policy):
         """The share of lambda applied now. ``constant``: 1. ``remaining_surface``: 1 - A / A1, with A the most
         new surface any candidate is expected to see and A1 that at the first planned view (clipped to [0, 1]):
         while most of the part is still unseen, the view that sees most is worth its motion; the motion counts
-        fully once little is left to gain."""
+        fully once little is left to gain. ``map_growth``: 1 - g / g_max, with g the planning map's surface growth
+        (full voxels x resolution^2) over the last two views and g_max the largest such growth so far (the
+        predicted surface A hardly falls over a run: it counts unknown space no view measures). Either to the
+        power ``planning.cost_schedule_power``."""
         if self.cost_schedule == "constant":
             return 1.0
+        if self.cost_schedule == "map_growth":
+            return self.growth.saturation(self.context.planning_map) ** self.cost_schedule_power
         if self.first_expected_area_m2 is None:
             self.first_expected_area_m2 = expected_area_m2
         if self.first_expected_area_m2 <= 0:
@@ -80,13 +99,15 @@ class OursPolicy(Policy):
         discount = np.exp(-c.cost_weight * self.cost_factor(float(exp_area.max())) * cost)
         exact = len(idx) <= self.exact_evaluated or self.exact_evaluated <= 0
         view_model = c.view_model if exact else coarse_view(c.view_model, self.coarse_ray_divisor)
-        utilities = self._score(cands.poses[idx], exp_gain, view_model)
+        utilities = self._score(cands.poses[idx], exp_gain, view_model, float(exp_area.max()))
         utilities *= discount
         if not exact:
             # coarse to fine: the best by the coarse bundle are scored with the full one (each term normalised
             # within them) and the choice is among them; the others keep their coarse utility, ranked below
             top = np.argsort(-utilities, kind="stable")[: self.exact_evaluated]
-            fine = self._score(cands.poses[idx[top]], exp_gain[top], c.view_model) * discount[top]
+            fine = (
+                self._score(cands.poses[idx[top]], exp_gain[top], c.view_model, float(exp_area.max())) * discount[top]
+            )
             rest = np.ones(len(idx), dtype=bool)
             rest[top] = False
             if rest.any():
@@ -96,13 +117,28 @@ class OursPolicy(Policy):
         self.remember(cands, utilities)
         return cands, stats, idx, exp_gain, exp_area, utilities
 
-    def _score(self, poses: np.ndarray, exp_gain: np.ndarray, view_model: ViewModel) -> np.ndarray:
-        """Ours' weighted score (before the motion discount) of camera poses (n, 4, 4) with their expected gains."""
+    def _score(
+        self, poses: np.ndarray, exp_gain: np.ndarray, view_model: ViewModel, exp_area_max_m2: float
+    ) -> np.ndarray:
+        """Ours' weighted score (before the motion discount) of camera poses (n, 4, 4) with their expected gains.
+        The ``undersampled_surface`` term's weight is scaled by its share of the new surface to be had: its best
+        candidate's area over that plus ``exp_area_max_m2``, the most unseen surface any candidate is expected to
+        see (early on little, in the tail most), to the power ``planning.undersampled_fade_power``."""
+        grid = self.context.planning_map
         terms = {"expected_surface": exp_gain}
-        if set(self.weights) - {"expected_surface"}:
-            g = evaluate_views(self.context.planning_map, poses, view_model, gain="report")
+        weights = dict(self.weights)
+        if "undersampled_surface" in weights:
+            missed, normals, pitch = self.sampling.fields(grid, self.open_border_weight)
+            radius = self.sampling.model.coverage_radius_m
+            gain, area = undersampled_surface(grid, poses, view_model, missed, pitch, radius, normals)
+            terms["undersampled_surface"] = gain
+            best = float(area.max()) if len(area) else 0.0
+            share = best / max(best + exp_area_max_m2, 1e-12)
+            weights["undersampled_surface"] *= share**self.undersampled_fade_power
+        if set(weights) - set(self.own_terms):
+            g = evaluate_views(grid, poses, view_model, gain="report")
             terms.update(g.all_gains)
-        return weighted_score(terms, self.weights, len(poses))
+        return weighted_score(terms, weights, len(poses))
 
     def choose(self, q):
         return self.choose_from(q, *self.scored_pool(q))
@@ -157,6 +193,27 @@ class OursPolicy(Policy):
             option.remaining_gain = math.inf  # not comparable with the predicted-surface gain of the first view
         stats["fallbacks"] = fallbacks
         return choice, "", stats
+
+
+@dataclass
+class GrowthTrack:
+    """The planning map's observed surface (m^2) at each choice (by map version), for the ``map_growth`` schedule."""
+
+    areas_m2: list = field(default_factory=list)
+    versions: list = field(default_factory=list)
+
+    def saturation(self, grid, window: int = 2) -> float:
+        """1 - (the surface the map gained over the last ``window`` choices) / (the most it gained over any
+        ``window`` running), in [0, 1]; 0 until ``window`` gains are known."""
+        if not self.versions or self.versions[-1] != grid.version:
+            self.versions.append(grid.version)
+            self.areas_m2.append(grid.observed_surface_area_m2())
+        areas = np.asarray(self.areas_m2)
+        if len(areas) <= window:
+            return 0.0
+        gains = areas[window:] - areas[:-window]
+        best = float(gains.max())
+        return float(np.clip(1.0 - gains[-1] / best, 0.0, 1.0)) if best > 0 else 1.0
 
 
 def coarse_view(view: ViewModel, divisor: int) -> ViewModel:
