@@ -501,7 +501,7 @@ def test_ours_undersampled_term_counts_by_its_share_of_the_surface_still_to_be_h
     cands, _, idx, exp_gain, _, _ = policy.scored_pool(q)
     poses, view = cands.poses[idx], recon.context.view_model
     grid = recon.context.planning_map
-    missed, normals, pitch = policy.sampling.fields(grid, 0.0)
+    missed, normals, pitch = policy.sampling.fields(grid, policy.open_border_weight)
     us_gain, us_area = undersampled_surface(grid, poses, view, missed, pitch, 0.002, normals)
     assert us_gain.max() > 0.0  # every 8th pixel of the opening views leaves sparse surface
     policy.weights = {"proximity_count": 1.0, "undersampled_surface": 2.0}
