@@ -9,8 +9,9 @@ nearest neighbour in the same frame, the wider of the two grid directions), aver
 view's angular pitch (the median of ``spacing x cos(incidence) / distance`` over its points; needs the view's sensor
 origin, :attr:`.map_parts.RawPoints.origins`). A view of spacing ``s`` measures the share ``min(1, pi r^2 / s^2)`` of
 a voxel's surface densely enough (``r`` = ``coverage_radius_m``); views are taken as independent, so the share a
-voxel still misses is the product of ``1 -`` those shares. :func:`.gains.undersampled_surface` scores a candidate view
-by the missed share it would measure.
+voxel still misses is the product of ``1 -`` those shares. The surface just beyond the fused points' open borders
+(:func:`open_edges`: grazing incidence, shadows) is expected too (:meth:`SamplingState.open_border`).
+:func:`.gains.undersampled_surface` scores a candidate view by the missed share it would measure.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from agiprobot_measurement.errors import InputError
 from agiprobot_measurement.nbv.volumetric.gains import predicted_normals
 from agiprobot_measurement.nbv.volumetric.voxel_map import FULL
 
-__all__ = ["SamplingModel", "SamplingState", "ViewSampling", "covered_share"]
+__all__ = ["SamplingModel", "SamplingState", "ViewSampling", "covered_share", "open_edges"]
 
 
 @dataclass(frozen=True)
