@@ -670,6 +670,16 @@ def expected_surface_fields(grid: VoxelMap, model: ExpectedSurfaceModel = Expect
     return grid._cached(key, compute)
 
 
+def _finite_poses(camera_poses) -> np.ndarray:
+    """Camera poses as a finite float (V, 4, 4) array (one (4, 4) pose becomes V = 1); InputError otherwise."""
+    poses = np.asarray(camera_poses, dtype=np.float64)
+    if poses.shape == (4, 4):
+        poses = poses[None]
+    if poses.ndim != 3 or poses.shape[1:] != (4, 4) or not np.all(np.isfinite(poses)):
+        raise InputError(f"camera_poses must be a finite (V, 4, 4) array, got shape {poses.shape}")
+    return poses
+
+
 def expected_surface(
     grid: VoxelMap, camera_poses: np.ndarray, view: ViewModel, model: ExpectedSurfaceModel = ExpectedSurfaceModel()
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -685,11 +695,7 @@ def expected_surface(
         raise InputError(f"grid must be a VoxelMap, got {type(grid).__name__}")
     if not isinstance(view, ViewModel):
         raise InputError(f"view must be a ViewModel, got {type(view).__name__}")
-    poses = np.asarray(camera_poses, dtype=np.float64)
-    if poses.shape == (4, 4):
-        poses = poses[None]
-    if poses.ndim != 3 or poses.shape[1:] != (4, 4) or not np.all(np.isfinite(poses)):
-        raise InputError(f"camera_poses must be a finite (V, 4, 4) array, got shape {poses.shape}")
+    poses = _finite_poses(camera_poses)
     if len(poses) == 0:
         return np.zeros(0), np.zeros(0)
     weight, normals = expected_surface_fields(grid, model)
@@ -711,11 +717,7 @@ def undersampled_surface(
     per planning voxel) the share of its surface no fused point lies within ``radius_m`` of (see
     :mod:`.sampling`), ``s = pitch_rad x distance / cos(incidence)`` the view's sample spacing there (m).
     ``normals`` (flat, 3): the directions the incidence is taken to (None: the fused normals)."""
-    poses = np.asarray(camera_poses, dtype=np.float64)
-    if poses.shape == (4, 4):
-        poses = poses[None]
-    if poses.ndim != 3 or poses.shape[1:] != (4, 4) or not np.all(np.isfinite(poses)):
-        raise InputError(f"camera_poses must be a finite (V, 4, 4) array, got shape {poses.shape}")
+    poses = _finite_poses(camera_poses)
     weight = np.ascontiguousarray(weight, dtype=np.float64).reshape(-1)
     if weight.shape != (grid.n_voxels,):
         raise InputError(f"weight must have one value per planning voxel ({grid.n_voxels}), got {weight.shape}")

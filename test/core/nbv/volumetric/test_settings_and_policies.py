@@ -42,6 +42,10 @@ def test_missing_entries_take_the_loops_defaults():
         ({"motion": []}, r"motion: expected a mapping"),
         ({"planning": {"tour": {"max_plan_view": 8}}}, r"planning\.tour\.max_plan_view: unknown key"),
         ({"planning": {"tour": {"keep_share": 1.5}}}, r"planning\.tour\.keep_share"),
+        ({"planning": {"open_border_weight": -1.0}}, r"planning\.open_border_weight"),
+        ({"planning": {"coverage_radius_m": 0.0}}, r"planning\.coverage_radius_m"),
+        ({"planning": {"sample_neighbours": 40}}, r"planning\.sample_neighbours"),
+        ({"planning": {"undersampled_fade_power": "strong"}}, r"planning\.undersampled_fade_power"),
     ],
 )
 def test_unknown_keys_and_bad_values_are_named(config, named):
