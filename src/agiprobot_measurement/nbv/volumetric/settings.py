@@ -187,7 +187,9 @@ class TourSettings:
     plan's size and covered share, the share of its planned gain a view must keep to stay in the plan, the smallest
     marginal value (share of the first pick's) worth a stop, the IK branches per view, and ``greedy_share``: when ours'
     best view alone promises at least this share of the plan's predicted new surface, it is visited first (the gain
-    is concentrated there: a tour that leaves it for later loses coverage; 1: never)."""
+    is concentrated there: a tour that leaves it for later loses coverage; 1: never), ``undersampled_min_share``: a
+    full planning voxel whose missed share (:meth:`.sampling.SamplingState.fields`) is at least this is also to be
+    covered (1: the plan covers the predicted unseen surface only)."""
 
     min_greedy_views: int = 3
     max_plan_views: int = 8
@@ -196,6 +198,7 @@ class TourSettings:
     min_marginal_share: float = 0.3
     max_branches: int = 4
     greedy_share: float = 0.5
+    undersampled_min_share: float = 0.25
 
     @classmethod
     def from_mapping(cls, values: dict) -> TourSettings:
@@ -210,6 +213,7 @@ class TourSettings:
             "min_marginal_share": ("min_marginal_share", share),
             "max_branches": ("max_branches", _whole(1, 8)),
             "greedy_share": ("greedy_share", share),
+            "undersampled_min_share": ("undersampled_min_share", share),
         }
         return cls(**_parse(values, "planning.tour", rules))
 
@@ -252,6 +256,9 @@ class PlanningSettings:
     open_border_weight: float = 0.0
     #: the term's weight x (its best area / (that + the most unseen surface expected)) ^ this power
     undersampled_fade_power: float = 1.0
+    #: ours: among the candidates whose utility is within this share of the best one's, the one whose move takes
+    #: least time is taken (views that promise almost the same are told apart by their motion; 0: the best)
+    near_best_share: float = 0.0
     tour: TourSettings = field(default_factory=TourSettings)
 
     @classmethod
@@ -278,6 +285,7 @@ class PlanningSettings:
             "sample_neighbours": ("sample_neighbours", _whole(1, 16)),
             "open_border_weight": ("open_border_weight", non_negative),
             "undersampled_fade_power": ("undersampled_fade_power", non_negative),
+            "near_best_share": ("near_best_share", lambda value, where: number(value, where, 0.0, 1.0)),
             "tour": ("tour", lambda value, where: TourSettings.from_mapping(_mapping(value, where))),
         }
         return cls(**_parse(values, "planning", rules))

@@ -506,10 +506,38 @@ def test_ours_undersampled_term_counts_by_its_share_of_the_surface_still_to_be_h
     assert us_gain.max() > 0.0  # every 8th pixel of the opening views leaves sparse surface
     policy.weights = {"proximity_count": 1.0, "undersampled_surface": 2.0}
     policy.undersampled_fade_power = 1.0
-    alone = policy._score(poses, exp_gain, view, 1e9)  # the unseen surface dwarfs it: the term fades out
+    alone, area = policy._score(poses, exp_gain, view, 1e9)  # the unseen surface dwarfs it: the term fades out
+    np.testing.assert_allclose(area, us_area)  # the area each would sample is handed on (the tour weighs it)
     policy.weights = {"proximity_count": 1.0}
-    np.testing.assert_allclose(alone, policy._score(poses, exp_gain, view, 0.0), atol=1e-6)
+    np.testing.assert_allclose(alone, policy._score(poses, exp_gain, view, 0.0)[0], atol=1e-6)
     policy.weights = {"proximity_count": 1.0, "undersampled_surface": 2.0}
     share = us_area.max() / (us_area.max() + 0.01)
-    with_term = policy._score(poses, exp_gain, view, 0.01)
+    with_term = policy._score(poses, exp_gain, view, 0.01)[0]
     np.testing.assert_allclose(with_term - alone, 2.0 * share * us_gain / us_gain.max(), atol=1e-9)
+
+
+def test_the_tour_covers_the_undersampled_surface_too_and_runs_the_loop(station):
+    recon, _ = make(station, max_views=4, gain="ours_tour")
+    policy = recon.policy
+    policy.tour = dataclasses.replace(policy.tour, min_greedy_views=1)
+    phases = []
+    choose = policy.choose
+
+    def spy(q):
+        out = choose(q)
+        phases.append(policy.last_phase)
+        return out
+
+    policy.choose = spy
+    result = recon.run()
+    assert result.error == "" and len(result.views) >= 3
+    assert "tour" in phases  # after the greedy opening the plan takes over
+    grid = recon.context.planning_map
+    predicted = int(grid.growth_neighbour_mask().sum())
+    centres, normals = policy._elements()
+    assert len(centres) > min(predicted, 2000)  # the undersampled full voxels are elements beside the predicted ones
+    lengths = np.linalg.norm(normals, axis=1)
+    assert np.all((np.abs(lengths - 1.0) < 1e-6) | (lengths == 0.0))  # unit directions, or none
+    assert len(policy.scores.undersampled_area_m2) > 0
+    policy.tour = dataclasses.replace(policy.tour, undersampled_min_share=1.0)  # off: the predicted surface only
+    assert len(policy._elements()[0]) == min(predicted, 2000)

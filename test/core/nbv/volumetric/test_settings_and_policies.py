@@ -46,6 +46,8 @@ def test_missing_entries_take_the_loops_defaults():
         ({"planning": {"coverage_radius_m": 0.0}}, r"planning\.coverage_radius_m"),
         ({"planning": {"sample_neighbours": 40}}, r"planning\.sample_neighbours"),
         ({"planning": {"undersampled_fade_power": "strong"}}, r"planning\.undersampled_fade_power"),
+        ({"planning": {"near_best_share": 1.5}}, r"planning\.near_best_share"),
+        ({"planning": {"tour": {"undersampled_min_share": -0.1}}}, r"planning\.tour\.undersampled_min_share"),
     ],
 )
 def test_unknown_keys_and_bad_values_are_named(config, named):

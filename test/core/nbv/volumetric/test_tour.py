@@ -104,6 +104,7 @@ def test_the_tour_takes_a_concentrated_gain_first(monkeypatch, greedy_share, fir
     from types import SimpleNamespace
 
     from agiprobot_measurement.nbv.volumetric.policies import touring
+    from agiprobot_measurement.nbv.volumetric.policies.ours import PoolScores
     from agiprobot_measurement.nbv.volumetric.settings import TourSettings
 
     # view 0 is ours' best and promises most of the plan's gain, far from the current joints; views 1 and 2 are
@@ -115,6 +116,9 @@ def test_the_tour_takes_a_concentrated_gain_first(monkeypatch, greedy_share, fir
     policy = touring.TourPolicy.__new__(touring.TourPolicy)
     policy.tour = TourSettings(max_branches=1, min_marginal_share=0.0, greedy_share=greedy_share)
     policy.plan = TourPlan()
+    policy.scores = PoolScores(
+        np.zeros(0), np.zeros(0)
+    )  # no undersampled term: the weights are the predicted surface's
     policy.context = SimpleNamespace(view_model=None, motion_cost=l1)
     policy._elements = lambda: (np.zeros((3, 3)), np.zeros((3, 3)))
     policy._branches = lambda q, cands, picked: [cands.joints[i][None] for i in picked]
@@ -124,3 +128,15 @@ def test_the_tour_takes_a_concentrated_gain_first(monkeypatch, greedy_share, fir
     choice, _, stats = policy._tour_choice(np.zeros(6), cands, {}, np.arange(3), area, area, np.array([3.0, 1.0, 1.0]))
     assert choice.index == first and stats["tour_views"] == 3
     assert len(policy.plan.planned_gains) == 3  # the rest of the plan is kept for the next view either way
+
+
+def test_among_near_best_views_the_quickest_move_is_taken():
+    from agiprobot_measurement.nbv.volumetric.policies.ours import PoolScores
+
+    utilities = np.array([1.0, 0.97, 0.5, 0.92])
+    scores = PoolScores(np.zeros(4), np.array([9.0, 4.0, 0.1, 2.0]))
+    assert scores.near_best(utilities, 0.0) is None  # off: the best by utility
+    assert scores.near_best(utilities, 0.05) == 1  # within 5 %: views 0 and 1, the quicker one
+    assert scores.near_best(utilities, 0.1) == 3
+    assert scores.near_best(utilities, 0.6) == 2
+    assert PoolScores(np.zeros(0), np.zeros(0)).near_best(utilities, 0.1) is None  # costs of another pool

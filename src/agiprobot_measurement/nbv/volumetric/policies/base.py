@@ -149,8 +149,11 @@ class Policy(ABC):
     def remember(self, cands, utilities_feasible: np.ndarray | None) -> None:
         self.context.on_pool(cands, utilities_feasible)
 
-    def ranked(self, cands, idx, gains, utilities, new_area) -> tuple:
+    def ranked(self, cands, idx, gains, utilities, new_area, first: int | None = None) -> tuple:
+        """(the choice, the fallbacks) by utility, ``first`` (an index into ``idx``) taken first when given."""
         order = np.argsort(-utilities, kind="stable")
+        if first is not None:
+            order = np.concatenate([[first], order[order != first]])
         best = order[0]
         choice = _choice(cands, idx[best], gains[best], utilities[best], new_area[best])
         fallbacks = [_choice(cands, idx[j], gains[j], utilities[j], new_area[j]) for j in order[1 : 1 + FALLBACKS]]

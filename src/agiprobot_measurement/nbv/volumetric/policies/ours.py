@@ -64,6 +64,8 @@ class OursPolicy(Policy):
         self.fallback_reach_vox = planning.coverage_fallback_reach_vox
         self.exact_evaluated = planning.exact_evaluated
         self.coarse_ray_divisor = planning.coarse_ray_divisor
+        self.near_best_share = planning.near_best_share
+        self.scores = PoolScores(np.zeros(0), np.zeros(0))
 
     def cost_factor(self, expected_area_m2: float) -> float:
         """The share of lambda applied now. ``constant``: 1. ``remaining_surface``: 1 - A / A1, with A the most
@@ -99,15 +101,15 @@ class OursPolicy(Policy):
         discount = np.exp(-c.cost_weight * self.cost_factor(float(exp_area.max())) * cost)
         exact = len(idx) <= self.exact_evaluated or self.exact_evaluated <= 0
         view_model = c.view_model if exact else coarse_view(c.view_model, self.coarse_ray_divisor)
-        utilities = self._score(cands.poses[idx], exp_gain, view_model, float(exp_area.max()))
+        utilities, undersampled = self._score(cands.poses[idx], exp_gain, view_model, float(exp_area.max()))
         utilities *= discount
         if not exact:
             # coarse to fine: the best by the coarse bundle are scored with the full one (each term normalised
             # within them) and the choice is among them; the others keep their coarse utility, ranked below
             top = np.argsort(-utilities, kind="stable")[: self.exact_evaluated]
-            fine = (
-                self._score(cands.poses[idx[top]], exp_gain[top], c.view_model, float(exp_area.max())) * discount[top]
-            )
+            fine, undersampled[top] = self._score(cands.poses[idx[top]], exp_gain[top], c.view_model,
+                                                  float(exp_area.max()))  # fmt: skip
+            fine *= discount[top]
             rest = np.ones(len(idx), dtype=bool)
             rest[top] = False
             if rest.any():
@@ -115,18 +117,21 @@ class OursPolicy(Policy):
                 utilities[rest] = floor * utilities[rest] / max(float(utilities[rest].max()), 1e-12) * (1 - 1e-6)
             utilities[top] = fine
         self.remember(cands, utilities)
+        self.scores = PoolScores(undersampled, cost)
         return cands, stats, idx, exp_gain, exp_area, utilities
 
     def _score(
         self, poses: np.ndarray, exp_gain: np.ndarray, view_model: ViewModel, exp_area_max_m2: float
-    ) -> np.ndarray:
-        """Ours' weighted score (before the motion discount) of camera poses (n, 4, 4) with their expected gains.
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(Ours' weighted score (before the motion discount), the undersampled surface each would sample densely
+        (m^2; zero when the term is not in the score)) of camera poses (n, 4, 4) with their expected gains.
         The ``undersampled_surface`` term's weight is scaled by its share of the new surface to be had: its best
         candidate's area over that plus ``exp_area_max_m2``, the most unseen surface any candidate is expected to
         see (early on little, in the tail most), to the power ``planning.undersampled_fade_power``."""
         grid = self.context.planning_map
         terms = {"expected_surface": exp_gain}
         weights = dict(self.weights)
+        area = np.zeros(len(poses))
         if "undersampled_surface" in weights:
             missed, normals, pitch = self.sampling.fields(grid, self.open_border_weight)
             radius = self.sampling.model.coverage_radius_m
@@ -138,7 +143,7 @@ class OursPolicy(Policy):
         if set(weights) - set(self.own_terms):
             g = evaluate_views(grid, poses, view_model, gain="report")
             terms.update(g.all_gains)
-        return weighted_score(terms, weights, len(poses))
+        return weighted_score(terms, weights, len(poses)), np.asarray(area, dtype=float)
 
     def choose(self, q):
         return self.choose_from(q, *self.scored_pool(q))
@@ -153,7 +158,9 @@ class OursPolicy(Policy):
             other = self.coverage_fallback(q, dict(stats))
             if other[0] is not None and other[0].remaining_area_m2 > float(exp_area.max()):
                 return other
-        choice, fallbacks = self.ranked(cands, idx, exp_gain, utilities, exp_area)
+        choice, fallbacks = self.ranked(
+            cands, idx, exp_gain, utilities, exp_area, first=self.scores.near_best(utilities, self.near_best_share)
+        )
         # the stopping rule looks at the predicted surface left for any candidate, not at the chosen view only
         for option in (choice, *fallbacks):
             option.remaining_area_m2 = float(exp_area.max())
@@ -193,6 +200,24 @@ class OursPolicy(Policy):
             option.remaining_gain = math.inf  # not comparable with the predicted-surface gain of the first view
         stats["fallbacks"] = fallbacks
         return choice, "", stats
+
+
+@dataclass
+class PoolScores:
+    """What the last :meth:`OursPolicy.scored_pool` measured beside the utilities, per feasible candidate."""
+
+    #: the undersampled surface each would sample densely (m^2; the coarse bundle's below the finely scored best)
+    undersampled_area_m2: np.ndarray
+    #: its motion cost from the current joints (s, the joint path's share included)
+    motion_cost_s: np.ndarray
+
+    def near_best(self, utilities: np.ndarray, share: float) -> int | None:
+        """The candidate with the cheapest motion among those whose utility is at least (1 - ``share``) x the
+        best's; None when ``share`` is 0 or the costs are not those of ``utilities``."""
+        if share <= 0 or len(self.motion_cost_s) != len(utilities) or not len(utilities):
+            return None
+        near = np.nonzero(utilities >= (1.0 - share) * float(utilities.max()))[0]
+        return int(near[np.argmin(self.motion_cost_s[near])])
 
 
 @dataclass

@@ -90,13 +90,22 @@ class TourPolicy(OursPolicy):
         return self._tour_choice(q, cands, stats, idx, exp_gain, exp_area, utilities)
 
     def _elements(self) -> tuple[np.ndarray, np.ndarray]:
-        """(centres (M, 3) m, predicted normals (M, 3)) of the predicted surface still unseen."""
+        """(centres (M, 3) m, normals (M, 3), zero where none) of the surface still to be covered: the predicted
+        unseen surface (growth-neighbour voxels, predicted normals) and the seen surface sampled too sparsely (full
+        voxels whose missed share is at least ``undersampled_min_share``, the directions of ours' undersampled term),
+        each at most :data:`MAX_ELEMENTS` / 2 (a random subset beyond)."""
         grid = self.context.planning_map
-        cells = np.argwhere(grid.growth_neighbour_mask())
-        if len(cells) > MAX_ELEMENTS:
-            cells = cells[self.context.rng.choice(len(cells), MAX_ELEMENTS, replace=False)]
-        normals = predicted_normals(grid)[grid.flat_index(cells)]
-        return grid.index_to_world(cells), normals
+        parts = [(np.argwhere(grid.growth_neighbour_mask()), predicted_normals(grid))]
+        if "undersampled_surface" in self.weights and self.tour.undersampled_min_share < 1.0:
+            missed, normals, _ = self.sampling.fields(grid, self.open_border_weight)
+            parts.append((np.argwhere((missed >= self.tour.undersampled_min_share).reshape(grid.shape)), normals))
+        centres, directions = [], []
+        for cells, normals in parts:
+            if len(cells) > MAX_ELEMENTS // 2:
+                cells = cells[self.context.rng.choice(len(cells), MAX_ELEMENTS // 2, replace=False)]
+            centres.append(grid.index_to_world(cells))
+            directions.append(normals[grid.flat_index(cells)] if normals is not None else np.zeros((len(cells), 3)))
+        return np.vstack(centres), np.vstack(directions)
 
     def _branches(self, q, cands, picked_idx) -> list[np.ndarray]:
         """Per picked candidate: the filter's joints first, then up to ``max_branches - 1`` more collision-free IK
@@ -124,26 +133,29 @@ class TourPolicy(OursPolicy):
     def _tour_choice(self, q, cands, stats, idx, exp_gain, exp_area, utilities):
         c = self.context
         poses = cands.poses[idx]
-        sets = coverage_sets(poses, *self._elements(), c.view_model) & (exp_area > 0)[:, None]
-        kept = self.plan.kept(poses, exp_area, self.tour.keep_share)
+        # a view's weight: the predicted unseen surface and the undersampled surface it would measure
+        undersampled = self.scores.undersampled_area_m2
+        weight = exp_area + (undersampled if len(undersampled) == len(exp_area) else 0.0)
+        sets = coverage_sets(poses, *self._elements(), c.view_model) & (weight > 0)[:, None]
+        kept = self.plan.kept(poses, weight, self.tour.keep_share)
         # ours' own best view is always in the plan (the tour may visit it later, on the way): the plan keeps the
         # greedy's gain, the order saves the shuttling
         best = int(np.argmax(utilities))
         first = [best, *(k for k in kept if k != best)]
-        picked = greedy_cover(sets, exp_area, self.tour.cover_share, self.tour.max_plan_views, first=first,
+        picked = greedy_cover(sets, weight, self.tour.cover_share, self.tour.max_plan_views, first=first,
                               min_marginal_share=self.tour.min_marginal_share)  # fmt: skip
         if not picked:
             return self.choose_from(q, cands, stats, idx, exp_gain, exp_area, utilities)
         branches = self._branches(q, cands, idx[picked])
         stops = []
-        if len(picked) > 1 and exp_area[best] >= self.tour.greedy_share * float(exp_area[picked].sum()):
+        if len(picked) > 1 and weight[best] >= self.tour.greedy_share * float(weight[picked].sum()):
             # the gain is concentrated in ours' best view: it goes first, the tour goes on from there
             stops = [(best, cands.joints[idx[best]])]
             rest = [k for k, p in enumerate(picked) if p != best]
             picked, branches = [picked[k] for k in rest], [branches[k] for k in rest]
         _, order, choice = order_tour(stops[0][1] if stops else q, branches, c.motion_cost)
         stops += [(picked[v], branches[v][b]) for v, b in zip(order, choice, strict=True)]
-        self.plan = TourPlan(poses[[p for p, _ in stops]], exp_area[[p for p, _ in stops]])
+        self.plan = TourPlan(poses[[p for p, _ in stops]], weight[[p for p, _ in stops]])
         options = [self._option(cands, idx, j, joints, exp_gain, utilities, exp_area) for j, joints in stops]
         ranked = [j for j in np.argsort(-utilities, kind="stable") if j not in {p for p, _ in stops}]
         options += [self._option(cands, idx, j, cands.joints[idx[j]], exp_gain, utilities, exp_area) for j in ranked]
