@@ -189,7 +189,7 @@ class TourSettings:
     best view alone promises at least this share of the plan's predicted new surface, it is visited first (the gain
     is concentrated there: a tour that leaves it for later loses coverage; 1: never), ``undersampled_min_share``: a
     full planning voxel whose missed share (:meth:`.sampling.SamplingState.fields`) is at least this is also to be
-    covered (1: the plan covers the predicted unseen surface only)."""
+    covered (1, the default: the plan covers the predicted unseen surface only)."""
 
     min_greedy_views: int = 3
     max_plan_views: int = 8
@@ -198,7 +198,7 @@ class TourSettings:
     min_marginal_share: float = 0.3
     max_branches: int = 4
     greedy_share: float = 0.5
-    undersampled_min_share: float = 0.25
+    undersampled_min_share: float = 1.0
 
     @classmethod
     def from_mapping(cls, values: dict) -> TourSettings:

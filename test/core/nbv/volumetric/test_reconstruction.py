@@ -519,7 +519,7 @@ def test_ours_undersampled_term_counts_by_its_share_of_the_surface_still_to_be_h
 def test_the_tour_covers_the_undersampled_surface_too_and_runs_the_loop(station):
     recon, _ = make(station, max_views=4, gain="ours_tour")
     policy = recon.policy
-    policy.tour = dataclasses.replace(policy.tour, min_greedy_views=1)
+    policy.tour = dataclasses.replace(policy.tour, min_greedy_views=1, undersampled_min_share=0.25)
     phases = []
     choose = policy.choose
 

@@ -8,8 +8,10 @@ the tail a greedy planner shuttles between the sides of the part. So:
    reference design's ``A / A1 < 0.2``) never fired on the generated tuning parts (the predicted surface includes
    unknown space no view reaches), so the count alone decides.
 2. **Tour phase**, every view: the predicted surface still unseen (the planning map's growth-neighbour voxels: unknown
-   voxels where the seen surface continues) is the set to cover; a candidate covers the elements inside its
-   frustum and scanning range (occlusion left out; its own predicted new area is its weight). The last plan's views
+   voxels where the seen surface continues) is the set to cover, with ``undersampled_min_share`` < 1 also the full
+   voxels whose seen surface was sampled too sparsely (:mod:`..sampling`); a candidate covers the elements inside its
+   frustum and scanning range (occlusion left out; its predicted new area, plus the undersampled area it would
+   sample densely, is its weight). The last plan's views
    that are still in the pool and still promise ``keep_share`` of the gain they were planned for are kept, the cover
    is topped up greedily (:func:`~agiprobot_measurement.nbv.volumetric.tour.greedy_cover`; ours' best view by its
    utility is always in the plan) to ``cover_share`` of the
