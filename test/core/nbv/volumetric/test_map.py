@@ -251,6 +251,18 @@ def test_npz_round_trip_and_cloud_export(tmp_path):
     assert back.shape == grid.shape and np.array_equal(back.log_odds, grid.log_odds)
     assert np.array_equal(back.raw.view, [3, 3, 4]) and np.allclose(back.raw.sigma_mm, [0.2, 0.1, 0.3])
     assert back.config == grid.config
+    # each view's sensor origin comes back (the sampling model's angular pitch needs it)
+    assert sorted(back.raw.origins) == [3, 4]
+    np.testing.assert_allclose(back.raw.origins[4], [-0.01, 0.0025, 0.0025])
+    with np.load(path) as data:
+        fields = dict(data)
+    fields["raw_origin_m"] = np.full((2, 3), np.nan)
+    np.savez(tmp_path / "bad_origins.npz", **fields)
+    with pytest.raises(InputError, match=r"bad_origins\.npz: raw_origin_m"):
+        VoxelMap.load_npz(tmp_path / "bad_origins.npz")
+    del fields["raw_origin_view"], fields["raw_origin_m"]
+    np.savez(tmp_path / "older.npz", **fields)
+    assert VoxelMap.load_npz(tmp_path / "older.npz").raw.origins == {}  # a map written before: no origins
     n = grid.export_cloud_ply(tmp_path / "cloud.ply", voxel_m=0.001)
     assert n == 2  # the first two points share a 1 mm cell
     ply = read_ply(tmp_path / "cloud.ply")
