@@ -7,6 +7,8 @@ import math
 
 import numpy as np
 
+from agiprobot_measurement.errors import InputError
+
 __all__ = ["RawPoints", "surface_samples_in_box"]
 
 
@@ -14,7 +16,7 @@ class RawPoints:
     """Every kept raw point of every fused frame: ``xyz_m`` (N, 3) float32 world, ``normal`` (N, 3) float32 unit
     (zero where the sensor gave none; oriented towards the sensor), ``view`` (N,) int32, ``sigma_mm`` (N,) float32
     (NaN where unknown). Frames are stored as chunks and concatenated on first access. ``origins`` maps a view id
-    to its sensor origin (3,) world (m) where the fusion knew it (not kept by the map's files)."""
+    to its sensor origin (3,) world (m) where the fusion knew it."""
 
     def __init__(self):
         self._chunks: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
@@ -37,6 +39,22 @@ class RawPoints:
             )
         )
         self._cache = None
+
+    def origin_arrays(self) -> dict[str, np.ndarray]:
+        """The origins as arrays for a map file: ``raw_origin_view`` (k,) int64, ``raw_origin_m`` (k, 3)."""
+        views = sorted(self.origins)
+        return {
+            "raw_origin_view": np.array(views, dtype=np.int64),
+            "raw_origin_m": np.array([self.origins[v] for v in views], dtype=float).reshape(-1, 3),
+        }
+
+    def set_origins(self, views: np.ndarray, origins_m: np.ndarray, where: str) -> None:
+        """The origins from a map file's arrays (:meth:`origin_arrays`); damaged ones are an InputError naming
+        ``where``."""
+        origins_m = np.asarray(origins_m)
+        if origins_m.shape != (len(views), 3) or not np.all(np.isfinite(origins_m)):
+            raise InputError(f"{where}: raw_origin_m does not give a finite origin per view")
+        self.origins = {int(v): o.astype(float) for v, o in zip(views, origins_m, strict=True)}
 
     def _arrays(self):
         if self._cache is None:

@@ -667,8 +667,7 @@ class VoxelMap:
             raw_normal=raw.normal,
             raw_view=raw.view,
             raw_sigma_mm=raw.sigma_mm,
-            raw_origin_view=np.array(sorted(raw.origins), dtype=np.int64),
-            raw_origin_m=np.array([raw.origins[v] for v in sorted(raw.origins)], dtype=float).reshape(-1, 3),
+            **raw.origin_arrays(),
             views_integrated=np.array(self.views_integrated),
         )
         return atomic_write_bytes(path, buffer.getvalue())
@@ -695,10 +694,7 @@ class VoxelMap:
                     target[...] = value
                 out.raw.append(data["raw_xyz_m"], data["raw_normal"], data["raw_view"], data["raw_sigma_mm"])
                 if "raw_origin_view" in data:  # the sensor origin per view (maps written before had none)
-                    views, origins = data["raw_origin_view"], data["raw_origin_m"]
-                    if origins.shape != (len(views), 3) or not np.all(np.isfinite(origins)):
-                        raise InputError(f"{path}: raw_origin_m does not give a finite origin per view")
-                    out.raw.origins = {int(v): o.astype(float) for v, o in zip(views, origins, strict=True)}
+                    out.raw.set_origins(data["raw_origin_view"], data["raw_origin_m"], str(path))
                 out.views_integrated = int(data["views_integrated"]) if "views_integrated" in data else 0
         except FileNotFoundError:
             raise InputError(f"{path}: no such map file") from None
