@@ -539,5 +539,7 @@ def test_the_tour_covers_the_undersampled_surface_too_and_runs_the_loop(station)
     lengths = np.linalg.norm(normals, axis=1)
     assert np.all((np.abs(lengths - 1.0) < 1e-6) | (lengths == 0.0))  # unit directions, or none
     assert len(policy.scores.undersampled_area_m2) > 0
+    assert policy.covers_undersampled
     policy.tour = dataclasses.replace(policy.tour, undersampled_min_share=1.0)  # off: the predicted surface only
+    assert not policy.covers_undersampled  # ... and the views weighed by their predicted unseen surface alone
     assert len(policy._elements()[0]) == min(predicted, 2000)

@@ -91,6 +91,12 @@ class TourPolicy(OursPolicy):
         self.last_phase = "tour"
         return self._tour_choice(q, cands, stats, idx, exp_gain, exp_area, utilities)
 
+    @property
+    def covers_undersampled(self) -> bool:
+        """The plan covers the seen surface sampled too sparsely too (``undersampled_min_share`` < 1 and the term in
+        ours' score)."""
+        return self.tour.undersampled_min_share < 1.0 and "undersampled_surface" in self.weights
+
     def _elements(self) -> tuple[np.ndarray, np.ndarray]:
         """(centres (M, 3) m, normals (M, 3), zero where none) of the surface still to be covered: the predicted
         unseen surface (growth-neighbour voxels, predicted normals) and the seen surface sampled too sparsely (full
@@ -98,7 +104,7 @@ class TourPolicy(OursPolicy):
         each at most :data:`MAX_ELEMENTS` / 2 (a random subset beyond)."""
         grid = self.context.planning_map
         parts = [(np.argwhere(grid.growth_neighbour_mask()), predicted_normals(grid))]
-        if "undersampled_surface" in self.weights and self.tour.undersampled_min_share < 1.0:
+        if self.covers_undersampled:
             missed, normals, _ = self.sampling.fields(grid, self.open_border_weight)
             parts.append((np.argwhere((missed >= self.tour.undersampled_min_share).reshape(grid.shape)), normals))
         centres, directions = [], []
@@ -135,9 +141,9 @@ class TourPolicy(OursPolicy):
     def _tour_choice(self, q, cands, stats, idx, exp_gain, exp_area, utilities):
         c = self.context
         poses = cands.poses[idx]
-        # a view's weight: the predicted unseen surface and the undersampled surface it would measure
-        undersampled = self.scores.undersampled_area_m2
-        weight = exp_area + (undersampled if len(undersampled) == len(exp_area) else 0.0)
+        # a view's weight: the predicted unseen surface, and the undersampled surface it would measure when the plan
+        # covers that too
+        weight = exp_area + self.scores.undersampled_area_m2 if self.covers_undersampled else exp_area
         sets = coverage_sets(poses, *self._elements(), c.view_model) & (weight > 0)[:, None]
         kept = self.plan.kept(poses, weight, self.tour.keep_share)
         # ours' own best view is always in the plan (the tour may visit it later, on the way): the plan keeps the
